@@ -1,0 +1,21 @@
+"""Exceptions raised by popdispatch. Each message is one line and names the offending element."""
+
+
+class PopdispatchError(Exception):
+    """Base class of every error popdispatch raises on purpose."""
+
+
+class FeederError(PopdispatchError, ValueError):
+    """The feeder is not a valid radial network (meshed, disconnected, bad element)."""
+
+
+class FleetError(PopdispatchError, ValueError):
+    """A generator table is invalid (unknown bus, bad cost or limit)."""
+
+
+class ProfileError(PopdispatchError, ValueError):
+    """Load profiles are missing, malformed or inconsistent with the feeder."""
+
+
+class InfeasibleError(PopdispatchError):
+    """The dispatch problem has no feasible solution (demand, limits or capacity)."""

@@ -1,0 +1,24 @@
+"""Radial feeders: the model, built-in cases, key-node reduction and DC flows."""
+
+from popdispatch.feeder.cases import elv_snapshot_566_kw, ieee_elv, load_case
+from popdispatch.feeder.generators import make_fleet, paper_fleet, read_fleet
+from popdispatch.feeder.model import Feeder
+from popdispatch.feeder.reduction import ReducedFeeder, reduce_feeder
+from popdispatch.feeder.tree import Tree, build_tree, downstream, line_flows, subtree_sums
+
+__all__ = [
+    "Feeder",
+    "ReducedFeeder",
+    "Tree",
+    "build_tree",
+    "downstream",
+    "elv_snapshot_566_kw",
+    "ieee_elv",
+    "line_flows",
+    "load_case",
+    "make_fleet",
+    "paper_fleet",
+    "read_fleet",
+    "reduce_feeder",
+    "subtree_sums",
+]

@@ -1,0 +1,103 @@
+"""Generator fleets: the paper's Table I and user tables.
+
+A fleet is a DataFrame indexed by generator name with columns
+
+- ``bus``: original bus id,
+- ``a`` (EUR), ``b`` (EUR/MW), ``c`` (EUR/MW^2): cost ``C(p) = a + b p + c p^2`` with p in MW (eq. 2),
+- ``pmin_kw``, ``pmax_kw``: output limits in kW.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from popdispatch.errors import FleetError
+
+FLEET_COLUMNS = ["bus", "a", "b", "c", "pmin_kw", "pmax_kw"]
+
+#: The paper's Table I (bus, a EUR, b EUR/MW, c EUR/MW^2, Pmin kW, Pmax kW).
+TABLE_I = [
+    (1, 0.0, 5.0, 0.02, 0.0, 10.0),
+    (114, 0.0, 1.0, 0.01, 0.0, 10.0),
+    (578, 0.0, 3.0, 0.025, 0.0, 5.0),
+    (739, 0.0, 4.0, 0.01, 0.0, 10.0),
+    (817, 0.0, 2.5, 0.015, 0.0, 20.0),
+    (835, 0.0, 2.0, 0.02, 0.0, 10.0),
+]
+
+
+def make_fleet(rows: Iterable[tuple], names: Iterable[str] | None = None) -> pd.DataFrame:
+    """Build a fleet table from ``(bus, a, b, c, pmin_kw, pmax_kw)`` rows; names default to ``G<bus>``."""
+    table = pd.DataFrame(list(rows), columns=FLEET_COLUMNS)
+    table["bus"] = table["bus"].astype(int)
+    table.index = pd.Index(
+        list(names) if names is not None else [f"G{b}" for b in table.bus], name="generator"
+    )
+    return table
+
+
+def paper_fleet() -> pd.DataFrame:
+    """The six distributed generators of the paper's Table I."""
+    return make_fleet(TABLE_I)
+
+
+def read_fleet(path: str | Path) -> pd.DataFrame:
+    """Read a fleet from a CSV or TOML file with the columns of :data:`FLEET_COLUMNS`.
+
+    CSV: one row per generator, an optional ``name`` column. TOML: an array of tables
+    ``[[generator]]`` with keys ``name`` (optional), ``bus``, ``a``, ``b``, ``c``, ``pmin_kw``,
+    ``pmax_kw``.
+    """
+    path = Path(path)
+    try:
+        if path.suffix.lower() == ".toml":
+            rows = tomllib.loads(path.read_text()).get("generator")
+            if not rows:
+                raise FleetError(f"{path}: no [[generator]] tables")
+            table = pd.DataFrame(rows)
+        else:
+            table = pd.read_csv(path, skipinitialspace=True)
+    except (OSError, tomllib.TOMLDecodeError, pd.errors.ParserError) as exc:
+        raise FleetError(f"cannot read fleet file {path}: {exc}") from None
+    table.columns = [str(c).strip().lower() for c in table.columns]
+    missing = [c for c in FLEET_COLUMNS if c not in table.columns]
+    if missing:
+        raise FleetError(f"{path}: fleet table lacks column {missing[0]!r} (needs {FLEET_COLUMNS})")
+    names = table["name"].astype(str) if "name" in table.columns else None
+    for column in FLEET_COLUMNS:
+        numeric = pd.to_numeric(table[column], errors="coerce")
+        if numeric.isna().any():
+            row = int(numeric.isna().to_numpy().argmax())
+            raise FleetError(f"{path}: row {row + 1} has non-numeric {column} = {table[column][row]!r}")
+        table[column] = numeric
+    return make_fleet(table[FLEET_COLUMNS].itertuples(index=False), names)
+
+
+def validate_fleet(fleet: pd.DataFrame, buses: pd.Index) -> None:
+    """Raise :class:`FleetError` naming the first invalid generator."""
+    missing = [c for c in FLEET_COLUMNS if c not in fleet.columns]
+    if missing:
+        raise FleetError(f"fleet table lacks column {missing[0]!r}")
+    if len(fleet) == 0:
+        raise FleetError("fleet has no generator")
+    if fleet.index.has_duplicates:
+        raise FleetError(f"generator {fleet.index[fleet.index.duplicated()][0]!r} is defined twice")
+    for name, row in fleet.iterrows():
+        if row.bus not in buses:
+            raise FleetError(f"generator {name!r} is on unknown bus {row.bus}")
+        for column in ("a", "b", "c", "pmin_kw", "pmax_kw"):
+            value = float(row[column])
+            if not np.isfinite(value):
+                raise FleetError(f"generator {name!r} has non-finite {column} = {value}")
+        for column in ("a", "b", "c", "pmin_kw", "pmax_kw"):
+            if row[column] < 0:
+                raise FleetError(f"generator {name!r} has negative {column} = {row[column]}")
+        if row.pmin_kw > row.pmax_kw:
+            raise FleetError(
+                f"generator {name!r} has pmin_kw = {row.pmin_kw} > pmax_kw = {row.pmax_kw}"
+            )
