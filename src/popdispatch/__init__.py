@@ -1,3 +1,4 @@
-"""popdispatch: online network-constrained dispatch of distributed generators with population dynamics."""
+"""popdispatch: online network-constrained dispatch of distributed generators with population
+dynamics."""
 
 __version__ = "0.1.0"

@@ -3,7 +3,8 @@
 A fleet is a DataFrame indexed by generator name with columns
 
 - ``bus``: original bus id,
-- ``a`` (EUR), ``b`` (EUR/MW), ``c`` (EUR/MW^2): cost ``C(p) = a + b p + c p^2`` with p in MW (eq. 2),
+- ``a`` (EUR), ``b`` (EUR/MW), ``c`` (EUR/MW^2): cost ``C(p) = a + b p + c p^2``, p in MW
+  (eq. 2),
 - ``pmin_kw``, ``pmax_kw``: output limits in kW.
 """
 
@@ -32,7 +33,7 @@ TABLE_I = [
 
 
 def make_fleet(rows: Iterable[tuple], names: Iterable[str] | None = None) -> pd.DataFrame:
-    """Build a fleet table from ``(bus, a, b, c, pmin_kw, pmax_kw)`` rows; names default to ``G<bus>``."""
+    """A fleet table from ``(bus, a, b, c, pmin_kw, pmax_kw)`` rows; names default to ``G<bus>``."""
     table = pd.DataFrame(list(rows), columns=FLEET_COLUMNS)
     table["bus"] = table["bus"].astype(int)
     table.index = pd.Index(
@@ -62,7 +63,13 @@ def read_fleet(path: str | Path) -> pd.DataFrame:
             table = pd.DataFrame(rows)
         else:
             table = pd.read_csv(path, skipinitialspace=True)
-    except (OSError, tomllib.TOMLDecodeError, pd.errors.ParserError) as exc:
+    except (
+        OSError,
+        UnicodeDecodeError,
+        tomllib.TOMLDecodeError,
+        pd.errors.ParserError,
+        pd.errors.EmptyDataError,
+    ) as exc:
         raise FleetError(f"cannot read fleet file {path}: {exc}") from None
     table.columns = [str(c).strip().lower() for c in table.columns]
     missing = [c for c in FLEET_COLUMNS if c not in table.columns]
@@ -73,8 +80,10 @@ def read_fleet(path: str | Path) -> pd.DataFrame:
         numeric = pd.to_numeric(table[column], errors="coerce")
         if numeric.isna().any():
             row = int(numeric.isna().to_numpy().argmax())
-            raise FleetError(f"{path}: row {row + 1} has non-numeric {column} = {table[column][row]!r}")
-        table[column] = numeric
+            raise FleetError(
+                f"{path}: row {row + 1} has non-numeric {column} = {table[column][row]!r}"
+            )
+        table[column] = numeric if column == "bus" else numeric.astype(float)
     return make_fleet(table[FLEET_COLUMNS].itertuples(index=False), names)
 
 

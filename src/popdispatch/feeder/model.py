@@ -136,7 +136,9 @@ def _check_radial(feeder: Feeder) -> None:
         )
     if g.number_of_edges() != g.number_of_nodes() - 1:
         cycle = nx.find_cycle(g, feeder.source_bus)
-        u, v = cycle[0][:2]
+        # Name the loop's last line in table order: the one that closes it.
+        order = {name: k for k, name in enumerate(feeder.lines.index)}
+        u, v = max((e[:2] for e in cycle), key=lambda e: order[g.edges[e]["line"]])
         raise FeederError(
             f"line {g.edges[u, v]['line']!r} closes a loop through buses "
             f"{[e[0] for e in cycle]}: feeder is meshed (popdispatch supports radial feeders only)"

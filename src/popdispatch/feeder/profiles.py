@@ -23,7 +23,8 @@ class LoadProfiles:
     Attributes
     ----------
     kw : index ``minute`` (1..1440), one column per load name; demand in kW.
-    source : human-readable origin, stated in every output (e.g. ``"official: ../shared/ieee-elv"``).
+    source : human-readable origin, stated in every output
+        (e.g. ``"official profiles: /data/ieee-elv"``).
     """
 
     kw: pd.DataFrame

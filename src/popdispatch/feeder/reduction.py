@@ -65,7 +65,8 @@ class ReducedFeeder:
     def path_lines(self, bus_a: int, bus_b: int) -> np.ndarray:
         """Reduced lines on the path between two original buses (any bus, key node or not)."""
         names = self.original.path_lines(bus_a, bus_b)
-        return np.unique(self.line_map.loc[names].to_numpy())
+        reduced = self.line_map.loc[names].to_numpy()
+        return np.unique(reduced[reduced >= 0])  # pruned lines (-1) have no reduced line
 
     def load_injection_kw(self, load_kw: np.ndarray) -> np.ndarray:
         """Nodal load (kW) from per-load values (last axis in the order of ``original.loads``)."""
@@ -154,7 +155,9 @@ def _merge_lines(
     # The parent node of a chain: the key node reached by walking up from the chain's top bus.
     child_position = np.empty(n_nodes, dtype=np.int64)
     child_position[node_of_position[node_of_position >= 0]] = np.flatnonzero(node_of_position >= 0)
-    from_node = np.array([_key_ancestor(tree, node_of_position, p) for p in child_position[1:]])
+    from_node = np.array(
+        [_key_ancestor(tree, node_of_position, p) for p in child_position[1:]], dtype=np.int64
+    )
     merged.insert(0, "from_node", from_node)
     merged.insert(1, "to_node", to_node)
     merged.insert(2, "from_bus", buses[child_position[from_node]])

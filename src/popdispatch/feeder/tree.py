@@ -65,7 +65,9 @@ def build_tree(n_nodes: int, ends_a: np.ndarray, ends_b: np.ndarray, root: int =
         )
     g = nx.Graph()
     g.add_nodes_from(range(n_nodes))
-    g.add_edges_from((int(a), int(b), {"line": k}) for k, (a, b) in enumerate(zip(ends_a, ends_b)))
+    g.add_edges_from(
+        (int(a), int(b), {"line": k}) for k, (a, b) in enumerate(zip(ends_a, ends_b, strict=True))
+    )
     if not nx.is_tree(g):
         raise FeederError("lines do not form a tree: network is meshed or disconnected")
     preorder = np.fromiter(nx.dfs_preorder_nodes(g, root), dtype=np.int64, count=n_nodes)
