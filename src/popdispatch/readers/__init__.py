@@ -1,0 +1,17 @@
+"""Readers of external data: the IEEE European LV Test Feeder's OpenDSS files and load profiles."""
+
+from popdispatch.readers.opendss import read_opendss_feeder
+from popdispatch.readers.profiles import (
+    PROFILES_ENV,
+    default_profiles,
+    read_profiles,
+    resolve_profiles,
+)
+
+__all__ = [
+    "PROFILES_ENV",
+    "default_profiles",
+    "read_opendss_feeder",
+    "read_profiles",
+    "resolve_profiles",
+]
