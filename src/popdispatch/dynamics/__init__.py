@@ -1,0 +1,56 @@
+"""Mean dynamics as vector fields on the population shares ``x`` (``x_i = p_i / P_d``).
+
+Each dynamic is a :class:`Dynamics` record naming its compiled vector field, so the integrator
+never needs to know which one it runs, and adding one never touches the integrator.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from popdispatch.dynamics.graph import GRAPHS, communication_graph
+from popdispatch.dynamics.replicator import local_replicator_rates, replicator_rates
+from popdispatch.dynamics.smith import smith_rates
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """A mean dynamic.
+
+    Attributes
+    ----------
+    name : CLI name.
+    rates : compiled vector field ``(x, f, graph, lo, hi) -> (inflow, out_rate)``.
+    uses_graph : whether the communication graph matters (else the complete graph is used).
+    extinction : whether a strategy at zero share stays at zero (imitative dynamics).
+    equation : the paper's equation number.
+    """
+
+    name: str
+    rates: Callable
+    uses_graph: bool
+    extinction: bool
+    equation: str
+
+
+DYNAMICS = {
+    d.name: d
+    for d in (
+        Dynamics("smith", smith_rates, False, False, "13"),
+        Dynamics("replicator", replicator_rates, False, True, "9"),
+        Dynamics("local-replicator", local_replicator_rates, True, True, "12"),
+        Dynamics("distributed-smith", smith_rates, True, False, "14"),
+    )
+}
+
+
+def get_dynamics(name: str) -> Dynamics:
+    """Look up a dynamic by name (see :data:`DYNAMICS`)."""
+    try:
+        return DYNAMICS[name]
+    except KeyError:
+        raise ValueError(f"unknown dynamics {name!r} (known: {', '.join(DYNAMICS)})") from None
+
+
+__all__ = ["DYNAMICS", "GRAPHS", "Dynamics", "communication_graph", "get_dynamics"]

@@ -1,0 +1,130 @@
+"""The dispatch problem as engine arrays, in MW (paper eq. 1): fleet, demand, limited lines.
+
+Everything people give in kW is converted here, once. Flows on the limited lines are affine in
+the set points: ``flow = load_flow - D @ p`` where ``D[k, i] = 1`` if generator ``i`` sits below
+line ``k`` (on its child side) and ``load_flow`` is the flow the loads alone would cause.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pandas as pd
+
+from popdispatch.errors import InfeasibleError, ProfileError
+from popdispatch.feeder.profiles import LoadProfiles, check_minute
+from popdispatch.feeder.reduction import ReducedFeeder
+from popdispatch.feeder.tree import line_flows
+
+KW_PER_MW = 1000.0
+
+
+@dataclass(frozen=True)
+class DispatchProblem:
+    """Engine data of one feeder, fleet and day of loads. Powers in MW, costs in EUR.
+
+    Attributes
+    ----------
+    generators : generator names (order of every per-generator array).
+    a, b, c : cost coefficients, EUR, EUR/MW, EUR/MW^2 (eq. 2).
+    pmin, pmax : generator limits, MW.
+    lines : reduced line numbers of the limited lines (finite ``limit_kw``).
+    limit : their flow limits U, MW.
+    down : ``(limited lines, generators)`` 1.0 where the generator is below the line.
+    demand : total demand per minute, MW, shape (1440,).
+    load_flow : flow on each limited line caused by the loads alone, MW, shape (1440, lines).
+    online : per minute and generator, whether it is available, shape (1440, generators).
+    profile_source : where the loads come from.
+    """
+
+    feeder: ReducedFeeder
+    generators: pd.Index
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    pmin: np.ndarray
+    pmax: np.ndarray
+    lines: np.ndarray
+    limit: np.ndarray
+    down: np.ndarray
+    demand: np.ndarray
+    load_flow: np.ndarray
+    online: np.ndarray
+    profile_source: str
+
+    @property
+    def n_generators(self) -> int:
+        return len(self.generators)
+
+    def flows(self, p: np.ndarray, minute: int) -> np.ndarray:
+        """Flows (MW) on the limited lines for set points ``p`` (MW) at a 1-based minute."""
+        return self.load_flow[minute - 1] - self.down @ p
+
+    def all_line_flows_mw(self, p: np.ndarray, minute: int, load_kw: np.ndarray) -> np.ndarray:
+        """Flows (MW) on every reduced line for set points ``p`` (MW) and per-load kW."""
+        injection = -self.feeder.load_injection_kw(load_kw) / KW_PER_MW
+        np.add.at(injection, self.feeder.generators["node"].to_numpy(), p)
+        return line_flows(self.feeder.tree, injection)
+
+    def with_outage(self, generator: str, off_minute: int, on_minute: int | None = None):
+        """The same problem with ``generator`` offline from ``off_minute`` until ``on_minute``."""
+        if generator not in self.generators:
+            raise ValueError(f"unknown generator {generator!r}")
+        check_minute(off_minute)
+        online = self.online.copy()
+        stop = on_minute - 1 if on_minute is not None else len(online)
+        online[off_minute - 1 : stop, self.generators.get_loc(generator)] = False
+        problem = replace(self, online=online)
+        check_capacity(problem)
+        return problem
+
+
+def build_problem(feeder: ReducedFeeder, profiles: LoadProfiles) -> DispatchProblem:
+    """Assemble the engine arrays for a reduced feeder and a day of load profiles."""
+    profiles = profiles.for_loads(feeder.original.loads.index)
+    gens = feeder.generators
+    load_kw = profiles.kw.to_numpy(float)
+    flows_kw = line_flows(feeder.tree, -feeder.load_injection_kw(load_kw))
+    limited = np.flatnonzero(np.isfinite(feeder.lines.limit_kw.to_numpy(float)))
+    problem = DispatchProblem(
+        feeder=feeder,
+        generators=gens.index,
+        a=gens.a.to_numpy(float),
+        b=gens.b.to_numpy(float),
+        c=gens.c.to_numpy(float),
+        pmin=gens.pmin_kw.to_numpy(float) / KW_PER_MW,
+        pmax=gens.pmax_kw.to_numpy(float) / KW_PER_MW,
+        lines=limited,
+        limit=feeder.lines.limit_kw.to_numpy(float)[limited] / KW_PER_MW,
+        down=feeder.generator_downstream()[limited].astype(float),
+        demand=load_kw.sum(axis=1) / KW_PER_MW,
+        load_flow=np.ascontiguousarray(flows_kw[:, limited]) / KW_PER_MW,
+        online=np.ones((len(load_kw), len(gens)), dtype=bool),
+        profile_source=profiles.source,
+    )
+    check_capacity(problem)
+    return problem
+
+
+def check_capacity(problem: DispatchProblem) -> None:
+    """Raise :class:`InfeasibleError` at the first minute whose demand exceeds online capacity."""
+    capacity = problem.online @ problem.pmax
+    short = problem.demand > capacity * (1 + 1e-12)
+    if short.any():
+        minute = int(np.argmax(short)) + 1
+        raise InfeasibleError(
+            f"demand {problem.demand[minute - 1] * KW_PER_MW:.3f} kW at minute {minute} exceeds "
+            f"the available generation capacity {capacity[minute - 1] * KW_PER_MW:.3f} kW"
+        )
+    floor = problem.online @ problem.pmin
+    low = problem.demand < floor * (1 - 1e-12)
+    if low.any():
+        minute = int(np.argmax(low)) + 1
+        raise InfeasibleError(
+            f"demand {problem.demand[minute - 1] * KW_PER_MW:.3f} kW at minute {minute} is below "
+            f"the sum of minimum outputs {floor[minute - 1] * KW_PER_MW:.3f} kW"
+        )
+
+
+__all__ = ["DispatchProblem", "InfeasibleError", "ProfileError", "build_problem", "check_capacity"]

@@ -1,0 +1,102 @@
+"""The yardstick: an exact DC optimal power flow of the same problem (paper eq. 1).
+
+    min  sum_i a_i + b_i p_i + c_i p_i^2
+    s.t. Pmin_i <= p_i <= Pmax_i,  sum_i p_i = P_d,  |flow_k| <= U_k on limited lines,
+
+with the lossless radial DC flows ``flow = load_flow - D p``. Solved with Clarabel (interior
+point, QP). The solver works in kW (better scaled than MW for these small generators); results
+are returned in kW. An infeasible problem is reported as infeasible, never as a solution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import clarabel
+import numpy as np
+from scipy import sparse
+
+from popdispatch.game.problem import KW_PER_MW, DispatchProblem
+
+
+@dataclass(frozen=True)
+class OpfResult:
+    """One minute's DC-OPF.
+
+    Attributes
+    ----------
+    status : ``"optimal"`` or ``"infeasible"``.
+    minute : 1-based minute.
+    demand_kw : total demand, kW.
+    p_kw : set point per generator, kW (NaN if infeasible).
+    cost : total cost ``sum C_i(p_i)`` with p in MW, EUR (per hour, Table I's coefficients).
+    line_price : dual of each limited line's constraint, EUR/MW (0 if not binding).
+    marginal_price : dual of the power balance, EUR/MW.
+    """
+
+    status: str
+    minute: int
+    demand_kw: float
+    p_kw: np.ndarray
+    cost: float
+    line_price: np.ndarray
+    marginal_price: float
+
+
+def generation_cost(problem: DispatchProblem, p_mw: np.ndarray, online: np.ndarray | None = None):
+    """``sum_i a_i + b_i p_i + c_i p_i^2`` (EUR) over online generators; ``p_mw`` in MW (..., n)."""
+    online = np.ones(problem.n_generators, bool) if online is None else online
+    terms = problem.a + problem.b * p_mw + problem.c * p_mw**2
+    return np.sum(np.where(online, terms, 0.0), axis=-1)
+
+
+def solve_opf(problem: DispatchProblem, minute: int) -> OpfResult:
+    """Solve the DC-OPF of one 1-based minute (generators offline that minute are held at 0)."""
+    n = problem.n_generators
+    online = problem.online[minute - 1]
+    pmin = np.where(online, problem.pmin, 0.0) * KW_PER_MW
+    pmax = np.where(online, problem.pmax, 0.0) * KW_PER_MW
+    load_flow = problem.load_flow[minute - 1] * KW_PER_MW
+    limit = problem.limit * KW_PER_MW
+    demand = problem.demand[minute - 1] * KW_PER_MW
+    down = problem.down
+    # Objective scaled by 1000: b p_MW + c p_MW^2 = (b p_kW + c p_kW^2 / 1000) / 1000.
+    P = sparse.csc_matrix(sparse.diags(2.0 * problem.c / KW_PER_MW))
+    q = problem.b.astype(float)
+    eye = sparse.eye(n)
+    A = sparse.vstack(
+        [
+            sparse.csr_matrix(np.ones((1, n))),
+            -eye,
+            eye,
+            sparse.csr_matrix(-down),
+            sparse.csr_matrix(down),
+        ]
+    ).tocsc()
+    rhs = np.concatenate([[demand], -pmin, pmax, limit - load_flow, limit + load_flow])
+    cones = [clarabel.ZeroConeT(1), clarabel.NonnegativeConeT(2 * n + 2 * len(limit))]
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.tol_gap_abs = settings.tol_gap_rel = 1e-10
+    settings.tol_feas = 1e-10
+    solution = clarabel.DefaultSolver(P, q, A, rhs, cones, settings).solve()
+    status = str(solution.status)
+    if status in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
+        nan = np.full(n, np.nan)
+        return OpfResult(
+            "infeasible", minute, demand, nan, np.nan, np.full(len(limit), np.nan), np.nan
+        )
+    if status not in ("Solved", "AlmostSolved"):
+        raise RuntimeError(f"DC-OPF at minute {minute}: Clarabel returned {status}")
+    p_kw = np.clip(np.asarray(solution.x), pmin, pmax)
+    dual = np.asarray(solution.z)
+    line_dual = dual[1 + 2 * n :]
+    line_price = line_dual[: len(limit)] - line_dual[len(limit) :]
+    cost = float(generation_cost(problem, p_kw / KW_PER_MW, online))
+    return OpfResult("optimal", minute, demand, p_kw, cost, line_price, float(-dual[0]))
+
+
+def solve_opf_day(problem: DispatchProblem, minutes: np.ndarray | None = None) -> list[OpfResult]:
+    """Solve the DC-OPF of every minute (default 1..1440)."""
+    minutes = np.arange(1, len(problem.demand) + 1) if minutes is None else minutes
+    return [solve_opf(problem, int(m)) for m in minutes]

@@ -1,0 +1,148 @@
+"""The paper's experiments as named scenarios (section III).
+
+- ``base-day``: ieee-elv, no line limits, Smith dynamics, the whole day against the DC-OPF.
+- ``congestion``: minute 566, every line between buses 505 and 666 limited to 28 kW, Smith.
+  The paper reports detection at iteration 53 and convergence at iteration 201.
+- ``extinction``: replicator dynamics never use an efficient generator that starts at zero
+  share (here Generator 2, bus 114, the cheapest), while Smith dynamics reach the optimum.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pandas as pd
+
+from popdispatch.feeder.cases import elv_snapshot_566_kw, ieee_elv
+from popdispatch.feeder.model import Feeder
+from popdispatch.feeder.profiles import LoadProfiles, single_minute_profiles
+from popdispatch.feeder.reduction import reduce_feeder
+from popdispatch.game.problem import DispatchProblem, build_problem
+from popdispatch.online import DayResult, RunSettings, SnapshotResult, run_day, run_snapshot
+from popdispatch.opf import OpfResult, solve_opf, solve_opf_day
+
+PEAK_MINUTE = 566
+CONGESTION_PATH = (505, 666, 28.0)
+EXTINCT_GENERATOR = "G114"
+
+
+def apply_path_limits(feeder: Feeder, limits: Sequence[tuple[int, int, float]]) -> Feeder:
+    """Limit every original line on the path between buses ``a`` and ``b`` to ``kw`` kW."""
+    for bus_a, bus_b, kw in limits:
+        if not kw >= 0:
+            raise ValueError(f"line limit {kw} kW between buses {bus_a} and {bus_b} is invalid")
+        names = feeder.path_lines(bus_a, bus_b)
+        feeder = feeder.with_line_limits(pd.Series(float(kw), index=names))
+    return feeder
+
+
+def peak_profiles() -> LoadProfiles:
+    """Official loads of minute 566 from pandapower's snapshot (no profile folder needed)."""
+    return single_minute_profiles(
+        PEAK_MINUTE, elv_snapshot_566_kw(), "official minute 566 (pandapower on_peak_566)"
+    )
+
+
+def elv_problem(
+    profiles: LoadProfiles | None = None,
+    limits: Sequence[tuple[int, int, float]] = (),
+    feeder: Feeder | None = None,
+) -> DispatchProblem:
+    """The ieee-elv dispatch problem (or ``feeder``'s) with optional path limits.
+
+    Without ``profiles`` the loads are the official ones of minute 566 (pandapower snapshot).
+    """
+    feeder = apply_path_limits(feeder or ieee_elv(), limits)
+    return build_problem(reduce_feeder(feeder), profiles or peak_profiles())
+
+
+@dataclass(frozen=True)
+class SnapshotComparison:
+    """A one-minute run and the DC-OPF of the same problem (``opf_unconstrained``: no limits)."""
+
+    run: SnapshotResult
+    opf: OpfResult
+    opf_unconstrained: OpfResult | None = None
+
+    @property
+    def max_abs_error_kw(self) -> float:
+        return float(np.max(np.abs(self.run.setpoints_kw - self.opf.p_kw)))
+
+
+@dataclass(frozen=True)
+class DayComparison:
+    """An online day and the DC-OPF of every simulated minute (``opf_kw``: minutes x generators)."""
+
+    run: DayResult
+    opf: list[OpfResult]
+
+    @property
+    def opf_kw(self) -> np.ndarray:
+        return np.array([o.p_kw for o in self.opf])
+
+    @property
+    def abs_error_kw(self) -> np.ndarray:
+        return np.abs(self.run.setpoints_kw - self.opf_kw)
+
+
+def snapshot_vs_opf(
+    problem: DispatchProblem, minute: int, settings: RunSettings | None = None
+) -> SnapshotComparison:
+    """Run one minute and solve its DC-OPF."""
+    return SnapshotComparison(run_snapshot(problem, minute, settings), solve_opf(problem, minute))
+
+
+def day_vs_opf(
+    problem: DispatchProblem, settings: RunSettings | None = None, minutes=None
+) -> DayComparison:
+    """Run the online day and solve the DC-OPF of each minute."""
+    run = run_day(problem, settings, minutes)
+    return DayComparison(run, solve_opf_day(problem, run.minutes))
+
+
+def base_day(profiles: LoadProfiles, settings: RunSettings | None = None) -> DayComparison:
+    """``base-day``: no line limits, Smith dynamics (unless ``settings`` say otherwise)."""
+    return day_vs_opf(elv_problem(profiles), settings)
+
+
+def congestion(
+    profiles: LoadProfiles | None = None, settings: RunSettings | None = None
+) -> SnapshotComparison:
+    """``congestion``: minute 566 with the 505-666 path limited to 28 kW."""
+    problem = elv_problem(profiles, [CONGESTION_PATH])
+    free = elv_problem(profiles)
+    result = snapshot_vs_opf(problem, PEAK_MINUTE, settings)
+    return replace(result, opf_unconstrained=solve_opf(free, PEAK_MINUTE))
+
+
+@dataclass(frozen=True)
+class ExtinctionResult:
+    """Replicator and Smith runs from the same state with ``generator`` at zero share."""
+
+    generator: str
+    replicator: SnapshotResult
+    smith: SnapshotResult
+    opf: OpfResult
+
+
+def extinction(
+    profiles: LoadProfiles | None = None,
+    minute: int = PEAK_MINUTE,
+    generator: str = EXTINCT_GENERATOR,
+    settings: RunSettings | None = None,
+) -> ExtinctionResult:
+    """``extinction``: ``generator`` starts at zero share, the others share the load equally."""
+    problem = elv_problem(profiles)
+    x0 = {g: (0.0 if g == generator else 1.0) for g in problem.generators}
+    base = replace(settings or RunSettings(), x0=x0)
+    return ExtinctionResult(
+        generator,
+        run_snapshot(problem, minute, replace(base, dynamics="replicator")),
+        run_snapshot(problem, minute, replace(base, dynamics="smith")),
+        solve_opf(problem, minute),
+    )
+
+
+SCENARIOS = ("base-day", "congestion", "extinction")

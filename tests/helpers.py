@@ -1,0 +1,58 @@
+"""Shared test helpers: where the official data is, random radial feeders."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from popdispatch.feeder.generators import make_fleet
+from popdispatch.feeder.model import Feeder
+
+
+def official_folder() -> Path:
+    env = os.environ.get("POPDISPATCH_PROFILES")
+    folder = Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "ieee-elv"
+    if not (folder / "Loads.txt").exists():
+        pytest.skip(f"official IEEE ELV data not found at {folder}")
+    return folder
+
+
+def random_feeder(rng: np.random.Generator, n_buses: int, n_gens: int) -> Feeder:
+    """A random radial feeder with loads on a third of the buses and random generators."""
+    parents = [int(rng.integers(0, i)) for i in range(1, n_buses)]
+    buses = pd.DataFrame(
+        {"x": rng.random(n_buses), "y": rng.random(n_buses)},
+        index=pd.Index(np.arange(1, n_buses + 1), name="bus"),
+    )
+    lines = pd.DataFrame(
+        {
+            "from_bus": np.array(parents) + 1,
+            "to_bus": np.arange(2, n_buses + 1),
+            "length_km": 0.01,
+            "r_ohm": 0.01,
+            "x_ohm": 0.001,
+            "limit_kw": np.inf,
+        },
+        index=pd.Index([f"L{i}" for i in range(1, n_buses)], name="line"),
+    )
+    load_buses = rng.choice(np.arange(1, n_buses + 1), size=max(1, n_buses // 3), replace=False)
+    loads = pd.DataFrame(
+        {"bus": load_buses}, index=pd.Index([f"LD{b}" for b in load_buses], name="load")
+    )
+    gen_buses = rng.choice(np.arange(1, n_buses + 1), size=n_gens, replace=False)
+    rows = [
+        (
+            int(b),
+            0.0,
+            float(rng.uniform(1, 5)),
+            float(rng.uniform(0.005, 0.03)),
+            0.0,
+            float(rng.uniform(5, 20)),
+        )
+        for b in gen_buses
+    ]
+    return Feeder("random", buses, lines, loads, 1, make_fleet(rows))
