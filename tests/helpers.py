@@ -13,11 +13,20 @@ from popdispatch.feeder.generators import make_fleet
 from popdispatch.feeder.model import Feeder
 
 
+def find_official_folder() -> Path | None:
+    """The official IEEE ELV folder: ``$POPDISPATCH_PROFILES``, else ``../shared/ieee-elv``."""
+    env = os.environ.get("POPDISPATCH_PROFILES", "").strip()
+    for candidate in (env, Path(__file__).resolve().parents[2] / "shared" / "ieee-elv"):
+        if candidate and all((Path(candidate) / f).is_file() for f in ("Loads.txt", "Lines.txt")):
+            return Path(candidate)
+    return None
+
+
 def official_folder() -> Path:
-    env = os.environ.get("POPDISPATCH_PROFILES")
-    folder = Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "ieee-elv"
-    if not (folder / "Loads.txt").exists():
-        pytest.skip(f"official IEEE ELV data not found at {folder}")
+    """The official folder, or skip the test when it is absent."""
+    folder = find_official_folder()
+    if folder is None:
+        pytest.skip("official IEEE ELV data not found")
     return folder
 
 

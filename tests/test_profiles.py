@@ -11,22 +11,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import find_official_folder
 
 from popdispatch.errors import ProfileError
 from popdispatch.feeder.cases import elv_snapshot_566_kw
 from popdispatch.feeder.profiles import LoadProfiles
 from popdispatch.readers import PROFILES_ENV, default_profiles, read_profiles, resolve_profiles
 
-
-def _official_folder() -> Path | None:
-    env = os.environ.get("POPDISPATCH_PROFILES", "").strip()
-    for candidate in (env, Path(__file__).resolve().parents[2] / "shared" / "ieee-elv"):
-        if candidate and (Path(candidate) / "Loads.txt").is_file():
-            return Path(candidate)
-    return None
-
-
-OFFICIAL = _official_folder()
+OFFICIAL = find_official_folder()
 needs_official = pytest.mark.skipif(OFFICIAL is None, reason="official IEEE ELV data absent")
 
 

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import find_official_folder
 
 from popdispatch.errors import FeederError
 from popdispatch.feeder.cases import ieee_elv
@@ -16,16 +16,7 @@ from popdispatch.feeder.generators import paper_fleet
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.readers import read_opendss_feeder
 
-
-def _official_folder() -> Path | None:
-    env = os.environ.get("POPDISPATCH_PROFILES", "").strip()
-    for candidate in (env, Path(__file__).resolve().parents[2] / "shared" / "ieee-elv"):
-        if candidate and (Path(candidate) / "Lines.txt").is_file():
-            return Path(candidate)
-    return None
-
-
-OFFICIAL = _official_folder()
+OFFICIAL = find_official_folder()
 needs_official = pytest.mark.skipif(OFFICIAL is None, reason="official IEEE ELV data absent")
 
 
