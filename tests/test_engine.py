@@ -188,3 +188,19 @@ def test_base_day_supply_equals_demand_every_minute(official_problem):
     assert np.all(day.converged)
     np.testing.assert_allclose(day.setpoints_kw.sum(axis=1), day.demand_kw, rtol=1e-9)
     assert np.all(day.setpoints_kw >= 0.0)
+
+
+def test_demand_above_capacity_is_reported_with_its_minute(official_problem):
+    from popdispatch.errors import InfeasibleError
+    from popdispatch.readers import read_profiles
+
+    profiles = read_profiles(official_folder())
+    doubled = type(profiles)(profiles.kw * 2.0, profiles.source)
+    with pytest.raises(InfeasibleError, match=r"minute \d+ exceeds the available generation"):
+        build_problem(official_problem.feeder, doubled)
+
+
+def test_results_state_their_profile_source(official_problem, peak_problem):
+    assert run_snapshot(peak_problem, 566).profile_source.startswith("official minute 566")
+    day = run_day(official_problem, minutes=np.arange(1, 4))
+    assert day.profile_source.startswith("official profiles: ")

@@ -62,6 +62,7 @@ class SnapshotResult:
     overflow_kw: np.ndarray
     flows_kw: np.ndarray
     wall_seconds: float
+    profile_source: str
 
     @property
     def setpoints_kw(self) -> np.ndarray:
@@ -171,6 +172,7 @@ def run_snapshot(
         overflow_kw=overflow_kw(problem, final, minute),
         flows_kw=flows * KW_PER_MW,
         wall_seconds=wall,
+        profile_source=problem.profile_source,
     )
 
 
@@ -194,6 +196,7 @@ class DayResult:
     cost: np.ndarray
     online: np.ndarray
     wall_seconds: float
+    profile_source: str
 
 
 def redistribute_tripped(x: np.ndarray, online: np.ndarray) -> np.ndarray:
@@ -247,4 +250,5 @@ def run_day(
         cost=generation_cost(problem, setpoints, online),
         online=online,
         wall_seconds=wall,
+        profile_source=problem.profile_source,
     )
