@@ -10,6 +10,7 @@ to their shares, and the offline one is cut out of the communication graph until
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import networkx as nx
@@ -213,10 +214,12 @@ def run_day(
     problem: DispatchProblem,
     settings: RunSettings | None = None,
     minutes: np.ndarray | None = None,
+    progress: Callable[[int], None] | None = None,
 ) -> DayResult:
     """The online day: every minute continues from the previous state until converged.
 
     ``minutes``: 1-based minutes to simulate in order (default the whole day 1..1440).
+    ``progress``: called with each minute once it is done (e.g. to advance a progress bar).
     """
     settings = settings or RunSettings()
     minutes = np.arange(1, len(problem.demand) + 1) if minutes is None else np.asarray(minutes)
@@ -235,6 +238,8 @@ def run_day(
         setpoints[row] = trajectory[-1]
         iterations[row] = len(trajectory) - 1
         converged[row] = converged_at >= 0
+        if progress is not None:
+            progress(int(minute))
     wall = time.perf_counter() - start
     overflow = np.stack([overflow_kw(problem, setpoints[r], m) for r, m in enumerate(minutes)])
     online = problem.online[minutes - 1]
