@@ -1,0 +1,581 @@
+"""The ``popdispatch`` command line (click).
+
+Commands: ``feeder``, ``opf``, ``snapshot``, ``day``, ``reproduce``, ``export``. With ``--json``
+a command prints exactly one JSON object on stdout (see README, "JSON output"); progress and
+notes go to stderr. Exit codes: 0 success, 1 a problem (bad data, infeasible dispatch, cannot
+write), 2 bad usage (malformed or unknown option values), 130 interrupted. Every error is one
+line on stderr, without traceback (set ``POPDISPATCH_DEBUG=1`` to see one).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import click
+
+from popdispatch.dynamics import DYNAMICS
+from popdispatch.dynamics.graph import GRAPHS
+from popdispatch.errors import PopdispatchError
+from popdispatch.feeder.profiles import MINUTES_PER_DAY
+from popdispatch.modes import MODES
+from popdispatch.report.output import json_text, staged_folder
+from popdispatch.report.progress import Progress
+
+Limit = tuple[int, int, float]
+EXIT_PROBLEM, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
+
+
+class Failure(Exception):
+    """A problem to report on one line with exit code 1 (after any ``--json`` output)."""
+
+
+# -- option types -------------------------------------------------------------------------------
+
+
+class LimitType(click.ParamType):
+    """``A:B=KW``: every line on the path between original buses A and B limited to KW kW."""
+
+    name = "A:B=KW"
+    pattern = re.compile(r"^\s*(\d+)\s*:\s*(\d+)\s*=\s*([^\s]+)\s*$")
+
+    def convert(self, value, param, ctx) -> Limit:
+        if isinstance(value, tuple):
+            return value
+        match = self.pattern.match(str(value))
+        if match is None:
+            self.fail(f"{value!r} is not of the form A:B=KW (e.g. 505:666=28)", param, ctx)
+        a, b, kw = int(match[1]), int(match[2]), _float(match[3])
+        if kw is None or kw < 0:
+            self.fail(f"{value!r}: limit {match[3]!r} is not a finite number >= 0 kW", param, ctx)
+        if a == b:
+            self.fail(f"{value!r}: buses A and B are the same; no line between them", param, ctx)
+        return a, b, kw
+
+
+def _float(text: str) -> float | None:
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if value == value and abs(value) != float("inf") else None
+
+
+class EventType(click.ParamType):
+    """``BUS:off@MIN`` or ``BUS:on@MIN``: the generator at BUS trips or returns at minute MIN."""
+
+    name = "BUS:off|on@MIN"
+    pattern = re.compile(r"^\s*(\d+)\s*:\s*(off|on)\s*@\s*(\d+)\s*$", re.IGNORECASE)
+
+    def convert(self, value, param, ctx) -> tuple[int, str, int]:
+        if isinstance(value, tuple):
+            return value
+        match = self.pattern.match(str(value))
+        if match is None:
+            self.fail(f"{value!r} is not of the form BUS:off@MIN or BUS:on@MIN", param, ctx)
+        minute = int(match[3])
+        if not 1 <= minute <= MINUTES_PER_DAY:
+            self.fail(f"{value!r}: minute {minute} is outside 1..{MINUTES_PER_DAY}", param, ctx)
+        return int(match[1]), match[2].lower(), minute
+
+
+class X0Type(click.ParamType):
+    """``uniform``, ``capacity`` or ``NAME=SHARE,...`` (names ``G114`` or buses ``114``)."""
+
+    name = "uniform|capacity|G=SHARE,..."
+
+    def convert(self, value, param, ctx) -> str | dict[str, float]:
+        if isinstance(value, dict) or value in ("uniform", "capacity"):
+            return value
+        from popdispatch.feeder.generators import paper_fleet
+
+        fleet = paper_fleet()
+        shares: dict[str, float] = {}
+        for item in str(value).split(","):
+            key, sep, share = item.partition("=")
+            key, number = key.strip(), _float(share)
+            name = f"G{key}" if key.isdigit() else key
+            if not sep or number is None or number < 0:
+                self.fail(
+                    f"{item!r} is not NAME=SHARE with a share >= 0 (in {value!r})", param, ctx
+                )
+            if name not in fleet.index:
+                known = ", ".join(fleet.index)
+                self.fail(f"unknown generator {key!r} in {value!r} (known: {known})", param, ctx)
+            shares[name] = number
+        if sum(shares.values()) <= 0:
+            self.fail(f"{value!r}: the shares sum to zero", param, ctx)
+        return shares
+
+
+class MinutesType(click.ParamType):
+    """``START-END``: a range of 1-based minutes, both included."""
+
+    name = "START-END"
+
+    def convert(self, value, param, ctx) -> tuple[int, int]:
+        if isinstance(value, tuple):
+            return value
+        match = re.fullmatch(r"\s*(\d+)\s*-\s*(\d+)\s*", str(value))
+        if match is None:
+            self.fail(f"{value!r} is not of the form START-END (e.g. 540-600)", param, ctx)
+        start, end = int(match[1]), int(match[2])
+        if not 1 <= start <= end <= MINUTES_PER_DAY:
+            self.fail(f"{value!r}: need 1 <= START <= END <= {MINUTES_PER_DAY}", param, ctx)
+        return start, end
+
+
+# -- shared options -----------------------------------------------------------------------------
+
+FOLDER = click.Path(exists=True, file_okay=False, dir_okay=True, readable=True, path_type=Path)
+
+
+option = click.option
+
+
+json_option = option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout.")
+quiet_option = option("-q", "--quiet", is_flag=True, help="No progress bars or notes on stderr.")
+minute_option = option(
+    "--minute",
+    type=click.IntRange(1, MINUTES_PER_DAY),
+    required=True,
+    help="1-based minute of the day (566 = the peak).",
+)
+limit_option = option(
+    "--limit",
+    "limits",
+    type=LimitType(),
+    multiple=True,
+    help="Limit every line on the path between original buses A and B to KW kilowatts "
+    "(repeatable), e.g. 505:666=28.",
+)
+profiles_option = option(
+    "--profiles",
+    type=FOLDER,
+    help="Folder with the official load profiles (else $POPDISPATCH_PROFILES, else the shipped "
+    "synthetic default; minute 566 alone uses the official loads shipped by pandapower).",
+)
+out_option = option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Also write time series (CSV, units in column names), summary.json and a figure here.",
+)
+
+
+def run_options(func):
+    """``--dynamics``, ``--mode``, ``--x0`` and ``--graph``."""
+    decorators = [
+        option(
+            "--dynamics",
+            type=click.Choice(list(DYNAMICS)),
+            default="smith",
+            show_default=True,
+            help="Population dynamics (paper eqs. 9-14).",
+        ),
+        option(
+            "--mode",
+            type=click.Choice(list(MODES)),
+            default="paper",
+            show_default=True,
+            help="How node controllers turn flows into fitness signals.",
+        ),
+        option(
+            "--x0",
+            type=X0Type(),
+            default="uniform",
+            show_default=True,
+            help="Initial shares: uniform, capacity or e.g. G114=0,G1=1,G578=1.",
+        ),
+        option(
+            "--graph",
+            type=click.Choice(list(GRAPHS)),
+            default="complete",
+            show_default=True,
+            help="Communication graph (local-replicator and distributed-smith only).",
+        ),
+    ]
+    for decorate in reversed(decorators):
+        func = decorate(func)
+    return func
+
+
+def settings_from(dynamics: str, mode: str, x0, graph: str):
+    from popdispatch.online import RunSettings
+
+    return RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0)
+
+
+# -- loading inputs -----------------------------------------------------------------------------
+
+
+def check_limits(limits: Sequence[Limit]) -> None:
+    """Usage error (exit 2) for a limit naming a bus the ieee-elv feeder does not have."""
+    from popdispatch.feeder.cases import ieee_elv
+
+    buses = ieee_elv().buses.index
+    for a, b, kw in limits:
+        for bus in (a, b):
+            if bus not in buses:
+                raise click.BadParameter(
+                    f"unknown bus {bus} in {a}:{b}={kw:g} (ieee-elv buses are 1..906)",
+                    param_hint="'--limit'",
+                )
+
+
+def load_profiles(folder: Path | None, minute: int | None, progress: Progress):
+    """Profiles for a run: ``--profiles``, else minute 566's official loads, else the default."""
+    from popdispatch.readers import PROFILES_ENV, read_profiles, resolve_profiles
+    from popdispatch.scenarios import PEAK_MINUTE, peak_profiles
+
+    if folder is not None:
+        with progress.step("reading load profiles"):
+            return read_profiles(folder)
+    if minute == PEAK_MINUTE:
+        return peak_profiles()
+    profiles = resolve_profiles(None)
+    if not os.environ.get(PROFILES_ENV, "").strip():
+        progress.note(f"no --profiles given: using the offline default, {profiles.source}")
+    return profiles
+
+
+def build(profiles, limits: Sequence[Limit], progress: Progress):
+    """The ieee-elv dispatch problem with path limits (feeder loading can take seconds)."""
+    from popdispatch.scenarios import elv_problem
+
+    with progress.step("loading the ieee-elv feeder"):
+        check_limits(limits)
+        return elv_problem(profiles, limits)
+
+
+def emit(summary: dict, as_json: bool, text: str) -> None:
+    """Print the summary as JSON or the human-readable text on stdout."""
+    click.echo(json_text(summary) if as_json else text, nl=not as_json)
+
+
+def generator_lines(rows: list[dict], columns: Sequence[str]) -> str:
+    header = f"{'generator':<10}{'bus':>6}" + "".join(f"{c:>14}" for c in columns)
+    body = [
+        f"{r['name']:<10}{r['bus']:>6}"
+        + "".join(f"{r[c]:>14.3f}" if r[c] is not None else f"{'-':>14}" for c in columns)
+        for r in rows
+    ]
+    return "\n".join([header, *body])
+
+
+def _fmt(value, unit: str = "", digits: int = 3) -> str:
+    return "-" if value is None else f"{value:.{digits}f}{unit}"
+
+
+# -- commands -----------------------------------------------------------------------------------
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="popdispatch")
+def cli() -> None:
+    """Online, distributed, network-constrained dispatch of distributed generators
+    with population dynamics, compared with an exact DC-OPF (IEEE European LV feeder)."""
+
+
+@cli.command()
+@click.option("--case", type=click.Choice(["ieee-elv"]), help="Built-in case (default).")
+@click.option("--opendss", type=FOLDER, help="Read the feeder from its OpenDSS files instead.")
+@json_option
+@quiet_option
+def feeder(case: str | None, opendss: Path | None, as_json: bool, quiet: bool) -> None:
+    """What the feeder is: buses, key nodes, lines, loads, generators, capacity."""
+    from popdispatch.feeder import load_case, reduce_feeder
+    from popdispatch.readers import read_opendss_feeder
+    from popdispatch.report.summaries import feeder_summary
+
+    if case and opendss:
+        raise click.UsageError("give either --case or --opendss, not both")
+    with Progress(quiet).step("loading the feeder"):
+        net = read_opendss_feeder(opendss) if opendss else load_case(case or "ieee-elv")
+        summary = feeder_summary(net, reduce_feeder(net))
+    gens = ", ".join(
+        f"{g['name']} (bus {g['bus']}, {g['pmax_kw']:g} kW)" for g in summary["generators"]
+    )
+    text = (
+        f"feeder {summary['case']}: {summary['buses']} buses, {summary['original_lines']} lines, "
+        f"source bus {summary['source_bus']}\nreduced to {summary['nodes']} key nodes and "
+        f"{summary['lines']} lines\n{summary['loads']} loads\ngenerators: {gens}\n"
+        f"total capacity: {summary['capacity_kw']:g} kW"
+    )
+    emit(summary, as_json, text)
+
+
+@cli.command()
+@minute_option
+@limit_option
+@profiles_option
+@json_option
+@quiet_option
+def opf(minute: int, limits, profiles: Path | None, as_json: bool, quiet: bool) -> int:
+    """The exact DC-OPF of one minute, paper eq. 1."""
+    from popdispatch.opf import solve_opf
+    from popdispatch.report.summaries import opf_summary
+
+    progress = Progress(quiet)
+    problem = build(load_profiles(profiles, minute, progress), limits, progress)
+    summary = opf_summary(problem, solve_opf(problem, minute), limits)
+    text = (
+        f"DC-OPF, minute {minute}: {summary['status']}; demand {summary['demand_kw']:.3f} kW; "
+        f"cost {_fmt(summary['cost'], ' EUR/h', 6)}\nprofiles: {summary['profile_source']}\n"
+        + generator_lines(summary["generators"], ["p_kw"])
+    )
+    emit(summary, as_json, text)
+    if summary["status"] != "optimal":
+        raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given line limits")
+    return 0
+
+
+@cli.command()
+@minute_option
+@limit_option
+@run_options
+@profiles_option
+@out_option
+@json_option
+@quiet_option
+def snapshot(minute, limits, dynamics, mode, x0, graph, profiles, out, as_json, quiet) -> int:
+    """One minute of dynamics: trajectory, convergence, comparison with the DC-OPF."""
+    from popdispatch.report.summaries import snapshot_summary, trajectory_table
+    from popdispatch.scenarios import snapshot_vs_opf
+
+    progress = Progress(quiet)
+    settings = settings_from(dynamics, mode, x0, graph)
+    problem = build(load_profiles(profiles, minute, progress), limits, progress)
+    with progress.step(f"minute {minute}: {dynamics} dynamics and DC-OPF"):
+        result = snapshot_vs_opf(problem, minute, settings)
+    summary = snapshot_summary(problem, result, limits)
+    if summary["status"] == "infeasible":
+        emit(summary, as_json, snapshot_text(summary))
+        raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given line limits")
+    if out is not None:
+        write_snapshot(out, summary, trajectory_table(result), result, progress)
+    emit(summary, as_json, snapshot_text(summary))
+    return 0
+
+
+def snapshot_text(s: dict) -> str:
+    return (
+        f"minute {s['minute']}, demand {s['demand_kw']:.3f} kW: {s['dynamics']} dynamics, "
+        f"{s['mode']} mode, x0 {s['x0']}\nprofiles: {s['profile_source']}\n"
+        f"status: {s['status']} (converged at iteration {_fmt(s['converged_iteration'], '', 0)}"
+        f" of {s['iterations']}; first congestion at iteration "
+        f"{_fmt(s['first_congestion_iteration'], '', 0)}; {s['wall_seconds']:.2f} s)\n"
+        + generator_lines(s["generators"], ["setpoint_kw", "opf_kw"])
+        + f"\nmax |set point - DC-OPF| = {_fmt(s['max_abs_error_kw'], ' kW')}; "
+        f"max overflow = {s['max_overflow_kw']:.3f} kW"
+    )
+
+
+def write_snapshot(out: Path, summary: dict, table, result, progress: Progress) -> None:
+    from popdispatch.report import figures
+
+    with progress.step(f"writing {out}"), staged_folder(out) as folder:
+        folder.write_csv("trajectory.csv", table)
+        figures.save_figure(figures.congestion_figure(result), folder.file("setpoints"))
+        folder.write_json("summary.json", summary)
+
+
+@cli.command()
+@limit_option
+@run_options
+@option(
+    "--event",
+    "events",
+    type=EventType(),
+    multiple=True,
+    help="Generator availability: BUS:off@MIN trips the generator at BUS at minute MIN, "
+    "BUS:on@MIN brings it back (repeatable).",
+)
+@option("--minutes", type=MinutesType(), help="Simulate only minutes START-END (default 1-1440).")
+@profiles_option
+@out_option
+@json_option
+@quiet_option
+def day(limits, dynamics, mode, x0, graph, events, minutes, profiles, out, as_json, quiet) -> int:
+    """The online day: every minute continues from the last (warm start), against the DC-OPF."""
+    import numpy as np
+
+    from popdispatch.report.reproduce import run_day_with_opf
+    from popdispatch.report.summaries import day_summary, day_table
+
+    progress = Progress(quiet)
+    settings = settings_from(dynamics, mode, x0, graph)
+    problem = build(load_profiles(profiles, None, progress), limits, progress)
+    problem = apply_events(problem, events)
+    span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
+    result = run_day_with_opf(problem, settings, span, progress)
+    labels = [f"{bus}:{state}@{minute}" for bus, state, minute in events]
+    summary = day_summary(problem, result, limits, labels)
+    if summary["status"] == "infeasible":
+        emit(summary, as_json, day_text(summary))
+        raise Failure("the DC-OPF is infeasible at some minute with the given limits and events")
+    if out is not None:
+        write_day(out, summary, day_table(result), result, problem, progress)
+    emit(summary, as_json, day_text(summary))
+    return 0
+
+
+def apply_events(problem, events: Sequence[tuple[int, str, int]]):
+    """Turn ``BUS:off@MIN`` / ``BUS:on@MIN`` events into generator outages."""
+    buses = dict(zip(problem.feeder.generators.bus.astype(int), problem.generators, strict=True))
+    off_since: dict[str, int] = {}
+    for bus, state, minute in sorted(events, key=lambda e: e[2]):
+        text = f"{bus}:{state}@{minute}"
+        if bus not in buses:
+            known = ", ".join(str(b) for b in buses)
+            raise click.BadParameter(
+                f"no generator at bus {bus} in {text} (generator buses: {known})",
+                param_hint="'--event'",
+            )
+        name = buses[bus]
+        if state == "off":
+            if name in off_since:
+                raise click.BadParameter(f"{name} is already off in {text}", param_hint="'--event'")
+            off_since[name] = minute
+        else:
+            if name not in off_since:
+                raise click.BadParameter(f"{name} is not off before {text}", param_hint="'--event'")
+            problem = problem.with_outage(name, off_since.pop(name), minute)
+    for name, minute in off_since.items():
+        problem = problem.with_outage(name, minute)
+    return problem
+
+
+def day_text(s: dict) -> str:
+    energy = ", ".join(
+        f"bus {b}: {e:.2f} (DC-OPF {s['opf_energy_kwh'][b]:.2f})"
+        for b, e in s["energy_kwh"].items()
+    )
+    return (
+        f"online day, minutes {s['first_minute']}-{s['last_minute']}: {s['dynamics']} dynamics, "
+        f"{s['mode']} mode\nprofiles: {s['profile_source']}\nstatus: {s['status']} "
+        f"({s['converged_minutes']} of {s['minutes']} minutes converged; "
+        f"{s['wall_seconds']:.1f} s)\n{s['minutes_within_0_1_kw']} minutes within 0.1 kW of the "
+        f"DC-OPF; max |error| {_fmt(s['max_abs_error_kw'], ' kW')}, mean "
+        f"{_fmt(s['mean_abs_error_kw'], ' kW')}\ncost {s['cost']:.5f} EUR (DC-OPF "
+        f"{s['opf_cost']:.5f} EUR); max overflow {s['max_overflow_kw']:.3f} kW\n"
+        f"energy, kWh: {energy}"
+    )
+
+
+def write_day(out: Path, summary: dict, table, result, problem, progress: Progress) -> None:
+    from popdispatch.report import figures
+    from popdispatch.report.summaries import generator_buses
+
+    with progress.step(f"writing {out}"), staged_folder(out) as folder:
+        folder.write_csv("day.csv", table)
+        fig = figures.base_day_figure(result, generator_buses(problem))
+        figures.save_figure(fig, folder.file("setpoints"))
+        folder.write_json("summary.json", summary)
+
+
+@cli.command()
+@profiles_option
+@option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Folder for figures, time series, summary.json and report.md.",
+)
+@option(
+    "--mode",
+    type=click.Choice(list(MODES)),
+    default="paper",
+    show_default=True,
+    help="Dispatch mode of every experiment.",
+)
+@option("--minutes", type=MinutesType(), help="Base day over minutes START-END only (quick look).")
+@json_option
+@quiet_option
+def reproduce(profiles, out, mode, minutes, as_json, quiet) -> None:
+    """The paper's three experiments end to end: figures, summary.json, report.md."""
+    import numpy as np
+
+    from popdispatch.report.reproduce import run_reproduction, write_reproduction
+
+    progress = Progress(quiet)
+    day_profiles = load_profiles(profiles, None, progress)
+    span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
+    rep = run_reproduction(
+        day_profiles, settings_from("smith", mode, "uniform", "complete"), span, progress
+    )
+    with staged_folder(out) as folder:
+        summary = write_reproduction(rep, folder, progress)
+    progress.note(f"wrote {out}/report.md, summary.json and figures/")
+    if as_json:
+        click.echo(json_text(summary), nl=False)
+
+
+@cli.command()
+@minute_option
+@option(
+    "--format",
+    "fmt",
+    type=click.Choice(["matpower", "pandapower"]),
+    required=True,
+    help="MATPOWER case file (.m) or pandapower JSON net.",
+)
+@option(
+    "--out", type=click.Path(dir_okay=False, path_type=Path), required=True, help="File to write."
+)
+@limit_option
+@profiles_option
+@quiet_option
+def export(minute, fmt, out, limits, profiles, quiet) -> None:
+    """The reduced feeder at one minute as a MATPOWER or pandapower case (DC-OPF cross-check)."""
+    from popdispatch.export import write_case
+
+    progress = Progress(quiet)
+    if not out.parent.is_dir():
+        raise click.BadParameter(f"folder {out.parent} does not exist", param_hint="'--out'")
+    day_profiles = load_profiles(profiles, minute, progress)
+    problem = build(day_profiles, limits, progress)
+    loads = minute_loads(problem, day_profiles, minute)
+    write_case(out, fmt, problem, minute, loads)
+    progress.note(f"wrote {out} ({fmt}, minute {minute})")
+
+
+def minute_loads(problem, profiles, minute: int):
+    """Per-load demand (kW) at ``minute`` in the order of the feeder's loads."""
+    return profiles.for_loads(problem.feeder.original.loads.index).at(minute).to_numpy(float)
+
+
+# -- entry point --------------------------------------------------------------------------------
+
+
+def _one_line(message: str) -> str:
+    return " ".join(str(message).split())
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; returns the exit code (0, 1 problem, 2 usage, 130 interrupted)."""
+    debug = bool(os.environ.get("POPDISPATCH_DEBUG"))
+    try:
+        code = cli.main(args=argv, prog_name="popdispatch", standalone_mode=False)
+    except click.UsageError as exc:
+        where = exc.ctx.command_path if exc.ctx else "popdispatch"
+        click.echo(f"{where}: error: {_one_line(exc.format_message())}", err=True)
+        return EXIT_USAGE
+    except click.ClickException as exc:
+        click.echo(f"popdispatch: error: {_one_line(exc.format_message())}", err=True)
+        return exc.exit_code
+    except (click.Abort, KeyboardInterrupt):
+        click.echo("popdispatch: interrupted; no output written", err=True)
+        return EXIT_INTERRUPTED
+    except (Failure, PopdispatchError, ValueError, OSError) as exc:
+        if debug:
+            raise
+        click.echo(f"popdispatch: error: {_one_line(str(exc))}", err=True)
+        return EXIT_PROBLEM
+    return code if isinstance(code, int) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

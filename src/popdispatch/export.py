@@ -1,0 +1,251 @@
+"""Export one minute of a dispatch problem for MATPOWER or pandapower, to cross-check the DC-OPF.
+
+The exported case is the *reduced* feeder (key nodes, merged lines) with its generators, their
+Table I costs, the loads of the chosen minute and the line limits. Buses keep their original
+numbers (bus 1 = source). Units in the files are the tools' own: MW, MVA, p.u. on
+``baseMVA = 1`` and ``baseKV = 0.416`` (the feeder's line-to-line voltage). Costs are
+polynomial in MW, EUR/h: ``a + b P + c P^2`` exactly as in the paper (eq. 2).
+
+- MATPOWER (``.m``): ``mpc.bus``, ``mpc.gen``, ``mpc.branch`` (``rateA`` = limit in MVA, 0 =
+  unlimited) and ``mpc.gencost`` (model 2); ``rundcopf('file.m')`` solves the same DC-OPF.
+- pandapower (JSON): a net with ``bus`` (index = original bus), ``line`` (limits through
+  ``max_i_ka`` at 100 % loading), ``load``, controllable ``gen`` with ``poly_cost``; the
+  generator at the source bus is the slack; ``pandapower.rundcopp(net)`` solves it.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from popdispatch.game.problem import KW_PER_MW, DispatchProblem
+from popdispatch.report.output import atomic_write, atomic_write_text
+
+BASE_MVA = 1.0
+BASE_KV = 0.416
+UNLIMITED_KA = 1000.0  # pandapower needs a finite max_i_ka; 1000 kA is ~720 MVA here
+FORMATS = ("matpower", "pandapower")
+
+
+def case_tables(problem: DispatchProblem, minute: int, load_kw: np.ndarray) -> dict:
+    """Buses, lines, loads and generators of the reduced feeder at ``minute`` (kW, ohm).
+
+    ``load_kw``: per-load demand (kW) in the order of ``problem.feeder.original.loads``.
+    """
+    reduced = problem.feeder
+    nodes = reduced.nodes
+    buses = pd.DataFrame(
+        {"bus": nodes.bus.to_numpy(), "pd_kw": reduced.load_injection_kw(load_kw)},
+        index=nodes.index,
+    )
+    lines = reduced.lines.assign(
+        from_bus=nodes.bus.to_numpy()[reduced.lines.from_node],
+        to_bus=nodes.bus.to_numpy()[reduced.lines.to_node],
+    )
+    loads = reduced.loads.assign(p_kw=np.asarray(load_kw, float))
+    gens = reduced.generators.assign(online=problem.online[minute - 1])
+    source = int(reduced.original.source_bus)
+    return {"buses": buses, "lines": lines, "loads": loads, "generators": gens, "source": source}
+
+
+# -- MATPOWER -----------------------------------------------------------------------------------
+
+
+def _rows(values) -> str:
+    return "\n".join("\t" + "\t".join(_num(v) for v in row) + ";" for row in values)
+
+
+def _num(value) -> str:
+    return f"{value:.12g}" if isinstance(value, float) else str(value)
+
+
+def matpower_text(problem: DispatchProblem, minute: int, load_kw: np.ndarray, name: str) -> str:
+    """A MATPOWER case file (version 2) of the reduced feeder at ``minute``."""
+    t = case_tables(problem, minute, load_kw)
+    zbase = BASE_KV**2 / BASE_MVA
+    gen_buses = set(t["generators"].bus.astype(int))
+    bus_rows = [
+        (
+            int(b),
+            3 if b == t["source"] else (2 if b in gen_buses else 1),
+            pd_kw / KW_PER_MW,
+            0.0,
+            0.0,
+            0.0,
+            1,
+            1.0,
+            0.0,
+            BASE_KV,
+            1,
+            1.1,
+            0.9,
+        )
+        for b, pd_kw in zip(t["buses"].bus, t["buses"].pd_kw, strict=True)
+    ]
+    gens = t["generators"]
+    gen_rows = [
+        (
+            int(g.bus),
+            0.0,
+            0.0,
+            g.pmax_kw / KW_PER_MW,
+            -g.pmax_kw / KW_PER_MW,
+            1.0,
+            BASE_MVA,
+            int(g.online),
+            g.pmax_kw / KW_PER_MW,
+            g.pmin_kw / KW_PER_MW,
+        )
+        + (0.0,) * 11
+        for g in gens.itertuples()
+    ]
+    branch_rows = [
+        (
+            int(ln.from_bus),
+            int(ln.to_bus),
+            ln.r_ohm / zbase,
+            ln.x_ohm / zbase,
+            0.0,
+            ln.limit_kw / KW_PER_MW if math.isfinite(ln.limit_kw) else 0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            1,
+            -360.0,
+            360.0,
+        )
+        for ln in t["lines"].itertuples()
+    ]
+    cost_rows = [(2, 0.0, 0.0, 3, float(g.c), float(g.b), float(g.a)) for g in gens.itertuples()]
+    names = "; ".join(f"'{n}'" for n in gens.index)
+    return f"""function mpc = {name}
+%{name.upper()}  Reduced {problem.feeder.original.name} feeder at minute {minute}.
+%   Written by popdispatch: {problem.feeder.n_nodes} key nodes, {problem.feeder.n_lines} lines.
+%   Loads: {problem.profile_source}.
+%   Powers in MW, impedances in p.u. (baseMVA {BASE_MVA:g}, baseKV {BASE_KV:g}),
+%   branch rateA = line limit in MVA (0 = unlimited), costs in EUR/h with P in MW.
+%   Cross-check: rundcopf('{name}').
+
+%% MATPOWER Case Format : Version 2
+mpc.version = '2';
+mpc.baseMVA = {BASE_MVA:g};
+
+%% bus data
+%\tbus_i\ttype\tPd\tQd\tGs\tBs\tarea\tVm\tVa\tbaseKV\tzone\tVmax\tVmin
+mpc.bus = [
+{_rows(bus_rows)}
+];
+
+%% generator data ({names})
+%\tbus\tPg\tQg\tQmax\tQmin\tVg\tmBase\tstatus\tPmax\tPmin\tPc1\tPc2\tQc1min\tQc1max\tQc2min\tQc2max\tramp_agc\tramp_10\tramp_30\tramp_q\tapf
+mpc.gen = [
+{_rows(gen_rows)}
+];
+
+%% branch data
+%\tfbus\ttbus\tr\tx\tb\trateA\trateB\trateC\tratio\tangle\tstatus\tangmin\tangmax
+mpc.branch = [
+{_rows(branch_rows)}
+];
+
+%% generator cost data (polynomial: c2 c1 c0, EUR/h with P in MW)
+%\t2\tstartup\tshutdown\tn\tc2\tc1\tc0
+mpc.gencost = [
+{_rows(cost_rows)}
+];
+"""
+
+
+def matlab_name(path: Path) -> str:
+    """A valid MATLAB function name from a file name (MATLAB calls the file by its name)."""
+    name = re.sub(r"\W", "_", path.stem)
+    return name if re.match(r"[A-Za-z]", name) else f"case_{name}"
+
+
+# -- pandapower ---------------------------------------------------------------------------------
+
+
+def pandapower_net(problem: DispatchProblem, minute: int, load_kw: np.ndarray):
+    """A pandapower net of the reduced feeder at ``minute`` (see module docstring)."""
+    import pandapower as pp
+
+    t = case_tables(problem, minute, load_kw)
+    net = pp.create_empty_network(
+        name=f"{problem.feeder.original.name} minute {minute}", sn_mva=BASE_MVA
+    )
+    for bus in t["buses"].bus:
+        pp.create_bus(net, vn_kv=BASE_KV, name=str(bus), index=int(bus))
+    ka_per_mw = 1.0 / (math.sqrt(3) * BASE_KV)
+    for number, ln in t["lines"].iterrows():
+        length = max(float(ln.length_km), 1e-6)
+        limited = math.isfinite(ln.limit_kw)
+        pp.create_line_from_parameters(
+            net,
+            int(ln.from_bus),
+            int(ln.to_bus),
+            length_km=length,
+            r_ohm_per_km=ln.r_ohm / length,
+            x_ohm_per_km=max(ln.x_ohm, 1e-9) / length,
+            c_nf_per_km=0.0,
+            max_i_ka=ln.limit_kw / KW_PER_MW * ka_per_mw if limited else UNLIMITED_KA,
+            max_loading_percent=100.0,
+            name=f"line {number}",
+        )
+    for name, load in t["loads"].iterrows():
+        pp.create_load(net, int(load.bus), p_mw=load.p_kw / KW_PER_MW, name=str(name))
+    _add_generators(net, t)
+    return net
+
+
+def _add_generators(net, t: dict) -> None:
+    import pandapower as pp
+
+    has_source = False
+    for name, g in t["generators"].iterrows():
+        at_source = int(g.bus) == t["source"]
+        has_source |= at_source
+        index = pp.create_gen(
+            net,
+            int(g.bus),
+            p_mw=0.0,
+            vm_pu=1.0,
+            name=str(name),
+            controllable=True,
+            min_p_mw=g.pmin_kw / KW_PER_MW,
+            max_p_mw=g.pmax_kw / KW_PER_MW,
+            slack=at_source,
+            in_service=bool(g.online),
+        )
+        pp.create_poly_cost(
+            net,
+            index,
+            "gen",
+            cp1_eur_per_mw=float(g.b),
+            cp2_eur_per_mw2=float(g.c),
+            cp0_eur=float(g.a),
+        )
+    if not has_source:  # a reference bus that supplies nothing
+        pp.create_ext_grid(net, t["source"], min_p_mw=0.0, max_p_mw=0.0, controllable=True)
+
+
+# -- writing ------------------------------------------------------------------------------------
+
+
+def write_case(
+    path: str | Path, fmt: str, problem: DispatchProblem, minute: int, load_kw: np.ndarray
+) -> Path:
+    """Write the case as ``fmt`` (``matpower`` or ``pandapower``) to ``path``, atomically."""
+    path = Path(path)
+    if fmt == "matpower":
+        return atomic_write_text(path, matpower_text(problem, minute, load_kw, matlab_name(path)))
+    if fmt == "pandapower":
+        import pandapower as pp
+
+        net = pandapower_net(problem, minute, load_kw)
+        return atomic_write(path, lambda tmp: pp.to_json(net, str(tmp)))
+    raise ValueError(f"unknown export format {fmt!r} (known: {', '.join(FORMATS)})")

@@ -1,0 +1,393 @@
+"""The paper's figures (section III), drawn from popdispatch results with matplotlib.
+
+Every function returns a :class:`matplotlib.figure.Figure` (object API, no pyplot state, no
+display needed); :func:`save_figure` writes it as PNG (screen) and PDF (paper). Powers are shown
+in kW, fitness in EUR/MW (the engine's units: Table I's coefficients apply to MW).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+
+from popdispatch.feeder.reduction import ReducedFeeder
+from popdispatch.game.controllers import broadcast_signals, overflow_signal
+from popdispatch.game.fitness import FitnessParameters, barrier
+from popdispatch.game.problem import KW_PER_MW, DispatchProblem
+from popdispatch.scenarios import DayComparison, ExtinctionResult, SnapshotComparison
+
+SINGLE = 3.5  # inches: one column of a two-column paper
+DOUBLE = 7.16  # inches: full page width
+STYLE = {
+    "font.size": 8,
+    "axes.titlesize": 9,
+    "axes.labelsize": 8,
+    "legend.fontsize": 7,
+    "xtick.labelsize": 7,
+    "ytick.labelsize": 7,
+    "lines.linewidth": 1.2,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+}
+PENALTY, INCENTIVE = "#c0392b", "#1e8449"
+LABEL_BOX = {"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8}
+
+
+def styled(draw):
+    """Decorator: draw the figure under the paper style (rcParams are read when drawing)."""
+
+    @functools.wraps(draw)
+    def wrapper(*args, **kwargs):
+        import matplotlib
+
+        with matplotlib.rc_context(STYLE):
+            return draw(*args, **kwargs)
+
+    return wrapper
+
+
+def new_figure(width: float, height: float, **subplots) -> tuple[Figure, np.ndarray]:
+    """A figure with a grid of axes (``subplots`` as for ``Figure.subplots``)."""
+    fig = Figure(figsize=(width, height), layout="constrained")
+    return fig, fig.subplots(squeeze=False, **subplots)
+
+
+def save_figure(fig: Figure, stem) -> list:
+    """Write ``stem.png`` (200 dpi) and ``stem.pdf``; returns the two paths."""
+    import matplotlib
+
+    paths = [stem.with_suffix(".png"), stem.with_suffix(".pdf")]
+    with matplotlib.rc_context(STYLE):
+        fig.savefig(paths[0], dpi=200)
+        fig.savefig(paths[1])
+    return paths
+
+
+def generator_colors(names) -> dict[str, str]:
+    """One fixed colour per generator (tab10), the same in every figure."""
+    palette = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2"]
+    return {name: palette[k % len(palette)] for k, name in enumerate(names)}
+
+
+# -- figure 1: fitness of a generator node ------------------------------------------------------
+
+
+@styled
+def fitness_figure(
+    problem: DispatchProblem, generator: str, shift: float, params: FitnessParameters
+) -> Figure:
+    """Fitness of ``generator`` against its output (eqs. 5-7), and shifted by ``shift`` EUR/MW.
+
+    ``shift`` is the magnitude of a congestion signal (eq. 8); the penalty curve is ``-shift``
+    below, the incentive curve ``+shift`` above. Plotted as ``f - B`` so the axis reads in
+    EUR/MW around the marginal cost.
+    """
+    k = problem.generators.get_loc(generator)
+    pmin, pmax = problem.pmin[k], problem.pmax[k]
+    p = np.linspace(pmin - 0.3 * pmax, 1.4 * pmax, 801)
+    base = -(problem.b[k] + 2 * problem.c[k] * p)
+    bar = barrier(p, np.full_like(p, pmin), np.full_like(p, pmax), float(params.m))
+    fitness = base + bar
+    fig, axes = new_figure(SINGLE, 2.5)
+    ax = axes[0, 0]
+    p_kw = p * KW_PER_MW
+    ax.plot(p_kw, fitness, color="black", label="fitness $f_i - B$")
+    ax.plot(p_kw, fitness - shift, color=PENALTY, ls="--", label=f"penalised ($-${shift:.1f})")
+    ax.plot(p_kw, fitness + shift, color=INCENTIVE, ls=":", label=f"incentivised (+{shift:.1f})")
+    for limit, name in ((pmin, "$P_{min}$"), (pmax, "$P_{max}$")):
+        ax.axvline(limit * KW_PER_MW, color="grey", lw=0.8, ls="-.")
+        ax.annotate(
+            name,
+            (limit * KW_PER_MW, 0.0),
+            xycoords=("data", "axes fraction"),
+            xytext=(2, 4),
+            textcoords="offset points",
+            fontsize=7,
+        )
+    ax.set_xlabel(f"output of {generator} (bus {problem.feeder.generators.bus[generator]}), kW")
+    ax.set_ylabel("fitness $-$ B, EUR/MW")
+    ax.set_title(f"Fitness of generator node {generator}")
+    ax.legend(loc="center")
+    return fig
+
+
+# -- feeder drawings (figures 2 and 3) ----------------------------------------------------------
+
+
+def _segments(reduced: ReducedFeeder):
+    """Original line segments (x, y pairs) and the reduced line each belongs to (-1: pruned)."""
+    original = reduced.original
+    xy = original.buses[["x", "y"]]
+    start = xy.loc[original.lines.from_bus].to_numpy()
+    end = xy.loc[original.lines.to_bus].to_numpy()
+    return np.stack([start, end], axis=1), reduced.line_map.to_numpy()
+
+
+def _draw_network(ax, reduced: ReducedFeeder, widths: np.ndarray, colors) -> None:
+    """Draw every original line; ``widths``/``colors`` per reduced line (pruned ones thin grey)."""
+    segments, which = _segments(reduced)
+    kept = which >= 0
+    ax.add_collection(LineCollection(segments[~kept], colors="#cccccc", linewidths=0.4))
+    colors = np.asarray(colors, dtype=object)
+    ax.add_collection(
+        LineCollection(
+            segments[kept], colors=list(colors[which[kept]]), linewidths=widths[which[kept]]
+        )
+    )
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.grid(False)
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def _draw_loads_and_generators(ax, reduced: ReducedFeeder, labels: dict[str, str]) -> None:
+    original = reduced.original
+    load_xy = original.buses.loc[original.loads.bus, ["x", "y"]].to_numpy()
+    ax.scatter(
+        *load_xy.T, s=14, facecolors="none", edgecolors="#2c3e50", lw=0.7, zorder=3, label="load"
+    )
+    source = original.buses.loc[original.source_bus]
+    ax.scatter(source.x, source.y, marker="s", s=40, color="black", zorder=4, label="source")
+    gens = reduced.generators
+    gen_xy = original.buses.loc[gens.bus, ["x", "y"]].to_numpy()
+    ax.scatter(
+        *gen_xy.T,
+        marker="^",
+        s=60,
+        color="#f39c12",
+        edgecolors="black",
+        lw=0.6,
+        zorder=5,
+        label="generator",
+    )
+    for name, (x, y) in zip(gens.index, gen_xy, strict=True):
+        ax.annotate(
+            labels.get(name, name),
+            (x, y),
+            xytext=(5, 4),
+            textcoords="offset points",
+            fontsize=7,
+            zorder=6,
+            bbox=LABEL_BOX,
+        )
+
+
+def all_flows_kw(problem: DispatchProblem, setpoints_kw: np.ndarray, minute: int, load_kw):
+    """Flow (kW, + away from the source) on every reduced line for set points in kW."""
+    p_mw = np.asarray(setpoints_kw) / KW_PER_MW
+    return problem.all_line_flows_mw(p_mw, minute, np.asarray(load_kw)) * KW_PER_MW
+
+
+@styled
+def feeder_flow_figure(
+    problem: DispatchProblem, setpoints_kw: np.ndarray, minute: int, load_kw: np.ndarray
+) -> Figure:
+    """The reduced feeder on its coordinates; line widths proportional to |flow| at ``minute``."""
+    reduced = problem.feeder
+    flows = np.abs(all_flows_kw(problem, setpoints_kw, minute, load_kw))
+    scale = 6.0 / max(flows.max(), 1e-9)
+    fig, axes = new_figure(SINGLE, 3.6)
+    ax = axes[0, 0]
+    _draw_network(ax, reduced, 0.3 + flows * scale, ["#2471a3"] * len(flows))
+    labels = {n: f"{n} {p:.1f} kW" for n, p in zip(problem.generators, setpoints_kw, strict=True)}
+    _draw_loads_and_generators(ax, reduced, labels)
+    for kw in (5, 20):
+        ax.plot([], [], color="#2471a3", lw=0.3 + kw * scale, label=f"{kw} kW flow")
+    ax.legend(loc="lower right", frameon=True)
+    ax.set_title(
+        f"Reduced feeder ({reduced.n_nodes} key nodes)\nline widths: flows at minute {minute}"
+    )
+    return fig
+
+
+@styled
+def congestion_detection_figure(
+    problem: DispatchProblem,
+    setpoints_kw: np.ndarray,
+    minute: int,
+    load_kw: np.ndarray,
+    C: float,
+    situation: str,
+) -> Figure:
+    """Node controllers at a congested limited path: the penalty side and the incentive side.
+
+    ``setpoints_kw`` is the dispatch whose flows are measured (``situation`` says which).
+    Lines are coloured by their side of the most overloaded limited line; the controllers at its
+    two ends are marked with their eq.-8 values, and every generator with the sum of the signals
+    it receives (EUR/MW).
+    """
+    reduced = problem.feeder
+    flows = all_flows_kw(problem, setpoints_kw, minute, load_kw)
+    limited = flows[problem.lines]
+    k = int(np.argmax(np.abs(limited) - problem.limit * KW_PER_MW))
+    line = int(problem.lines[k])
+    down = np.ascontiguousarray(problem.down)
+    signal = broadcast_signals(limited / KW_PER_MW, problem.limit, down, float(C))
+    child_sends = limited[k] < 0  # flow towards the source: the child side sends it
+    is_limited = np.isin(np.arange(reduced.n_lines), problem.lines)
+    colors = np.where(_subtree_lines(reduced, line) == child_sends, PENALTY, INCENTIVE)
+    colors = np.where(is_limited, "black", colors)
+    fig, axes = new_figure(DOUBLE, 3.9, ncols=2)
+    labels = {n: f"{n} {s:+.1f}" for n, s in zip(problem.generators, signal, strict=True)}
+    for ax in axes[0]:
+        _draw_network(ax, reduced, np.where(is_limited, 3.0, 0.9), colors)
+        _draw_loads_and_generators(ax, reduced, labels)
+    zoom = axes[0, 1]
+    _zoom_to(zoom, problem.feeder.original.buses, _path_buses(problem))
+    _draw_controllers(zoom, problem, line, limited[k], C)
+    row = reduced.lines.loc[line]
+    ax = axes[0, 0]
+    ax.plot([], [], color="black", lw=3, label=f"limited path (U = {problem.limit[k] * 1e3:g} kW)")
+    ax.plot([], [], color=PENALTY, lw=1.5, label="penalty side (sends the overflow)")
+    ax.plot([], [], color=INCENTIVE, lw=1.5, label="incentive side")
+    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=6)
+    ax.set_title("Sides of the congested path; signals received, EUR/MW")
+    zoom.set_title(
+        f"Zoom: line {int(row.from_bus)}-{int(row.to_bus)} carries {abs(limited[k]):.1f} kW"
+    )
+    fig.suptitle(f"Congestion detection ({situation})", fontsize=9)
+    return fig
+
+
+def _path_buses(problem: DispatchProblem) -> list[int]:
+    """Original buses at the ends of the limited reduced lines."""
+    rows = problem.feeder.lines.loc[problem.lines]
+    return sorted(set(rows.from_bus.astype(int)) | set(rows.to_bus.astype(int)))
+
+
+def _zoom_to(ax, buses, around: list[int], margin_m: float = 20.0) -> None:
+    xy = buses.loc[around, ["x", "y"]].to_numpy()
+    (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0)
+    half = max(x1 - x0, y1 - y0) / 2 + margin_m
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    ax.set_xlim(cx - half, cx + half)
+    ax.set_ylim(cy - half, cy + half)
+
+
+def _draw_controllers(ax, problem: DispatchProblem, line: int, flow_kw: float, C: float) -> None:
+    """Mark the node controllers at both ends of ``line`` with their eq.-8 values (EUR/MW)."""
+    row = problem.feeder.lines.loc[line]
+    limit = problem.limit[list(problem.lines).index(line)] * KW_PER_MW
+    buses = problem.feeder.original.buses
+    ends = ((int(row.from_bus), flow_kw, (-8, 10)), (int(row.to_bus), -flow_kw, (8, -14)))
+    for bus, measured, offset in ends:
+        value = overflow_signal(measured / KW_PER_MW, limit / KW_PER_MW, float(C))
+        kind = "penalty" if value < 0 else "incentive"
+        x, y = buses.loc[bus, ["x", "y"]]
+        ax.scatter(
+            x,
+            y,
+            marker="s",
+            s=90,
+            facecolors="none",
+            lw=1.8,
+            zorder=7,
+            edgecolors=PENALTY if value < 0 else INCENTIVE,
+        )
+        ax.annotate(
+            f"controller at bus {bus}: {kind} {value:+.1f}",
+            (x, y),
+            xytext=offset,
+            textcoords="offset points",
+            ha="right" if offset[0] < 0 else "left",
+            fontsize=6.5,
+            zorder=8,
+            bbox=LABEL_BOX,
+        )
+
+
+def _subtree_lines(reduced: ReducedFeeder, line: int) -> np.ndarray:
+    """Boolean per reduced line: is it below ``line`` (in the subtree of its child node)?"""
+    tree = reduced.tree
+    child = tree.line_child[line]
+    first, size = tree.start[child], tree.size[child]
+    position = tree.start[tree.line_child]
+    return (position >= first) & (position < first + size)
+
+
+# -- figures 4-6: set points against the DC-OPF -------------------------------------------------
+
+
+@styled
+def base_day_figure(result: DayComparison, buses: list[int]) -> Figure:
+    """Generator outputs over the day: dynamics solid, DC-OPF dashed, one panel per generator.
+
+    ``buses``: the original bus of each generator (for the panel titles).
+    """
+    run = result.run
+    hours = run.minutes / 60.0
+    colors = generator_colors(run.generators)
+    fig, axes = new_figure(DOUBLE, 4.2, nrows=2, ncols=3, sharex=True)
+    opf = result.opf_kw
+    for k, (ax, name) in enumerate(zip(axes.flat, run.generators, strict=False)):
+        ax.plot(hours, run.setpoints_kw[:, k], color=colors[name], label="dynamics")
+        ax.plot(hours, opf[:, k], color="black", ls="--", lw=0.7, alpha=0.8, label="DC-OPF")
+        ax.set_xticks(range(0, 25, 6))
+        ax.set_title(f"{name} (bus {buses[k]})")
+        ax.set_ylabel("output, kW")
+    for ax in axes[-1]:
+        ax.set_xlabel("time of day, h")
+    axes[0, 0].legend(loc="upper left")
+    fig.suptitle(
+        f"Generator output over the day: {run.settings.dynamics} dynamics (solid), DC-OPF (dashed)",
+        fontsize=9,
+    )
+    return fig
+
+
+def _iteration_axes(ax, run, opf_kw, colors) -> None:
+    iterations = np.arange(run.iterations + 1)
+    for k, name in enumerate(run.generators):
+        ax.plot(iterations, run.trajectory_kw[:, k], color=colors[name], label=name)
+        if np.isfinite(opf_kw[k]):
+            ax.axhline(opf_kw[k], color=colors[name], ls="--", lw=0.9)
+    ax.set_xlabel("iteration (0.01 s each)")
+    ax.set_ylabel("set point, kW")
+    ax.set_xlim(0, run.iterations)
+
+
+@styled
+def congestion_figure(result: SnapshotComparison, title: str | None = None) -> Figure:
+    """Set points per iteration (solid) and the DC-OPF (dashed); detection and convergence."""
+    run = result.run
+    fig, axes = new_figure(SINGLE, 3.0)
+    ax = axes[0, 0]
+    _iteration_axes(ax, run, result.opf.p_kw, generator_colors(run.generators))
+    for it, label, style in (
+        (run.first_congestion, "congestion detected", ":"),
+        (run.converged_at, "converged", "-."),
+    ):
+        if it is not None:
+            ax.axvline(it, color="grey", ls=style, lw=1.0)
+            ax.annotate(
+                f"{label}\n(iteration {it})",
+                (it, 0.55),
+                xycoords=("data", "axes fraction"),
+                xytext=(3, 0),
+                textcoords="offset points",
+                fontsize=6.5,
+                bbox=LABEL_BOX,
+            )
+    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=3)
+    ax.set_title(title or f"Minute {run.minute}: set points (solid), DC-OPF (dashed)")
+    return fig
+
+
+@styled
+def extinction_figure(result: ExtinctionResult) -> Figure:
+    """Replicator against Smith dynamics from the same state with one generator at zero share."""
+    colors = generator_colors(result.smith.generators)
+    fig, axes = new_figure(DOUBLE, 2.8, ncols=2, sharey=True)
+    for ax, run, title in (
+        (axes[0, 0], result.replicator, "replicator"),
+        (axes[0, 1], result.smith, "Smith"),
+    ):
+        _iteration_axes(ax, run, result.opf.p_kw, colors)
+        ax.set_title(f"{title} dynamics, {result.generator} starts at zero")
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncols=6)
+    fig.suptitle("Extinction: set points (solid), DC-OPF (dashed)", fontsize=9)
+    return fig

@@ -1,0 +1,96 @@
+"""Progress on stderr (tqdm): bars for loops, an elapsed-time spinner for long single calls.
+
+Nothing is shown for steps shorter than one second, nor at all when ``quiet``. Standard output
+is never touched (it carries ``--json``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import threading
+import time
+from collections.abc import Iterable, Iterator
+
+from tqdm import tqdm
+
+DELAY_S = 1.0
+
+
+class Progress:
+    """Progress reporting for one command run."""
+
+    def __init__(self, quiet: bool = False):
+        self.quiet = quiet
+
+    def note(self, message: str) -> None:
+        """A one-line remark on stderr (e.g. which profiles are used), unless quiet."""
+        if not self.quiet:
+            tqdm.write(f"popdispatch: {message}", file=sys.stderr)
+
+    def iterate(self, items: Iterable, description: str, total: int | None = None) -> Iterator:
+        """Iterate over ``items`` with a progress bar."""
+        yield from tqdm(
+            items,
+            desc=description,
+            total=total,
+            disable=self.quiet,
+            delay=DELAY_S,
+            leave=False,
+            file=sys.stderr,
+            dynamic_ncols=True,
+            mininterval=0.1 if sys.stderr.isatty() else 10.0,
+        )
+
+    @contextlib.contextmanager
+    def step(self, description: str) -> Iterator[None]:
+        """An elapsed-time spinner while a single long call runs (no total known).
+
+        On a terminal the line updates twice a second after the first second; elsewhere (logs)
+        one line with the elapsed time is written when a step took more than a second.
+        """
+        if self.quiet:
+            yield
+            return
+        if not sys.stderr.isatty():
+            start = time.perf_counter()
+            yield
+            elapsed = time.perf_counter() - start
+            if elapsed > DELAY_S:
+                tqdm.write(f"{description}: {elapsed:.1f} s", file=sys.stderr)
+            return
+        with self._spinner(description):
+            yield
+
+    @contextlib.contextmanager
+    def _spinner(self, description: str) -> Iterator[None]:
+        bar = tqdm(
+            desc=description,
+            total=None,
+            delay=DELAY_S,
+            leave=False,
+            file=sys.stderr,
+            bar_format="{desc}: {elapsed}",
+        )
+        stop = threading.Event()
+        shown = threading.Event()
+
+        def tick() -> None:
+            if stop.wait(DELAY_S):
+                return
+            shown.set()
+            while not stop.is_set():
+                bar.refresh()
+                stop.wait(0.5)
+
+        thread = threading.Thread(target=tick, daemon=True)
+        thread.start()
+        try:
+            yield
+        finally:
+            stop.set()
+            thread.join()
+            if shown.is_set():  # keep the final elapsed time on its own line
+                bar.refresh()
+                sys.stderr.write("\n")
+            bar.close()
