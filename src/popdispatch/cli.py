@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -554,9 +555,23 @@ def _one_line(message: str) -> str:
     return " ".join(str(message).split())
 
 
+class _Interrupt:
+    """SIGINT handler that remembers it fired: compiled engine code may turn the
+    KeyboardInterrupt into another exception (numba raises SystemError), which must still be
+    reported as an interruption."""
+
+    fired = False
+
+    def __call__(self, signum, frame) -> None:
+        self.fired = True
+        raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0, 1 problem, 2 usage, 130 interrupted)."""
     debug = bool(os.environ.get("POPDISPATCH_DEBUG"))
+    interrupt = _Interrupt()
+    signal.signal(signal.SIGINT, interrupt)
     try:
         code = cli.main(args=argv, prog_name="popdispatch", standalone_mode=False)
     except click.UsageError as exc:
@@ -574,6 +589,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         click.echo(f"popdispatch: error: {_one_line(str(exc))}", err=True)
         return EXIT_PROBLEM
+    except Exception:
+        if not interrupt.fired or debug:
+            raise
+        click.echo("popdispatch: interrupted; no output written", err=True)
+        return EXIT_INTERRUPTED
     return code if isinstance(code, int) else 0
 
 

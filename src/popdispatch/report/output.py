@@ -93,7 +93,7 @@ class StagedFolder:
         self.write_text(name, json_text(summary))
 
     def write_csv(self, name: str, table: pd.DataFrame) -> None:
-        table.to_csv(self.file(name), index=False, float_format="%.6g")
+        table.to_csv(self.file(name), index=False, float_format="%.10g")
 
 
 @contextlib.contextmanager

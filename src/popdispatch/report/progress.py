@@ -43,6 +43,24 @@ class Progress:
         )
 
     @contextlib.contextmanager
+    def counter(self, description: str, total: int) -> Iterator:
+        """A progress bar over ``total`` units; yields ``advance(_)`` to call once per unit."""
+        bar = tqdm(
+            desc=description,
+            total=total,
+            disable=self.quiet,
+            delay=DELAY_S,
+            leave=False,
+            file=sys.stderr,
+            dynamic_ncols=True,
+            mininterval=0.1 if sys.stderr.isatty() else 10.0,
+        )
+        try:
+            yield lambda *_: bar.update(1)
+        finally:
+            bar.close()
+
+    @contextlib.contextmanager
     def step(self, description: str) -> Iterator[None]:
         """An elapsed-time spinner while a single long call runs (no total known).
 

@@ -63,10 +63,11 @@ class Reproduction:
 def run_day_with_opf(
     problem: DispatchProblem, settings: RunSettings, minutes, progress: Progress
 ) -> DayComparison:
-    """The online day (elapsed-time spinner) and the DC-OPF of each minute (progress bar)."""
+    """The online day and the DC-OPF of each minute, with progress bars."""
     label = f"online day ({settings.dynamics}, {settings.mode} mode)"
-    with progress.step(label):
-        run = run_day(problem, settings, minutes)
+    total = len(problem.demand) if minutes is None else len(minutes)
+    with progress.counter(label, total) as advance:
+        run = run_day(problem, settings, minutes, progress=advance)
     opf = [
         solve_opf(problem, int(m))
         for m in progress.iterate(run.minutes, "DC-OPF per minute", len(run.minutes))

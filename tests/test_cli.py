@@ -1,0 +1,328 @@
+"""The ``popdispatch`` command line, run for real in subprocesses (issue 4).
+
+Engine runs cost a JIT compilation per process (~10 s), so each command that integrates the
+dynamics is run once and its outputs are checked together.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from helpers import find_official_folder, official_folder
+
+from popdispatch.modes import MODES
+
+SCRIPT = Path(sys.executable).with_name("popdispatch")
+COMMANDS = ["feeder", "opf", "snapshot", "day", "reproduce", "export"]
+
+
+def command(*args: str) -> list[str]:
+    base = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "popdispatch.cli"]
+    return base + list(args)
+
+
+def clean_env() -> dict[str, str]:
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("POPDISPATCH_PROFILES", "POPDISPATCH_DEBUG")
+    }
+    env["MPLBACKEND"] = "Agg"
+    return env
+
+
+def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        command(*args), capture_output=True, text=True, env=clean_env(), cwd=cwd, timeout=900
+    )
+
+
+def assert_one_line_error(result: subprocess.CompletedProcess, code: int, *words: str) -> None:
+    assert result.returncode == code, result.stderr
+    assert "Traceback" not in result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    for word in words:
+        assert word in lines[0], lines[0]
+
+
+def gens(summary: dict) -> dict[str, dict]:
+    return {g["name"]: g for g in summary["generators"]}
+
+
+# -- help and choices ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+def test_every_command_has_help(name):
+    result = run(name, "--help")
+    assert result.returncode == 0
+    assert result.stdout.startswith(f"Usage: popdispatch {name}")
+
+
+def test_mode_choices_come_from_the_engine():
+    text = run("snapshot", "--help").stdout
+    for mode in MODES:
+        assert mode in text
+
+
+# -- feeder and opf -----------------------------------------------------------------------------
+
+
+def test_feeder_json():
+    result = run("feeder", "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert (summary["buses"], summary["nodes"], summary["lines"], summary["loads"]) == (
+        906, 110, 109, 55,
+    )  # fmt: skip
+    assert summary["capacity_kw"] == 65.0
+    assert [g["bus"] for g in summary["generators"]] == [1, 114, 578, 739, 817, 835]
+
+
+def test_feeder_from_opendss_matches_the_built_in_case():
+    folder = official_folder()
+    summary = json.loads(run("feeder", "--opendss", str(folder), "--json", "-q").stdout)
+    assert (summary["buses"], summary["nodes"], summary["lines"], summary["loads"]) == (
+        906, 110, 109, 55,
+    )  # fmt: skip
+
+
+def test_opf_json_with_the_paper_limit():
+    result = run("opf", "--minute", "566", "--limit", "505:666=28", "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["status"] == "optimal"
+    assert summary["minute"] == 566
+    assert summary["demand_kw"] == pytest.approx(57.358, abs=1e-3)
+    p = {name: g["p_kw"] for name, g in gens(summary).items()}
+    assert p["G739"] == pytest.approx(3.138, abs=1e-3)
+    assert p["G1"] == pytest.approx(9.220, abs=1e-3)
+    assert sum(p.values()) == pytest.approx(57.358, abs=1e-3)
+    assert summary["cost"] == pytest.approx(0.1536634, rel=1e-5)
+
+
+def test_opf_infeasible_limits_exit_1_and_still_report():
+    result = run("opf", "--minute", "566", "--limit", "505:666=0", "--json")
+    assert_one_line_error(result, 1, "infeasible")
+    assert json.loads(result.stdout)["status"] == "infeasible"
+
+
+# -- bad input ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (["opf", "--minute", "0"], ["--minute", "0"]),
+        (["opf", "--minute", "1441"], ["--minute", "1441"]),
+        (["opf", "--minute", "566", "--limit", "505-666=28"], ["--limit", "505-666=28"]),
+        (["opf", "--minute", "566", "--limit", "505:666=-3"], ["--limit", "-3"]),
+        (["opf", "--minute", "566", "--limit", "505:9999=28"], ["--limit", "unknown bus 9999"]),
+        (["opf", "--minute", "566", "--profiles", "/no/such/folder"], ["--profiles"]),
+        (["snapshot", "--minute", "566", "--x0", "G999=1"], ["--x0", "G999"]),
+        (["snapshot", "--minute", "566", "--x0", "G114=abc"], ["--x0", "G114=abc"]),
+        (["snapshot", "--minute", "566", "--dynamics", "nope"], ["--dynamics", "nope"]),
+        (["day", "--event", "739:offline@10"], ["--event", "739:offline@10"]),
+        (["day", "--event", "115:off@10", "-q"], ["--event", "no generator at bus 115"]),
+        (["day", "--event", "739:on@10", "-q"], ["--event", "G739 is not off"]),
+        (["day", "--minutes", "10-5"], ["--minutes", "10-5"]),
+        (["export", "--minute", "566", "--format", "csv", "--out", "x.m"], ["--format"]),
+        (["feeder", "--case", "ieee-elv", "--opendss", "."], ["--case", "--opendss"]),
+    ],
+)
+def test_usage_errors_exit_2_with_one_line(args, words, tmp_path):
+    result = run(*args, cwd=tmp_path)
+    assert_one_line_error(result, 2, *words)
+    assert result.stdout == ""
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unreadable_profile_folder_is_a_problem(tmp_path):
+    (tmp_path / "Loads.txt").write_text("New Load.LOAD1 Phases=1 Bus1=34.1 kW=1 Yearly=Shape_x\n")
+    result = run("opf", "--minute", "100", "--profiles", str(tmp_path))
+    assert_one_line_error(result, 1, "Loads.txt", "Shape_x")
+
+
+def test_out_that_is_a_file_is_a_usage_error(tmp_path):
+    target = tmp_path / "taken"
+    target.write_text("keep me")
+    result = run("snapshot", "--minute", "566", "--out", str(target))
+    assert_one_line_error(result, 2, "--out")
+    assert target.read_text() == "keep me"
+
+
+# -- snapshot -----------------------------------------------------------------------------------
+
+SNAPSHOT_KEYS = {
+    "status", "minute", "demand_kw", "mode", "dynamics", "x0", "profile_source", "generators",
+    "iterations", "first_congestion_iteration", "max_overflow_kw", "max_abs_error_kw",
+    "wall_seconds",
+}  # fmt: skip
+
+
+def test_snapshot_congestion_json_and_out(tmp_path):
+    out = tmp_path / "snap"
+    result = run("snapshot", "--minute", "566", "--limit", "505:666=28", "--out", str(out),
+                 "--json")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary.keys() >= SNAPSHOT_KEYS
+    assert summary["status"] == "converged"
+    assert (summary["mode"], summary["dynamics"], summary["x0"]) == ("paper", "smith", "uniform")
+    assert "official minute 566" in summary["profile_source"]
+    g = gens(summary)
+    assert set(g["G739"]) >= {"bus", "setpoint_kw", "opf_kw"}
+    assert g["G739"]["opf_kw"] == pytest.approx(3.138, abs=1e-3)
+    assert g["G739"]["setpoint_kw"] < 5.0  # penalised well below its free optimum of 10 kW
+    assert g["G1"]["setpoint_kw"] > 5.0  # raised to compensate (free optimum 2.358 kW)
+    assert summary["first_congestion_iteration"] is not None
+    assert summary["first_congestion_iteration"] <= summary["iterations"]
+    assert 0.1 < summary["max_overflow_kw"] < 1.0  # the paper's signal leaves a residual
+    error = max(abs(x["setpoint_kw"] - x["opf_kw"]) for x in summary["generators"])
+    assert summary["max_abs_error_kw"] == pytest.approx(error)
+    assert sorted(p.name for p in out.iterdir()) == [
+        "setpoints.pdf", "setpoints.png", "summary.json", "trajectory.csv",
+    ]  # fmt: skip
+    assert json.loads((out / "summary.json").read_text()) == summary
+    table = pd.read_csv(out / "trajectory.csv")
+    assert len(table) == summary["iterations"] + 1
+    assert {"iteration", "time_s", "G739_setpoint_kw", "G739_opf_kw"} <= set(table.columns)
+    assert table.G739_setpoint_kw.iloc[-1] == pytest.approx(g["G739"]["setpoint_kw"], abs=1e-5)
+
+
+def test_snapshot_replicator_keeps_a_zero_start_generator_extinct():
+    result = run("snapshot", "--minute", "566", "--dynamics", "replicator", "--x0",
+                 "G114=0,G1=1,G578=1,G739=1,G817=1,G835=1", "--json", "-q")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["dynamics"] == "replicator"
+    assert summary["x0"].startswith("G114=0")
+    assert gens(summary)["G114"]["setpoint_kw"] == 0.0
+    assert summary["max_abs_error_kw"] > 9.9  # the DC-OPF puts G114 at 10 kW
+
+
+def test_snapshot_infeasible_limits_write_nothing(tmp_path):
+    out = tmp_path / "never"
+    result = run("snapshot", "--minute", "566", "--limit", "505:666=0", "--out", str(out),
+                 "--json", "-q")  # fmt: skip
+    assert_one_line_error(result, 1, "infeasible")
+    assert json.loads(result.stdout)["status"] == "infeasible"
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- day ----------------------------------------------------------------------------------------
+
+DAY_KEYS = {
+    "status", "minutes", "profile_source", "mode", "dynamics", "max_abs_error_kw",
+    "mean_abs_error_kw", "energy_kwh", "opf_energy_kwh", "cost", "opf_cost", "max_overflow_kw",
+    "wall_seconds",
+}  # fmt: skip
+
+
+def test_day_with_an_outage_json_and_out(tmp_path):
+    out = tmp_path / "day"
+    result = run("day", "--minutes", "600-620", "--event", "817:off@605", "--event",
+                 "817:on@612", "--out", str(out), "--json")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary.keys() >= DAY_KEYS
+    assert summary["minutes"] == 21
+    assert summary["events"] == ["817:off@605", "817:on@612"]
+    assert summary["profile_source"].startswith("synthetic default")
+    assert "offline default" in result.stderr  # says so
+    table = pd.read_csv(out / "day.csv")
+    assert list(table.minute) == list(range(600, 621))
+    off = table.minute.between(605, 611)
+    assert (table.G817_setpoint_kw[off] == 0).all()
+    assert (table.G817_opf_kw[off] == 0).all()
+    assert table.G817_setpoint_kw[~off].gt(0).all()
+    assert summary["energy_kwh"]["817"] == pytest.approx(table.G817_setpoint_kw.sum() / 60)
+    assert summary["opf_cost"] == pytest.approx(table.opf_cost_eur_per_h.sum() / 60)
+    assert summary["cost"] >= summary["opf_cost"] - 1e-9  # the DC-OPF is the cheapest
+    demand = table.demand_kw
+    setpoints = table[[c for c in table.columns if c.endswith("_setpoint_kw")]].sum(axis=1)
+    assert (setpoints - demand).abs().max() < 1e-6
+    assert json.loads((out / "summary.json").read_text()) == summary
+    assert (out / "setpoints.png").stat().st_size > 0
+
+
+# -- export -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("fmt", "name"), [("matpower", "elv566.m"), ("pandapower", "elv.json")])
+def test_export_writes_the_file(tmp_path, fmt, name):
+    out = tmp_path / name
+    result = run("export", "--minute", "566", "--format", fmt, "--out", str(out), "--limit",
+                 "505:666=28", "-q")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    text = out.read_text()
+    if fmt == "matpower":
+        assert text.startswith("function mpc = elv566")
+        assert "mpc.gencost" in text
+    else:
+        assert json.loads(text)["_module"].startswith("pandapower")
+    assert [p.name for p in tmp_path.iterdir()] == [name]
+
+
+# -- reproduce ----------------------------------------------------------------------------------
+
+FIGURES = [
+    "fig1_fitness", "fig2_congestion_detection", "fig3_feeder_flows_566", "fig4_base_day",
+    "fig5_congestion_iterations", "fig6_extinction",
+]  # fmt: skip
+
+
+def test_reproduce_writes_every_file(tmp_path):
+    out = tmp_path / "results"
+    folder = find_official_folder()
+    profiles = ["--profiles", str(folder)] if folder else []
+    result = run("reproduce", *profiles, "--minutes", "560-575", "--out", str(out), "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    expected = {"base_day.csv", "congestion.csv", "extinction.csv", "summary.json", "report.md"}
+    expected |= {f"figures/{f}.{ext}" for f in FIGURES for ext in ("png", "pdf")}
+    written = {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()}
+    assert written == expected
+    assert all((out / name).stat().st_size > 0 for name in expected)
+    assert json.loads((out / "summary.json").read_text()) == summary
+    assert {"minute_566", "congestion", "extinction", "base_day"} <= summary.keys()
+    assert summary["base_day"]["minutes"] == 16
+    extinct = gens(summary["extinction"]["replicator"])["G114"]["setpoint_kw"]
+    assert extinct == 0.0
+    report = (out / "report.md").read_text()
+    assert "iteration 53" in report and "iteration 201" in report  # the paper's figures
+    first = summary["congestion"]["first_congestion_iteration"]
+    assert f"detected at iteration {first}," in report  # ours
+    assert list(tmp_path.iterdir()) == [out]  # no staging folder left behind
+
+
+def test_ctrl_c_leaves_no_partial_output(tmp_path):
+    out = tmp_path / "results"
+    process = subprocess.Popen(
+        command("reproduce", "--out", str(out)),
+        env=clean_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    seen = []
+    for line in process.stderr:  # steps are logged as they finish (stderr is not a terminal)
+        seen.append(line)
+        if line.startswith("minute 566, congestion and extinction"):
+            break  # the whole online day is next: interrupt it
+    time.sleep(2)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, "".join(seen) + stderr
+    assert "Traceback" not in stderr
+    assert "interrupted" in stderr
+    assert list(tmp_path.iterdir()) == []
