@@ -1,0 +1,143 @@
+"""Summaries, figures, the reproduction report and atomic output (issue 4)."""
+
+from __future__ import annotations
+
+import json
+import stat
+
+import numpy as np
+import pytest
+
+from popdispatch.online import RunSettings
+from popdispatch.readers import default_profiles
+from popdispatch.report import reproduce as rp
+from popdispatch.report.markdown import reproduction_report
+from popdispatch.report.output import atomic_write_text, json_text, staged_folder
+from popdispatch.report.progress import Progress
+
+
+@pytest.fixture(scope="module")
+def reproduction():
+    """The three experiments with a short base day (minutes 560-565 of the default profiles)."""
+    return rp.run_reproduction(
+        default_profiles(), RunSettings(), np.arange(560, 566), Progress(quiet=True)
+    )
+
+
+# -- atomic output ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("error", [RuntimeError, KeyboardInterrupt])
+def test_staged_folder_leaves_nothing_on_error(tmp_path, error):
+    with pytest.raises(error), staged_folder(tmp_path / "out") as folder:
+        folder.write_text("a.txt", "complete")
+        folder.write_text("b/c.txt", "complete")
+        raise error
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_staged_folder_merges_into_an_existing_folder(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("old")
+    (out / "a.txt").write_text("old")
+    with staged_folder(out) as folder:
+        folder.write_text("a.txt", "new")
+        folder.write_json("s/summary.json", {"x": np.float64(1.5), "nan": float("nan")})
+    assert (out / "keep.txt").read_text() == "old"
+    assert (out / "a.txt").read_text() == "new"
+    assert json.loads((out / "s/summary.json").read_text()) == {"x": 1.5, "nan": None}
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
+def test_new_output_folder_and_files_get_ordinary_permissions(tmp_path):
+    with staged_folder(tmp_path / "out") as folder:
+        folder.write_text("a.txt", "x")
+    assert stat.S_IMODE((tmp_path / "out").stat().st_mode) & 0o055 == 0o055 & ~_umask()
+    path = atomic_write_text(tmp_path / "f.txt", "hello")
+    assert path.read_text() == "hello"
+    assert stat.S_IMODE(path.stat().st_mode) & 0o044 == 0o044 & ~_umask()
+
+
+def _umask() -> int:
+    import os
+
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def test_atomic_write_keeps_the_old_file_on_error(tmp_path):
+    from popdispatch.report.output import atomic_write
+
+    target = tmp_path / "f.txt"
+    target.write_text("old")
+
+    def fail(tmp):
+        tmp.write_text("half")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        atomic_write(target, fail)
+    assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["f.txt"]
+
+
+def test_json_text_is_strict_json():
+    text = json_text({"a": np.array([1.0, np.inf]), "b": np.int64(3), "c": np.bool_(True)})
+    assert json.loads(text) == {"a": [1.0, None], "b": 3, "c": True}
+
+
+# -- reproduction ---------------------------------------------------------------------------------
+
+
+def test_reproduction_summary_numbers(reproduction):
+    summary = rp.reproduction_summary(reproduction)
+    peak = summary["minute_566"]
+    assert peak["status"] == "converged"
+    assert peak["max_abs_error_kw"] < 0.1
+    opf = {g["name"]: g["opf_kw"] for g in peak["generators"]}
+    assert opf["G1"] == pytest.approx(2.358, abs=1e-3)
+    cong = summary["congestion"]
+    assert {g["name"]: g["opf_kw"] for g in cong["generators"]}["G739"] == pytest.approx(
+        3.138, abs=1e-3
+    )
+    day = summary["base_day"]
+    assert (day["first_minute"], day["last_minute"], day["minutes"]) == (560, 565, 6)
+    table = rp.day_table(reproduction.day)
+    assert day["cost"] == pytest.approx(table.cost_eur_per_h.sum() / 60)
+    assert day["max_abs_error_kw"] == pytest.approx(table.max_abs_error_kw.max())
+    assert sum(day["energy_kwh"].values()) == pytest.approx(table.demand_kw.sum() / 60)
+    json.loads(json_text(summary))  # serialisable, no NaN
+
+
+def test_congestion_shift_is_the_unconstrained_overflow(reproduction):
+    # The unconstrained DC-OPF overloads the 505-666 path by several kW (paper: "4 to 6 kW").
+    shift = rp.congestion_shift(reproduction)
+    assert 4.0 < shift < 10.0  # EUR/MW = overflow (MW) x C (1000)
+
+
+def test_report_table_carries_paper_ours_and_dc_opf(reproduction):
+    summary = rp.reproduction_summary(reproduction)
+    report = reproduction_report(summary, ["fig1_fitness"])
+    rows = [line for line in report.splitlines() if line.startswith("| ")]
+    assert len(rows) == 6  # header, separator and four experiments
+    cong = summary["congestion"]
+    congestion_row = next(r for r in rows if r.startswith("| congestion"))
+    assert "iteration 53" in congestion_row and "iteration 201" in congestion_row
+    assert f"detected at iteration {cong['first_congestion_iteration']}," in congestion_row
+    assert "G739 3.138" in congestion_row  # the DC-OPF column
+    day_row = next(r for r in rows if r.startswith("| base day"))
+    assert f"{summary['base_day']['minutes_within_0_1_kw']} of 6 minutes" in day_row
+    assert "docs/paper-mode.md" in report  # paper mode: say why it misses the DC-OPF
+    assert all(r.count(" | ") == 3 for r in rows)  # no stray column separators
+
+
+def test_every_figure_is_written_as_png_and_pdf(reproduction, tmp_path):
+    with staged_folder(tmp_path / "out") as folder:
+        stems = rp.make_figures(reproduction, folder, Progress(quiet=True))
+    assert len(stems) == 6
+    for stem in stems:
+        png = (tmp_path / "out" / "figures" / f"{stem}.png").read_bytes()
+        pdf = (tmp_path / "out" / "figures" / f"{stem}.pdf").read_bytes()
+        assert png.startswith(b"\x89PNG") and pdf.startswith(b"%PDF")
