@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import official_folder, random_feeder
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -18,6 +17,8 @@ from popdispatch.online import Engine, RunSettings, run_day, run_snapshot
 from popdispatch.opf import solve_opf
 from popdispatch.readers import read_profiles
 from popdispatch.scenarios import congestion, elv_problem, extinction, snapshot_vs_opf
+
+from helpers import official_folder, random_feeder
 
 
 @pytest.fixture(scope="module")
@@ -119,12 +120,12 @@ def test_rest_points_are_equal_fitness_states(seed, n, dynamics, graph):
     f = np.where(used, 7.0, 7.0 - rng.uniform(0.5, 2.0, n))
     if field.uses_graph and graph != "complete":
         x, f = rng.dirichlet(np.ones(n)), np.full(n, 7.0)  # full support: no graph truncation
-    inflow, out_rate = field.rates(x, f, adjacency, bounds, bounds)
+    inflow, out_rate, _ = field.rates(x, f, adjacency, bounds, bounds)
     np.testing.assert_allclose(inflow - x * out_rate, 0.0, atol=1e-12)
     # full support, unequal fitness: the state moves
     x = rng.dirichlet(np.ones(n))
     f = rng.uniform(0, 5, n)
-    inflow, out_rate = field.rates(x, f, adjacency, bounds, bounds)
+    inflow, out_rate, _ = field.rates(x, f, adjacency, bounds, bounds)
     assert np.abs(inflow - x * out_rate).max() > 1e-6
     assert abs(np.sum(inflow - x * out_rate)) < 1e-12
 

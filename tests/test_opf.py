@@ -14,7 +14,6 @@ import networkx as nx
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import random_feeder
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linprog, minimize
@@ -26,6 +25,8 @@ from popdispatch.feeder.reduction import ReducedFeeder, reduce_feeder
 from popdispatch.game.problem import build_problem
 from popdispatch.opf import solve_opf
 from popdispatch.scenarios import apply_path_limits, elv_problem
+
+from helpers import random_feeder
 
 # Table I, in the fleet's order G1, G114, G578, G739, G817, G835 (EUR, EUR/MW, EUR/MW^2).
 TABLE_A = np.zeros(6)

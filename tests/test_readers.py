@@ -8,13 +8,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import find_official_folder
 
 from popdispatch.errors import FeederError
 from popdispatch.feeder.cases import ieee_elv
 from popdispatch.feeder.generators import paper_fleet
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.readers import read_opendss_feeder
+
+from helpers import find_official_folder
 
 OFFICIAL = find_official_folder()
 needs_official = pytest.mark.skipif(OFFICIAL is None, reason="official IEEE ELV data absent")

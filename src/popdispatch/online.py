@@ -17,10 +17,10 @@ import networkx as nx
 import numpy as np
 import pandas as pd
 
-from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.dynamics import communication_graph, get_dynamics, project_to_box
 from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
-from popdispatch.integrate import Integrator, integrate
+from popdispatch.integrate import INFEASIBLE, Integrator, integrate
 from popdispatch.modes import get_mode
 from popdispatch.opf import generation_cost
 
@@ -36,7 +36,12 @@ class RunSettings:
     graph: str | nx.Graph = "complete"
     x0: str | dict[str, float] = "uniform"
     fitness: FitnessParameters = field(default_factory=FitnessParameters)
-    integrator: Integrator = field(default_factory=Integrator)
+    integrator: Integrator | None = None  # None: the mode's default
+
+    @property
+    def stepping(self) -> Integrator:
+        """The integrator in force: the given one, else the mode's default."""
+        return self.integrator or get_mode(self.mode).integrator
 
     def x0_label(self) -> str:
         if isinstance(self.x0, str):
@@ -64,10 +69,18 @@ class SnapshotResult:
     flows_kw: np.ndarray
     wall_seconds: float
     profile_source: str
+    infeasible: bool = False
 
     @property
     def setpoints_kw(self) -> np.ndarray:
         return self.trajectory_kw[-1]
+
+    @property
+    def status(self) -> str:
+        """``"converged"``, ``"not_converged"`` or ``"infeasible"`` (prices ran away)."""
+        if self.infeasible:
+            return "infeasible"
+        return "converged" if self.converged_at is not None else "not_converged"
 
     @property
     def iterations(self) -> int:
@@ -112,20 +125,30 @@ class Engine:
         self.graph = communication_graph(
             settings.graph if self.dynamics.uses_graph else "complete", names
         )
+        self.rates = self.dynamics.bounded_rates if self.mode.bounded else self.dynamics.rates
+        if self.rates is None:
+            raise ValueError(
+                f"{self.mode.name} mode cannot run {self.dynamics.name} dynamics: they are "
+                "imitative, so a generator at zero share stays at zero (extinction) and the "
+                "DC-OPF is out of reach whenever it uses one; use smith or distributed-smith"
+            )
         self.z = np.zeros(self.mode.controller_states(problem))
+        self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
 
     def run_minute(self, x: np.ndarray, minute: int, max_iterations: int | None = None):
         """Integrate one minute from shares ``x``; returns the kernel's raw outputs."""
         problem, settings = self.problem, self.settings
-        integrator = settings.integrator
+        integrator = settings.stepping
         online = problem.online[minute - 1]
         graph = self.graph * online[:, None] * online[None, :]
         demand = float(problem.demand[minute - 1])
         lo = np.where(online, problem.pmin, 0.0) / demand
         hi = np.where(online, problem.pmax, 0.0) / demand
+        if self.mode.bounded:
+            x = project_to_box(x, lo, hi)
         params = self.mode.parameters(problem, minute, settings.fitness)
         out = integrate(
-            self.dynamics.rates,
+            self.rates,
             self.mode.game,
             x,
             self.z,
@@ -135,10 +158,13 @@ class Engine:
             hi,
             params,
             integrator.dt,
+            integrator.method_code,
             integrator.substeps,
+            (integrator.rtol, integrator.atol, integrator.price_atol),
             integrator.tol_kw / KW_PER_MW,
             integrator.window,
             max_iterations or integrator.max_iterations,
+            self.z_cap,
         )
         setpoints, x, self.z, converged_at, first_congestion = out
         return setpoints, x, converged_at, first_congestion
@@ -174,6 +200,7 @@ def run_snapshot(
         flows_kw=flows * KW_PER_MW,
         wall_seconds=wall,
         profile_source=problem.profile_source,
+        infeasible=converged_at == INFEASIBLE,
     )
 
 
@@ -198,6 +225,14 @@ class DayResult:
     online: np.ndarray
     wall_seconds: float
     profile_source: str
+    infeasible: np.ndarray | None = None
+
+    @property
+    def status(self) -> str:
+        """``"infeasible"`` if any minute was, ``"converged"`` if every minute converged."""
+        if self.infeasible is not None and self.infeasible.any():
+            return "infeasible"
+        return "converged" if self.converged.all() else "not_converged"
 
 
 def redistribute_tripped(x: np.ndarray, online: np.ndarray) -> np.ndarray:
@@ -228,6 +263,7 @@ def run_day(
     setpoints = np.empty((len(minutes), n))
     iterations = np.empty(len(minutes), dtype=np.int64)
     converged = np.empty(len(minutes), dtype=bool)
+    infeasible = np.zeros(len(minutes), dtype=bool)
     x = initial_shares(problem, settings.x0, int(minutes[0]))
     start = time.perf_counter()
     for row, minute in enumerate(minutes):
@@ -238,6 +274,7 @@ def run_day(
         setpoints[row] = trajectory[-1]
         iterations[row] = len(trajectory) - 1
         converged[row] = converged_at >= 0
+        infeasible[row] = converged_at == INFEASIBLE
         if progress is not None:
             progress(int(minute))
     wall = time.perf_counter() - start
@@ -256,4 +293,5 @@ def run_day(
         online=online,
         wall_seconds=wall,
         profile_source=problem.profile_source,
+        infeasible=infeasible,
     )

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from popdispatch.dynamics.capacity import capacity_smith_rates, project_to_box
 from popdispatch.dynamics.graph import GRAPHS, communication_graph
 from popdispatch.dynamics.replicator import local_replicator_rates, replicator_rates
 from popdispatch.dynamics.smith import smith_rates
@@ -25,6 +26,7 @@ class Dynamics:
     uses_graph : whether the communication graph matters (else the complete graph is used).
     extinction : whether a strategy at zero share stays at zero (imitative dynamics).
     equation : the paper's equation number.
+    bounded_rates : capacity-constrained variant used by the exact mode (None if there is none).
     """
 
     name: str
@@ -32,15 +34,16 @@ class Dynamics:
     uses_graph: bool
     extinction: bool
     equation: str
+    bounded_rates: Callable | None = None
 
 
 DYNAMICS = {
     d.name: d
     for d in (
-        Dynamics("smith", smith_rates, False, False, "13"),
+        Dynamics("smith", smith_rates, False, False, "13", capacity_smith_rates),
         Dynamics("replicator", replicator_rates, False, True, "9"),
         Dynamics("local-replicator", local_replicator_rates, True, True, "12"),
-        Dynamics("distributed-smith", smith_rates, True, False, "14"),
+        Dynamics("distributed-smith", smith_rates, True, False, "14", capacity_smith_rates),
     )
 }
 
@@ -53,4 +56,11 @@ def get_dynamics(name: str) -> Dynamics:
         raise ValueError(f"unknown dynamics {name!r} (known: {', '.join(DYNAMICS)})") from None
 
 
-__all__ = ["DYNAMICS", "GRAPHS", "Dynamics", "communication_graph", "get_dynamics"]
+__all__ = [
+    "DYNAMICS",
+    "GRAPHS",
+    "Dynamics",
+    "communication_graph",
+    "get_dynamics",
+    "project_to_box",
+]

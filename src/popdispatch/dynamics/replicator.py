@@ -13,11 +13,13 @@ import numpy as np
 def replicator_rates(x, f, graph, lo, hi):
     """Eq. 9: ``x_i' = x_i (f_i - f_bar)`` with ``f_bar = sum_j x_j f_j`` (eq. 10)."""
     growth = f - np.sum(x * f)
-    return x * np.maximum(growth, 0.0), np.maximum(-growth, 0.0)
+    out_rate = np.maximum(-growth, 0.0)
+    return x * np.maximum(growth, 0.0), out_rate, out_rate.max()
 
 
 @nb.njit(cache=True)
 def local_replicator_rates(x, f, graph, lo, hi):
     """Eq. 12: ``x_i' = x_i (f_i sum_{j in N_i} x_j - sum_{j in N_i} f_j x_j)``."""
     growth = f * (graph @ x) - graph @ (f * x)
-    return x * np.maximum(growth, 0.0), np.maximum(-growth, 0.0)
+    out_rate = np.maximum(-growth, 0.0)
+    return x * np.maximum(growth, 0.0), out_rate, out_rate.max()

@@ -1,8 +1,10 @@
 """Smith dynamics (paper eq. 13) and distributed Smith dynamics (eq. 14).
 
 Every vector field in :mod:`popdispatch.dynamics` has the signature
-``rates(x, f, graph, lo, hi) -> (inflow, out_rate)`` with ``x' = inflow - x * out_rate``,
-``inflow >= 0`` and ``out_rate >= 0``: the integrator relies on that split to keep ``x >= 0``.
+``rates(x, f, graph, lo, hi) -> (inflow, out_rate, rate_bound)`` with
+``x' = inflow - x * out_rate``, ``inflow >= 0`` and ``out_rate >= 0``; ``rate_bound`` (1/s) bounds
+how fast any share moves relative to its room, so an explicit step ``h <= 1 / rate_bound`` keeps
+``x`` in its domain (``x >= 0``, and ``lo <= x <= hi`` for capacity-constrained fields).
 ``graph`` is the symmetric 0/1 adjacency of the communication graph between strategies;
 ``lo``/``hi`` are share bounds (used by capacity-constrained protocols, ignored here).
 """
@@ -31,4 +33,4 @@ def smith_rates(x, f, graph, lo, hi):
                 inflow[i] += x[j] * gap
             else:
                 out_rate[i] -= gap
-    return inflow, out_rate
+    return inflow, out_rate, out_rate.max()

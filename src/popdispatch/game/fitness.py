@@ -14,18 +14,29 @@ import numpy as np
 
 @dataclass(frozen=True)
 class FitnessParameters:
-    """The paper's constants.
+    """The game's constants.
 
     Attributes
     ----------
     B : bias that keeps fitness positive, EUR/MW (paper: 1000).
-    m : slope of the generator-limit barrier, EUR/MW^2 (paper: 400).
-    C : gain of the congestion signal, EUR/MW^2 (paper: 1000).
+    m : slope of the generator-limit barrier, EUR/MW^2 (paper: 400; paper mode only).
+    C : gain of the congestion signal, EUR/MW^2 (paper: 1000). In exact mode it is the
+        proportional (augmented-Lagrangian) part of the line price.
+    gain : exact mode: revision-rate multiplier of the fitness differences (dimensionless).
+    price_rate : exact mode: how fast a line price integrates its overflow, EUR/MW per MW per s.
     """
 
     B: float = 1000.0
     m: float = 400.0
     C: float = 1000.0
+    gain: float = 100.0
+    price_rate: float = 1.0e5
+
+    def __post_init__(self) -> None:
+        for name in ("B", "m", "C", "gain", "price_rate"):
+            value = getattr(self, name)
+            if not (value >= 0 and value < float("inf")):
+                raise ValueError(f"fitness constant {name} must be finite and >= 0, got {value}")
 
 
 @nb.njit(cache=True)

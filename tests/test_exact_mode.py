@@ -1,0 +1,184 @@
+"""Exact mode: capacity-constrained revision and integrated line prices land on the DC-OPF."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from popdispatch.feeder.profiles import single_minute_profiles
+from popdispatch.feeder.reduction import reduce_feeder
+from popdispatch.game.problem import build_problem
+from popdispatch.integrate import Integrator
+from popdispatch.online import RunSettings, run_snapshot
+from popdispatch.opf import solve_opf
+from popdispatch.readers import read_profiles
+from popdispatch.scenarios import apply_path_limits, day_vs_opf, elv_problem
+
+from helpers import official_folder, random_feeder
+
+EXACT = RunSettings(mode="exact")
+
+
+@pytest.mark.parametrize("limit_kw", [None, 28.0, 29.0, 30.0, 32.0])
+@pytest.mark.parametrize("x0", ["uniform", "capacity"])
+def test_minute_566_lands_on_dc_opf_within_100_iterations(limit_kw, x0):
+    problem = elv_problem(limits=[] if limit_kw is None else [(505, 666, limit_kw)])
+    opf = solve_opf(problem, 566)
+    assert opf.status == "optimal"
+    run = run_snapshot(problem, 566, RunSettings(mode="exact", x0=x0))
+    assert run.status == "converged"
+    assert run.converged_at <= 100
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= 1e-3
+    assert run.overflow_kw.max(initial=0.0) <= 1e-3
+    np.testing.assert_allclose(run.setpoints_kw.sum(), 57.358, atol=1e-9)
+
+
+def test_congestion_prices_match_the_opf_duals():
+    """The congestion price a controller ends with is the DC-OPF's line dual."""
+    problem = elv_problem(limits=[(505, 666, 28.0)])
+    from popdispatch.online import Engine, initial_shares
+
+    engine = Engine(problem, EXACT)
+    engine.run_minute(initial_shares(problem, "uniform", 566), 566)
+    n_lines = len(problem.limit)
+    prices = engine.z[:n_lines] - engine.z[n_lines:]  # EUR/MW, positive = downward overflow
+    opf = solve_opf(problem, 566)
+    # OPF duals are per kW of flow on a kW-scaled objective: same EUR/MW numbers
+    np.testing.assert_allclose(np.abs(prices), np.abs(opf.line_price), atol=1e-3)
+    assert np.abs(prices).max() > 0.9
+
+
+@pytest.mark.parametrize("graph", ["complete", "star"])
+def test_distributed_smith_reaches_the_opf(graph):
+    """Complete graph, and the star around G1 (the generator that trades with every other)."""
+    problem = elv_problem(limits=[(505, 666, 28.0)])
+    settings_ = RunSettings(mode="exact", dynamics="distributed-smith", graph=graph)
+    run = run_snapshot(problem, 566, settings_)
+    assert run.status == "converged"
+    assert np.abs(run.setpoints_kw - solve_opf(problem, 566).p_kw).max() <= 1e-3
+
+
+def test_saturated_generators_do_not_relay_on_a_sparse_graph():
+    """Documented limitation (docs/exact-mode.md): on the path in fleet order, G1 and G739 are
+    separated by generators at Pmax, which cannot take mass to pass it on; distributed Smith
+    rests 0.78 kW from the DC-OPF although every generator is at rest with its neighbours."""
+    problem = elv_problem(limits=[(505, 666, 28.0)])
+    settings_ = RunSettings(mode="exact", dynamics="distributed-smith", graph="path")
+    run = run_snapshot(problem, 566, settings_)
+    assert run.status == "converged"
+    assert np.abs(run.setpoints_kw - solve_opf(problem, 566).p_kw).max() > 0.5
+
+
+@pytest.mark.parametrize("dynamics", ["replicator", "local-replicator"])
+def test_exact_mode_refuses_imitative_dynamics(dynamics):
+    with pytest.raises(ValueError, match="extinction"):
+        run_snapshot(elv_problem(), 566, RunSettings(mode="exact", dynamics=dynamics))
+
+
+def test_infeasible_limit_is_reported_quickly():
+    problem = elv_problem(limits=[(505, 666, 20.0)])
+    assert solve_opf(problem, 566).status == "infeasible"
+    run = run_snapshot(problem, 566, EXACT)
+    assert run.status == "infeasible"
+    assert run.iterations < 1000
+
+
+@pytest.fixture(scope="module")
+def official():
+    return read_profiles(official_folder())
+
+
+@pytest.mark.parametrize("limits", [[], [(505, 666, 28.0)]], ids=["free", "505-666@28kW"])
+def test_whole_day_within_10_watts_of_dc_opf(official, limits):
+    comparison = day_vs_opf(elv_problem(official, limits), EXACT)
+    assert all(o.status == "optimal" for o in comparison.opf)
+    assert comparison.run.converged.all()
+    assert comparison.abs_error_kw.max() <= 0.01
+    np.testing.assert_allclose(
+        comparison.run.setpoints_kw.sum(axis=1), comparison.run.demand_kw, rtol=1e-9
+    )
+    if limits:
+        assert comparison.run.overflow_kw.max() <= 1e-3
+        binding = [o.minute for o in comparison.opf if np.abs(o.line_price).max() > 1e-6]
+        assert 566 in binding  # the limit binds at the peak
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**31),
+    n_buses=st.integers(4, 30),
+    n_gens=st.integers(2, 6),
+    n_limits=st.integers(0, 2),
+)
+def test_random_feeders_exact_equilibrium_is_the_qp_solution(seed, n_buses, n_gens, n_limits):
+    rng = np.random.default_rng(seed)
+    feeder = random_feeder(rng, n_buses, min(n_gens, n_buses))
+    limits = []
+    for _ in range(n_limits):
+        a, b = (int(v) for v in rng.choice(feeder.buses.index, 2, replace=False))
+        limits.append((a, b, float(rng.uniform(0.5, 15.0))))
+    feeder = apply_path_limits(feeder, limits)
+    capacity = feeder.generators.pmax_kw.sum()
+    load = pd.Series(rng.uniform(0.1, 1.0, len(feeder.loads)), index=feeder.loads.index)
+    load *= rng.uniform(0.2, 0.9) * capacity / load.sum()
+    problem = build_problem(reduce_feeder(feeder), single_minute_profiles(1, load, "random"))
+    opf = solve_opf(problem, 1)
+    integrator = Integrator(method="heun", tol_kw=1e-5, window=20, max_iterations=60000)
+    run = run_snapshot(problem, 1, RunSettings(mode="exact", integrator=integrator))
+    if opf.status == "infeasible":
+        # prices rise until they pass the cap; a tiny overflow may outlast the horizon
+        assert run.status in ("infeasible", "not_converged")
+        assert run.overflow_kw.max() > 0.0
+        return
+    # several generators interior at once (one per binding line) converge on the time scale of
+    # their tiny cost curvature: judged at the end of the 10-minute horizon if not converged
+    assert run.status != "infeasible"
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= 1e-3
+    assert run.overflow_kw.max(initial=0.0) <= 1e-3
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(2, 8))
+def test_capacity_smith_rest_points_are_the_box_kkt_states(seed, n):
+    """Interior strategies share one fitness, those at hi may be fitter, those at lo worse."""
+    from popdispatch.dynamics.capacity import capacity_smith_rates
+
+    rng = np.random.default_rng(seed)
+    graph = np.ones((n, n)) - np.eye(n)
+    hi = rng.uniform(0.3, 0.9, n)
+    lo = np.zeros(n)
+    where = rng.integers(0, 3, n)  # 0 at lo, 1 interior, 2 at hi
+    x = np.where(where == 0, 0.0, np.where(where == 2, hi, hi * rng.uniform(0.1, 0.9, n)))
+    f = np.where(where == 1, 5.0, np.where(where == 2, 5.0 + rng.uniform(0, 2, n), 4.0))
+    inflow, out_rate, _ = capacity_smith_rates(x, f, graph, lo, hi)
+    np.testing.assert_allclose(inflow - x * out_rate, 0.0, atol=1e-12)
+    # a KKT violation (an interior strategy fitter than another interior one) moves the state
+    x = hi * rng.uniform(0.2, 0.8, n)
+    f = rng.uniform(0, 5, n)
+    inflow, out_rate, bound = capacity_smith_rates(x, f, graph, lo, hi)
+    rate = inflow - x * out_rate
+    assert np.abs(rate).max() > 1e-9
+    assert abs(rate.sum()) < 1e-12
+    # the largest stable step keeps every share inside its box
+    stepped = x + (0.99 / bound) * rate
+    assert np.all(stepped >= lo - 1e-12) and np.all(stepped <= hi + 1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**31), n=st.integers(2, 8))
+def test_projection_to_box_is_feasible_and_idempotent(seed, n):
+    from popdispatch.dynamics.capacity import project_to_box
+
+    rng = np.random.default_rng(seed)
+    hi = rng.uniform(0.2, 1.0, n)
+    hi *= max(1.0, 1.2 / hi.sum())
+    lo = np.minimum(hi, rng.uniform(0, 0.1, n)) * (rng.random(n) < 0.5)
+    lo *= min(1.0, 0.8 / max(lo.sum(), 1e-12))
+    x = rng.dirichlet(np.ones(n))
+    y = project_to_box(x, lo, hi)
+    assert abs(y.sum() - 1.0) < 1e-9
+    assert np.all(y >= lo - 1e-12) and np.all(y <= hi + 1e-12)
+    np.testing.assert_allclose(project_to_box(y, lo, hi), y, atol=1e-9)
