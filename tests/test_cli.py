@@ -16,9 +16,10 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from helpers import find_official_folder, official_folder
 
 from popdispatch.modes import MODES
+
+from helpers import find_official_folder, official_folder
 
 SCRIPT = Path(sys.executable).with_name("popdispatch")
 COMMANDS = ["feeder", "opf", "snapshot", "day", "reproduce", "export"]
@@ -137,6 +138,7 @@ def test_opf_infeasible_limits_exit_1_and_still_report():
         (["day", "--minutes", "10-5"], ["--minutes", "10-5"]),
         (["export", "--minute", "566", "--format", "csv", "--out", "x.m"], ["--format"]),
         (["feeder", "--case", "ieee-elv", "--opendss", "."], ["--case", "--opendss"]),
+        (["reproduce", "--out", "no/such/results"], ["--out", "does not exist"]),
     ],
 )
 def test_usage_errors_exit_2_with_one_line(args, words, tmp_path):

@@ -251,6 +251,15 @@ def build(profiles, limits: Sequence[Limit], progress: Progress):
         return elv_problem(profiles, limits)
 
 
+def check_out(out: Path | None) -> None:
+    """Usage error (exit 2) before any work if ``--out`` cannot be created where it is asked."""
+    if out is not None and not out.absolute().parent.is_dir():
+        raise click.BadParameter(
+            f"cannot write {out}: folder {out.absolute().parent} does not exist",
+            param_hint="'--out'",
+        )
+
+
 def emit(summary: dict, as_json: bool, text: str) -> None:
     """Print the summary as JSON or the human-readable text on stdout."""
     click.echo(json_text(summary) if as_json else text, nl=not as_json)
@@ -347,6 +356,7 @@ def snapshot(minute, limits, dynamics, mode, x0, graph, profiles, out, as_json, 
     from popdispatch.scenarios import snapshot_vs_opf
 
     progress = Progress(quiet)
+    check_out(out)
     settings = settings_from(dynamics, mode, x0, graph)
     problem = build(load_profiles(profiles, minute, progress), limits, progress)
     with progress.step(f"minute {minute}: {dynamics} dynamics and DC-OPF"):
@@ -407,6 +417,7 @@ def day(limits, dynamics, mode, x0, graph, events, minutes, profiles, out, as_js
     from popdispatch.report.summaries import day_summary, day_table
 
     progress = Progress(quiet)
+    check_out(out)
     settings = settings_from(dynamics, mode, x0, graph)
     problem = build(load_profiles(profiles, None, progress), limits, progress)
     problem = apply_events(problem, events)
@@ -502,6 +513,7 @@ def reproduce(profiles, out, mode, minutes, as_json, quiet) -> None:
     from popdispatch.report.reproduce import run_reproduction, write_reproduction
 
     progress = Progress(quiet)
+    check_out(out)
     day_profiles = load_profiles(profiles, None, progress)
     span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
     rep = run_reproduction(
@@ -534,8 +546,7 @@ def export(minute, fmt, out, limits, profiles, quiet) -> None:
     from popdispatch.export import write_case
 
     progress = Progress(quiet)
-    if not out.parent.is_dir():
-        raise click.BadParameter(f"folder {out.parent} does not exist", param_hint="'--out'")
+    check_out(out)
     day_profiles = load_profiles(profiles, minute, progress)
     problem = build(day_profiles, limits, progress)
     loads = minute_loads(problem, day_profiles, minute)
