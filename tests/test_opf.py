@@ -389,3 +389,22 @@ def test_offline_generator_is_held_at_zero():
     for minute in (565, 567):
         again = solve_opf(outage, minute)
         np.testing.assert_allclose(again.p_kw, [0, 10, 5, demand - 45.0, 20, 10], atol=1e-4)
+
+
+def test_day_solver_with_data_updates_equals_fresh_solves():
+    """One solver updated minute after minute gives what a fresh solver gives each minute."""
+    from popdispatch.opf import solve_opf_day
+    from popdispatch.readers import read_profiles
+
+    from helpers import official_folder
+
+    profiles = read_profiles(official_folder())
+    problem = elv_problem(profiles, [(505, 666, 28.0)]).with_outage("G114", 700, 705)
+    minutes = np.array([1, 565, 566, 567, 699, 700, 704, 705, 1440])
+    day = solve_opf_day(problem, minutes)
+    for minute, updated in zip(minutes, day, strict=True):
+        fresh = solve_opf(problem, int(minute))
+        assert updated.status == fresh.status == "optimal"
+        np.testing.assert_allclose(updated.p_kw, fresh.p_kw, atol=1e-6)
+        assert updated.cost == pytest.approx(fresh.cost, rel=1e-9)
+    assert day[minutes.tolist().index(566)].line_price[0] != 0.0
