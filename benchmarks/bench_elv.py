@@ -1,0 +1,82 @@
+"""Benchmarks on ieee-elv: the online day (paper and exact mode), the congestion minute, the
+same day solved minute by minute as a DC-OPF QP, and the day's peak memory.
+
+Usage: python benchmarks/bench_elv.py [--profiles DIR] [--repeat N]
+Prints medians of N runs (after one warm-up run that compiles the kernels).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import time
+import tracemalloc
+from collections.abc import Callable
+from datetime import date
+
+from popdispatch.online import RunSettings, run_day, run_snapshot
+from popdispatch.opf import solve_opf_day
+from popdispatch.readers import read_profiles
+from popdispatch.scenarios import CONGESTION_PATH, PEAK_MINUTE, elv_problem
+
+
+def median_seconds(run: Callable[[], float], repeat: int) -> float:
+    """Median of ``repeat`` timings; ``run`` returns its own time in seconds."""
+    run()  # warm-up: JIT compilation and caches
+    return statistics.median(run() for _ in range(repeat))
+
+
+def wall(fn: Callable[[], object]) -> float:
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
+
+
+def peak_memory_mb(fn: Callable[[], object]) -> float:
+    tracemalloc.start()
+    fn()
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak / 2**20
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--profiles", default=os.environ.get("POPDISPATCH_PROFILES"))
+    parser.add_argument("--repeat", type=int, default=5)
+    args = parser.parse_args()
+    profiles = read_profiles(args.profiles) if args.profiles else None
+    day_problem = elv_problem(profiles) if profiles else None
+    congested = elv_problem(limits=[CONGESTION_PATH])
+
+    print(
+        f"# popdispatch benchmarks, {date.today()}, {platform.processor() or platform.machine()}"
+        f", {os.cpu_count()} cores, Python {platform.python_version()}"
+    )
+    for mode in ("paper", "exact"):
+        settings = RunSettings(mode=mode)
+        minute = median_seconds(
+            lambda s=settings: run_snapshot(congested, PEAK_MINUTE, s).wall_seconds, args.repeat
+        )
+        print(f"congestion minute 566, {mode} mode: {minute * 1e3:.2f} ms (engine)")
+    if day_problem is None:
+        print("day benchmarks skipped: give --profiles or set POPDISPATCH_PROFILES")
+        return
+    opf_day = median_seconds(lambda: wall(lambda: solve_opf_day(day_problem)), args.repeat)
+    print(f"DC-OPF day, 1440 QPs (Clarabel, built once): {opf_day:.3f} s")
+    for mode in ("exact", "paper"):
+        settings = RunSettings(mode=mode)
+        repeat = args.repeat if mode == "exact" else 1
+        day = median_seconds(lambda s=settings: run_day(day_problem, s).wall_seconds, repeat)
+        print(
+            f"population-dynamics day, {mode} mode: {day:.3f} s (engine), "
+            f"{opf_day / day:.2f}x the DC-OPF day's speed"
+        )
+    memory = peak_memory_mb(lambda: run_day(day_problem, RunSettings(mode="exact")))
+    print(f"peak Python memory of the exact-mode day run: {memory:.1f} MiB (tracemalloc)")
+
+
+if __name__ == "__main__":
+    main()
