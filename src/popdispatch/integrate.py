@@ -38,6 +38,9 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from popdispatch.dynamics.fields import vector_field
+from popdispatch.game.payoffs import game
+
 METHODS = {"euler": 0, "heun": 1}
 
 
@@ -101,10 +104,10 @@ INFEASIBLE = -2
 
 
 @nb.njit(cache=True)
-def _stage(rates, game, x, z, demand, graph, lo, hi, params):
+def _stage(field, mode, x, z, demand, graph, lo, hi, params):
     """One evaluation: ``(x', z', largest stable step, congestion, residual)``."""
-    f, z_rate, congestion, residual = game(x * demand, z, params)
-    inflow, out_rate, rate_bound = rates(x, f, graph, lo, hi)
+    f, z_rate, congestion, residual = game(mode, x * demand, z, params)
+    inflow, out_rate, rate_bound = vector_field(field, x, f, graph, lo, hi)
     h_stable = 0.5 / rate_bound if rate_bound > 0.0 else np.inf
     return inflow - x * out_rate, z_rate, h_stable, congestion, residual
 
@@ -120,13 +123,13 @@ def _error_norm(x_high, x_low, z_high, z_low, rtol, atol, price_atol):
 
 
 @nb.njit(cache=True)
-def _advance_euler(rates, game, x, z, demand, graph, lo, hi, params, dt, substeps):
+def _advance_euler(field, mode, x, z, demand, graph, lo, hi, params, dt, substeps):
     remaining = dt
     congested = 0.0
     residual = 0.0
     while remaining > 1e-12 * dt:
         dx, dz, h_stable, congestion, residual = _stage(
-            rates, game, x, z, demand, graph, lo, hi, params
+            field, mode, x, z, demand, graph, lo, hi, params
         )
         congested = max(congested, congestion)
         h = min(dt / substeps, remaining, h_stable)
@@ -137,20 +140,20 @@ def _advance_euler(rates, game, x, z, demand, graph, lo, hi, params, dt, substep
 
 
 @nb.njit(cache=True)
-def _advance_heun(rates, game, x, z, demand, graph, lo, hi, params, dt, h_try, tol):
+def _advance_heun(field, mode, x, z, demand, graph, lo, hi, params, dt, h_try, tol):
     rtol, atol, price_atol = tol
     remaining = dt
     congested = 0.0
     residual = 0.0
     while remaining > 1e-12 * dt:
         dx1, dz1, h_stable, congestion, residual = _stage(
-            rates, game, x, z, demand, graph, lo, hi, params
+            field, mode, x, z, demand, graph, lo, hi, params
         )
         congested = max(congested, congestion)
         h = min(h_try, remaining, h_stable)
         x1 = x + h * dx1
         z1 = np.maximum(z + h * dz1, 0.0)
-        dx2, dz2, h_stable2, _, _ = _stage(rates, game, x1, z1, demand, graph, lo, hi, params)
+        dx2, dz2, h_stable2, _, _ = _stage(field, mode, x1, z1, demand, graph, lo, hi, params)
         if h > h_stable2:
             h_try = h_stable2
             continue
@@ -166,8 +169,8 @@ def _advance_heun(rates, game, x, z, demand, graph, lo, hi, params, dt, h_try, t
 
 @nb.njit(cache=True)
 def integrate(
-    rates,
-    game,
+    field,
+    mode,
     x,
     z,
     demand,
@@ -186,11 +189,11 @@ def integrate(
 ):
     """Run the dynamics from shares ``x`` (and controller state ``z``) at fixed ``demand`` (MW).
 
-    ``game(p, z, params) -> (f, z_rate, congestion, residual)`` gives fitness, the controllers'
+    ``field`` is a vector-field code (:mod:`popdispatch.dynamics.fields`) and ``mode`` a game
+    code (:func:`popdispatch.game.payoffs.game`): the game gives fitness, the controllers'
     state rate, the largest congestion signal magnitude and the controllers' residual (MW; a
-    run converges only once it is below ``tol_mw`` too); ``rates`` is a vector field (see
-    :mod:`popdispatch.dynamics`). ``method``: 0 Euler with ``substeps``, 1 adaptive Heun with
-    ``tol = (rtol, atol, price_atol)``.
+    run converges only once it is below ``tol_mw`` too). ``method``: 0 Euler with
+    ``substeps``, 1 adaptive Heun with ``tol = (rtol, atol, price_atol)``.
 
     Returns ``(setpoints, x, z, converged_at, first_congestion)``: set points (MW) on the grid,
     rows ``0..last``, final state, the iteration of convergence (-1 if none, :data:`INFEASIBLE`
@@ -207,11 +210,11 @@ def integrate(
     for k in range(1, max_iterations + 1):
         if method == 0:
             x, z, congested, residual = _advance_euler(
-                rates, game, x, z, demand, graph, lo, hi, params, dt, substeps
+                field, mode, x, z, demand, graph, lo, hi, params, dt, substeps
             )
         else:
             x, z, congested, residual, h_try = _advance_heun(
-                rates, game, x, z, demand, graph, lo, hi, params, dt, h_try, tol
+                field, mode, x, z, demand, graph, lo, hi, params, dt, h_try, tol
             )
         setpoints[k] = x * demand
         if first_congestion < 0 and congested > 0.0:

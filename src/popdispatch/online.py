@@ -21,7 +21,7 @@ from popdispatch.dynamics import communication_graph, get_dynamics, project_to_b
 from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.integrate import INFEASIBLE, Integrator, integrate
-from popdispatch.modes import get_mode
+from popdispatch.modes import game_parameters, get_mode
 from popdispatch.opf import generation_cost
 
 X0_CHOICES = ("uniform", "capacity")
@@ -125,8 +125,8 @@ class Engine:
         self.graph = communication_graph(
             settings.graph if self.dynamics.uses_graph else "complete", names
         )
-        self.rates = self.dynamics.bounded_rates if self.mode.bounded else self.dynamics.rates
-        if self.rates is None:
+        self.field = self.dynamics.bounded_field if self.mode.bounded else self.dynamics.field
+        if self.field is None:
             raise ValueError(
                 f"{self.mode.name} mode cannot run {self.dynamics.name} dynamics: they are "
                 "imitative, so a generator at zero share stays at zero (extinction) and the "
@@ -134,6 +134,12 @@ class Engine:
             )
         self.z = np.zeros(self.mode.controller_states(problem))
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
+
+    def warm_up(self, x: np.ndarray, minute: int) -> None:
+        """Compile (or load from the disk cache) the kernels outside any timed region."""
+        z = self.z.copy()
+        self.run_minute(x.copy(), minute, max_iterations=1)
+        self.z = z
 
     def run_minute(self, x: np.ndarray, minute: int, max_iterations: int | None = None):
         """Integrate one minute from shares ``x``; returns the kernel's raw outputs."""
@@ -146,10 +152,10 @@ class Engine:
         hi = np.where(online, problem.pmax, 0.0) / demand
         if self.mode.bounded:
             x = project_to_box(x, lo, hi)
-        params = self.mode.parameters(problem, minute, settings.fitness)
+        params = game_parameters(problem, minute, settings.fitness)
         out = integrate(
-            self.rates,
-            self.mode.game,
+            self.field,
+            self.mode.code,
             x,
             self.z,
             demand,
@@ -183,6 +189,7 @@ def run_snapshot(
     settings = settings or RunSettings()
     engine = Engine(problem, settings)
     x = initial_shares(problem, settings.x0, minute)
+    engine.warm_up(x, minute)
     start = time.perf_counter()
     setpoints, x, converged_at, first_congestion = engine.run_minute(x, minute)
     wall = time.perf_counter() - start
@@ -265,6 +272,7 @@ def run_day(
     converged = np.empty(len(minutes), dtype=bool)
     infeasible = np.zeros(len(minutes), dtype=bool)
     x = initial_shares(problem, settings.x0, int(minutes[0]))
+    engine.warm_up(x, int(minutes[0]))
     start = time.perf_counter()
     for row, minute in enumerate(minutes):
         online = problem.online[minute - 1]
