@@ -307,6 +307,22 @@ def test_reproduce_writes_every_file(tmp_path):
     assert list(tmp_path.iterdir()) == [out]  # no staging folder left behind
 
 
+def test_reproduce_in_exact_mode_lands_on_the_dc_opf(tmp_path):
+    out = tmp_path / "results"
+    result = run(
+        "reproduce", "--mode", "exact", "--minutes", "565-567", "--out", str(out), "--json"
+    )
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["mode"] == "exact"
+    assert summary["congestion"]["max_abs_error_kw"] < 1e-3
+    assert summary["congestion"]["max_overflow_kw"] < 1e-3
+    assert summary["base_day"]["max_abs_error_kw"] < 0.01
+    # the extinction row still shows the paper's replicator keeping G114 at zero
+    assert gens(summary["extinction"]["replicator"])["G114"]["setpoint_kw"] == 0.0
+    assert gens(summary["extinction"]["smith"])["G114"]["setpoint_kw"] > 9.999
+
+
 def test_ctrl_c_leaves_no_partial_output(tmp_path):
     out = tmp_path / "results"
     process = subprocess.Popen(
@@ -319,9 +335,9 @@ def test_ctrl_c_leaves_no_partial_output(tmp_path):
     seen = []
     for line in process.stderr:  # steps are logged as they finish (stderr is not a terminal)
         seen.append(line)
-        if line.startswith("minute 566, congestion and extinction"):
-            break  # the whole online day is next: interrupt it
-    time.sleep(2)
+        if line.startswith("loading the ieee-elv feeder"):
+            break  # the experiments (about 25 s, most of it the online day) are next
+    time.sleep(3)
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 130, "".join(seen) + stderr

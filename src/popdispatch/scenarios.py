@@ -133,13 +133,18 @@ def extinction(
     generator: str = EXTINCT_GENERATOR,
     settings: RunSettings | None = None,
 ) -> ExtinctionResult:
-    """``extinction``: ``generator`` starts at zero share, the others share the load equally."""
+    """``extinction``: ``generator`` starts at zero share, the others share the load equally.
+
+    The Smith run uses ``settings`` (any mode); the replicator run always uses the paper mode,
+    the only one that can run imitative dynamics (exact mode refuses them for this very reason).
+    """
     problem = elv_problem(profiles)
     x0 = {g: (0.0 if g == generator else 1.0) for g in problem.generators}
     base = replace(settings or RunSettings(), x0=x0)
+    imitative = replace(base, dynamics="replicator", mode="paper", integrator=None)
     return ExtinctionResult(
         generator,
-        run_snapshot(problem, minute, replace(base, dynamics="replicator")),
+        run_snapshot(problem, minute, imitative),
         run_snapshot(problem, minute, replace(base, dynamics="smith")),
         solve_opf(problem, minute),
     )
