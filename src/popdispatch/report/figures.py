@@ -231,7 +231,7 @@ def congestion_detection_figure(
     is_limited = np.isin(np.arange(reduced.n_lines), problem.lines)
     colors = np.where(_subtree_lines(reduced, line) == child_sends, PENALTY, INCENTIVE)
     colors = np.where(is_limited, "black", colors)
-    fig, axes = new_figure(DOUBLE, 3.9, ncols=2)
+    fig, axes = new_figure(DOUBLE, 4.6, ncols=2)
     labels = {n: f"{n} {s:+.1f}" for n, s in zip(problem.generators, signal, strict=True)}
     for ax in axes[0]:
         _draw_network(ax, reduced, np.where(is_limited, 3.0, 0.9), colors)
@@ -244,11 +244,9 @@ def congestion_detection_figure(
     ax.plot([], [], color="black", lw=3, label=f"limited path (U = {problem.limit[k] * 1e3:g} kW)")
     ax.plot([], [], color=PENALTY, lw=1.5, label="penalty side (sends the overflow)")
     ax.plot([], [], color=INCENTIVE, lw=1.5, label="incentive side")
-    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=6)
-    ax.set_title("Sides of the congested path; signals received, EUR/MW")
-    zoom.set_title(
-        f"Zoom: line {int(row.from_bus)}-{int(row.to_bus)} carries {abs(limited[k]):.1f} kW"
-    )
+    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=3)
+    ax.set_title("Signals received, EUR/MW")
+    zoom.set_title(f"Line {int(row.from_bus)}-{int(row.to_bus)}: {abs(limited[k]):.1f} kW")
     fig.suptitle(f"Congestion detection ({situation})", fontsize=9)
     return fig
 
