@@ -28,33 +28,25 @@ class Progress:
         if not self.quiet:
             tqdm.write(f"popdispatch: {message}", file=sys.stderr)
 
+    def _bar_options(self) -> dict:
+        """tqdm settings shared by every bar: stderr, shown after a second, gone when done."""
+        return {
+            "disable": self.quiet,
+            "delay": DELAY_S,
+            "leave": False,
+            "file": sys.stderr,
+            "dynamic_ncols": True,
+            "mininterval": 0.1 if sys.stderr.isatty() else 10.0,
+        }
+
     def iterate(self, items: Iterable, description: str, total: int | None = None) -> Iterator:
         """Iterate over ``items`` with a progress bar."""
-        yield from tqdm(
-            items,
-            desc=description,
-            total=total,
-            disable=self.quiet,
-            delay=DELAY_S,
-            leave=False,
-            file=sys.stderr,
-            dynamic_ncols=True,
-            mininterval=0.1 if sys.stderr.isatty() else 10.0,
-        )
+        yield from tqdm(items, desc=description, total=total, **self._bar_options())
 
     @contextlib.contextmanager
     def counter(self, description: str, total: int) -> Iterator:
         """A progress bar over ``total`` units; yields ``advance(_)`` to call once per unit."""
-        bar = tqdm(
-            desc=description,
-            total=total,
-            disable=self.quiet,
-            delay=DELAY_S,
-            leave=False,
-            file=sys.stderr,
-            dynamic_ncols=True,
-            mininterval=0.1 if sys.stderr.isatty() else 10.0,
-        )
+        bar = tqdm(desc=description, total=total, **self._bar_options())
         try:
             yield lambda *_: bar.update(1)
         finally:
