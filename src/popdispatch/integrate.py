@@ -26,9 +26,11 @@ run stops and reports the problem infeasible.
 Convergence (documented criterion): the mean set point of every generator over the last
 ``window`` iterations differs by at most ``tol_kw`` kilowatts from its mean over the ``window``
 iterations before, and the controllers' residual (exact mode: overflow, or slack under a
-positive price) is at most ``tol_kw``. Means, not samples, because a generator sliding along
-its limit chatters on the scale of the internal step. The iteration of convergence is the first
-iteration of the last window; the run stops when the criterion first holds.
+positive price) is at most ``tol_kw``; with ``extrapolate`` (exact mode) the geometric tail of
+the window means must be within ``tol_kw`` as well. Means, not samples, because a generator
+sliding along its limit chatters on the scale of the internal step. The iteration of
+convergence is the first iteration of the last window; the run stops when the criterion first
+holds.
 """
 
 from __future__ import annotations
@@ -58,6 +60,8 @@ class Integrator:
     tol_kw : convergence tolerance on window means of the set points and on the residual, kW.
     window : iterations per averaging window.
     max_iterations : horizon per run (per minute in the day loop); 6000 = one minute.
+    extrapolate : also require the geometrically projected remaining motion to be within
+        ``tol_kw`` (for smooth, slowly converging runs; chatter in paper mode defeats it).
     """
 
     dt: float = 0.01
@@ -69,6 +73,7 @@ class Integrator:
     tol_kw: float = 0.01
     window: int = 20
     max_iterations: int = 6000
+    extrapolate: bool = False
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -86,16 +91,35 @@ class Integrator:
 
 
 @nb.njit(cache=True)
-def _windows_agree(trajectory: np.ndarray, last: int, window: int, tol: float) -> bool:
-    """Do the means of the last two windows of set points differ by at most ``tol``?"""
+def _window_mean(trajectory: np.ndarray, last: int, window: int, i: int) -> float:
+    total = 0.0
+    for k in range(window):
+        total += trajectory[last - k, i]
+    return total / window
+
+
+@nb.njit(cache=True)
+def _windows_agree(
+    trajectory: np.ndarray, last: int, window: int, tol: float, extrapolate: bool
+) -> bool:
+    """Do the means of the last two windows of set points differ by at most ``tol``?
+
+    With ``extrapolate`` (needs three windows), a geometric tail is also projected: if the
+    window means keep moving the same way with ratio ``r < 1``, the distance still to go,
+    ``|d| r / (1 - r)``, must be within ``tol`` too. Slow exponential tails (several generators
+    inside their limits, whose split is set by tiny quadratic costs) otherwise look converged.
+    """
     for i in range(trajectory.shape[1]):
-        recent = 0.0
-        before = 0.0
-        for k in range(window):
-            recent += trajectory[last - k, i]
-            before += trajectory[last - window - k, i]
-        if abs(recent - before) > tol * window:
+        recent = _window_mean(trajectory, last, window, i)
+        middle = _window_mean(trajectory, last - window, window, i)
+        step = recent - middle
+        if abs(step) > tol:
             return False
+        if extrapolate:
+            previous = middle - _window_mean(trajectory, last - 2 * window, window, i)
+            ratio = step / previous if previous != 0.0 else 0.0
+            if 0.0 < ratio < 1.0 and abs(step) * ratio / (1.0 - ratio) > tol:
+                return False
     return True
 
 
@@ -186,6 +210,7 @@ def integrate(
     window,
     max_iterations,
     z_cap,
+    extrapolate,
 ):
     """Run the dynamics from shares ``x`` (and controller state ``z``) at fixed ``demand`` (MW).
 
@@ -223,8 +248,8 @@ def integrate(
             converged_at = INFEASIBLE
             last = k
             break
-        steady = k >= 2 * window and residual <= tol_mw
-        if steady and _windows_agree(setpoints, k, window, tol_mw):
+        steady = k >= (3 if extrapolate else 2) * window and residual <= tol_mw
+        if steady and _windows_agree(setpoints, k, window, tol_mw, extrapolate):
             converged_at = k - window
             last = k
             break

@@ -61,7 +61,7 @@ MODES = {
         EXACT,
         lambda problem: 2 * len(problem.limit),
         True,
-        Integrator(method="heun", tol_kw=1e-5, window=5),
+        Integrator(method="heun", tol_kw=1e-5, window=5, extrapolate=True),
     ),
 }
 

@@ -171,6 +171,7 @@ class Engine:
             integrator.window,
             max_iterations or integrator.max_iterations,
             self.z_cap,
+            integrator.extrapolate,
         )
         setpoints, x, self.z, converged_at, first_congestion = out
         return setpoints, x, converged_at, first_congestion
