@@ -16,7 +16,7 @@ and its step control from the vector field (:mod:`popdispatch.dynamics`) and the
 
 Domain: every vector field is split as ``x' = inflow - x * out_rate`` (both >= 0) and reports a
 ``rate_bound``; an Euler stage keeps ``x`` in its domain whenever ``h * rate_bound <= 1``, so
-every stage is shortened to ``0.5 / rate_bound`` when needed (Heun is a convex combination of
+every stage is shortened to ``0.9 / rate_bound`` when needed (Heun is a convex combination of
 Euler stages, so it inherits this). Mass is conserved because the fields sum to zero.
 
 Controller states ``z`` (exact mode's line prices) are integrated alongside and kept
@@ -132,7 +132,7 @@ def _stage(field, mode, x, z, demand, graph, lo, hi, params):
     """One evaluation: ``(x', z', largest stable step, congestion, residual)``."""
     f, z_rate, congestion, residual = game(mode, x * demand, z, params)
     inflow, out_rate, rate_bound = vector_field(field, x, f, graph, lo, hi)
-    h_stable = 0.5 / rate_bound if rate_bound > 0.0 else np.inf
+    h_stable = 0.9 / rate_bound if rate_bound > 0.0 else np.inf
     return inflow - x * out_rate, z_rate, h_stable, congestion, residual
 
 
