@@ -205,3 +205,27 @@ def test_results_state_their_profile_source(official_problem, peak_problem):
     assert run_snapshot(peak_problem, 566).profile_source.startswith("official minute 566")
     day = run_day(official_problem, minutes=np.arange(1, 4))
     assert day.profile_source.startswith("official profiles: ")
+
+
+def test_node_controllers_table_matches_the_compiled_broadcast():
+    """Each controller, computed on its own (eq. 8), adds up to what the engine broadcasts."""
+    from popdispatch.game import NodeControllers, broadcast_signals
+
+    problem = elv_problem(limits=[(505, 666, 28.0)])
+    free = solve_opf(elv_problem(), 566)  # unconstrained optimum overloads the path
+    flows = problem.flows(free.p_kw / 1000.0, 566)
+    controllers = NodeControllers.from_problem(problem)
+    table = controllers.table
+    assert len(table) == 2 * len(problem.lines)
+    values = controllers.signals(flows, 1000.0)
+    by_line = values.groupby(table.line).agg(["min", "max"])
+    np.testing.assert_allclose(by_line["min"], -by_line["max"])  # penalty and incentive
+    assert values.abs().max() > 1.0
+    received = dict.fromkeys(problem.generators, 0.0)
+    for receivers, value in zip(table.receivers, values, strict=True):
+        for generator in receivers:
+            received[generator] += value
+    compiled = broadcast_signals(flows, problem.limit, problem.down, 1000.0)
+    np.testing.assert_allclose([received[g] for g in problem.generators], compiled, atol=1e-9)
+    # the sending side (downstream generators push the flow up the path) is penalised
+    assert received["G739"] < 0 < received["G1"]
