@@ -8,7 +8,15 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from popdispatch.errors import FeederError
-from popdispatch.feeder.tree import build_tree, downstream, line_flows, path_lines, subtree_sums
+from popdispatch.feeder.tree import (
+    build_tree,
+    depths,
+    downstream,
+    line_flows,
+    path_lines,
+    path_sums,
+    subtree_sums,
+)
 
 SETTINGS = settings(max_examples=150, deadline=None)
 FINITE = st.floats(-100.0, 100.0, allow_nan=False, allow_infinity=False)
@@ -133,6 +141,31 @@ def test_subtree_sums_with_leading_axes(data, case):
 
 @SETTINGS
 @given(data=st.data(), case=random_trees())
+def test_path_sums_and_depths_match_networkx(data, case):
+    n, ends_a, ends_b, root = case
+    values = data.draw(arrays(np.float64, (2, n), elements=FINITE))
+    tree = build_tree(n, ends_a, ends_b, root)
+    paths = nx.shortest_path(_graph(n, ends_a, ends_b), root)  # root -> every node
+    np.testing.assert_array_equal(depths(tree), [len(paths[v]) - 1 for v in range(n)])
+    sums = path_sums(tree, values)
+    assert sums.shape == (2, n)
+    expected = [[values[r, paths[v]].sum() for v in range(n)] for r in range(2)]
+    np.testing.assert_allclose(sums, expected, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(path_sums(tree, values[1]), sums[1], atol=1e-12)
+
+
+def test_deep_chain():
+    # A 50,000-node path graph (lines listed leaf first, reversed): depths and sizes still exact.
+    n = 50_000
+    tree = build_tree(n, np.arange(n - 1, 0, -1), np.arange(n - 2, -1, -1), root=0)
+    np.testing.assert_array_equal(tree.parent, np.arange(-1, n - 1))
+    np.testing.assert_array_equal(tree.size, np.arange(n, 0, -1))
+    np.testing.assert_array_equal(depths(tree), np.arange(n))
+    np.testing.assert_array_equal(tree.line_child, np.arange(n - 1, 0, -1))
+
+
+@SETTINGS
+@given(data=st.data(), case=random_trees())
 def test_downstream_matches_brute_force(data, case):
     n, ends_a, ends_b, root = case
     nodes = np.array(data.draw(st.lists(st.integers(0, n - 1), max_size=12)), dtype=np.int64)
@@ -198,6 +231,15 @@ def test_build_tree_rejects_parallel_line_with_right_count():
     # 0-1 twice and node 2 unconnected: n - 1 lines but not a tree.
     with pytest.raises(FeederError, match="meshed or disconnected"):
         build_tree(3, np.array([0, 1]), np.array([1, 0]), 0)
+
+
+def test_build_tree_rejects_unknown_nodes():
+    with pytest.raises(FeederError, match="meshed or disconnected"):
+        build_tree(3, np.array([0, 5]), np.array([1, 2]), 0)
+    with pytest.raises(FeederError, match="meshed or disconnected"):
+        build_tree(3, np.array([0, -1]), np.array([1, 2]), 0)
+    with pytest.raises(FeederError, match="root node 3"):
+        build_tree(3, np.array([0, 1]), np.array([1, 2]), 3)
 
 
 def test_small_tree_by_hand():

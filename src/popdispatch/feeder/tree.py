@@ -13,8 +13,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import networkx as nx
 import numpy as np
+from scipy.sparse import csr_array
+from scipy.sparse.csgraph import depth_first_order
 
 from popdispatch.errors import FeederError
 
@@ -55,7 +56,9 @@ class Tree:
 def build_tree(n_nodes: int, ends_a: np.ndarray, ends_b: np.ndarray, root: int = 0) -> Tree:
     """Orient the undirected lines ``ends_a[k] -- ends_b[k]`` away from ``root``.
 
-    Raises :class:`FeederError` if the lines do not form one tree over all nodes.
+    Raises :class:`FeederError` if the lines do not form one tree over all nodes. O(n) in
+    compiled code (one depth-first search by :mod:`scipy.sparse.csgraph`) plus an
+    O(n log depth) numpy sweep for the subtree sizes: no per-node Python loop.
     """
     ends_a = np.asarray(ends_a, dtype=np.int64)
     ends_b = np.asarray(ends_b, dtype=np.int64)
@@ -63,39 +66,59 @@ def build_tree(n_nodes: int, ends_a: np.ndarray, ends_b: np.ndarray, root: int =
         raise FeederError(
             f"a radial feeder with {n_nodes} nodes needs {n_nodes - 1} lines, got {len(ends_a)}"
         )
-    g = nx.Graph()
-    g.add_nodes_from(range(n_nodes))
-    g.add_edges_from(
-        (int(a), int(b), {"line": k}) for k, (a, b) in enumerate(zip(ends_a, ends_b, strict=True))
-    )
-    if not nx.is_tree(g):
+    if len(ends_b) != len(ends_a):
+        raise FeederError(f"{len(ends_a)} line start nodes but {len(ends_b)} line end nodes")
+    if not 0 <= root < n_nodes:
+        raise FeederError(f"root node {root} is not one of the nodes 0..{n_nodes - 1}")
+    ends = np.concatenate([ends_a, ends_b])
+    if len(ends) and (ends.min() < 0 or ends.max() >= n_nodes):
         raise FeederError("lines do not form a tree: network is meshed or disconnected")
-    preorder = np.fromiter(nx.dfs_preorder_nodes(g, root), dtype=np.int64, count=n_nodes)
-    parent = np.full(n_nodes, -1, dtype=np.int64)
-    for child, par in nx.dfs_predecessors(g, root).items():
-        parent[child] = par
+    graph = csr_array(
+        (np.ones(len(ends_a), dtype=np.int8), (ends_a, ends_b)), shape=(n_nodes, n_nodes)
+    )
+    preorder, predecessors = depth_first_order(
+        graph, root, directed=False, return_predecessors=True
+    )
+    # n - 1 lines that reach every node form a tree (a loop, a parallel line or a self-loop
+    # would leave some node unreached).
+    if len(preorder) != n_nodes:
+        raise FeederError("lines do not form a tree: network is meshed or disconnected")
+    preorder = preorder.astype(np.int64)
+    parent = predecessors.astype(np.int64)
+    parent[root] = -1
     line_child = np.where(parent[ends_b] == ends_a, ends_b, ends_a)
     line_parent = np.where(line_child == ends_b, ends_a, ends_b)
     parent_line = np.full(n_nodes, -1, dtype=np.int64)
     parent_line[line_child] = np.arange(n_nodes - 1)
     start = np.empty(n_nodes, dtype=np.int64)
     start[preorder] = np.arange(n_nodes)
-    size = _subtree_sizes(parent, preorder)
+    size = _subtree_sizes(parent, preorder, start)
     return Tree(root, line_parent, line_child, parent, parent_line, preorder, start, size)
 
 
-def _subtree_sizes(parent: np.ndarray, preorder: np.ndarray) -> np.ndarray:
-    # Depth-level sweep (deepest level first): one numpy call per level, none per node.
-    depth = np.zeros(len(parent), dtype=np.int64)
-    for node in preorder[1:]:
-        depth[node] = depth[parent[node]] + 1
-    size = np.ones(len(parent), dtype=np.int64)
-    order = preorder[np.argsort(-depth[preorder], kind="stable")]
-    levels = np.split(order, np.flatnonzero(np.diff(depth[order])) + 1)
-    for level in levels:
-        if depth[level[0]] > 0:
-            np.add.at(size, parent[level], size[level])
-    return size
+def _subtree_sizes(parent: np.ndarray, preorder: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """Subtree sizes from where each subtree's pre-order range ends.
+
+    A node's range ends where its next sibling starts; a last child's range ends where its
+    parent's does. Following "last child -> parent" hops by pointer doubling finds, for every
+    node, the first ancestor-or-self with a next sibling (or the root, whose range ends at n):
+    O(n log depth) in numpy, however deep or branched the tree.
+    """
+    n = len(parent)
+    children = preorder[1:]  # every non-root node; siblings end up in pre-order
+    grouped = children[np.argsort(parent[children], kind="stable")]
+    same_parent = parent[grouped[1:]] == parent[grouped[:-1]]
+    end = np.full(n, n, dtype=np.int64)
+    end[grouped[:-1][same_parent]] = start[grouped[1:][same_parent]]
+    last_child = grouped[np.append(~same_parent, True)] if len(grouped) else grouped
+    hop = np.arange(n, dtype=np.int64)
+    hop[last_child] = parent[last_child]
+    while True:
+        further = hop[hop]
+        if np.array_equal(further, hop):
+            break
+        hop = further
+    return end[hop] - start
 
 
 def subtree_sums(tree: Tree, values: np.ndarray) -> np.ndarray:
@@ -146,3 +169,25 @@ def _ancestors(tree: Tree, node: int) -> list[int]:
     while tree.parent[chain[-1]] >= 0:
         chain.append(int(tree.parent[chain[-1]]))
     return chain
+
+
+def path_sums(tree: Tree, values: np.ndarray) -> np.ndarray:
+    """Sum of ``values`` (per node, last axis) over each node's path from the root.
+
+    The path includes the node itself and the root: ``path_sums(tree, ones) - 1`` is the depth,
+    ``path_sums`` of per-node line lengths (0 at the root) the distance from the source. Any unit;
+    the result is in the unit of ``values``. A value enters the cumulative sum where its node's
+    pre-order range starts and leaves where it ends: O(n), no per-node Python loop.
+    """
+    values = np.asarray(values)
+    n = tree.n_nodes
+    dtype = np.result_type(values.dtype, np.int64)
+    delta = np.zeros(values.shape[:-1] + (n + 1,), dtype=dtype)
+    delta[..., tree.start] = values
+    np.subtract.at(delta, (Ellipsis, tree.start + tree.size), values)
+    return np.take(np.cumsum(delta, axis=-1), tree.start, axis=-1)
+
+
+def depths(tree: Tree) -> np.ndarray:
+    """Number of lines between each node and the root (0 at the root)."""
+    return path_sums(tree, np.ones(tree.n_nodes, dtype=np.int64)) - 1
