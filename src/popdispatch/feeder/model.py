@@ -11,8 +11,12 @@ from dataclasses import dataclass, replace
 import networkx as nx
 import numpy as np
 import pandas as pd
+from scipy.sparse import csr_array
+from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
 from popdispatch.errors import FeederError
+from popdispatch.feeder.tree import Tree, build_tree
+from popdispatch.feeder.tree import path_lines as tree_path_lines
 
 BUS_COLUMNS = ["x", "y"]
 LINE_COLUMNS = ["from_bus", "to_bus", "length_km", "r_ohm", "x_ohm", "limit_kw"]
@@ -30,7 +34,8 @@ class Feeder:
     lines : index line name; columns ``from_bus``, ``to_bus``, ``length_km``, ``r_ohm``,
         ``x_ohm`` (series impedance of the whole line, ohm) and ``limit_kw`` (flow limit in kW,
         ``inf`` for no limit).
-    loads : index load name; column ``bus``.
+    loads : index load name; column ``bus``. Other columns (e.g. ``peak_kw`` of the synthetic
+        feeders, kW) are carried along unchecked and ignored by the engine.
     source_bus : the bus fed by the substation (the root of the tree).
     generators : the fleet (see :mod:`popdispatch.feeder.generators`), index generator name.
     """
@@ -65,27 +70,42 @@ class Feeder:
     def graph(self) -> nx.Graph:
         """The feeder as an undirected networkx graph; edges carry the line name as ``line``."""
         g = nx.Graph()
-        g.add_nodes_from(self.buses.index)
+        g.add_nodes_from(self.buses.index.tolist())
         g.add_edges_from(
-            (f, t, {"line": name})
-            for name, f, t in zip(
-                self.lines.index, self.lines.from_bus, self.lines.to_bus, strict=True
+            zip(
+                self.lines.from_bus.tolist(),
+                self.lines.to_bus.tolist(),
+                ({"line": name} for name in self.lines.index.tolist()),
+                strict=True,
             )
         )
         return g
 
+    def bus_tree(self) -> Tree:
+        """The feeder as a :class:`~popdispatch.feeder.tree.Tree` rooted at the source bus.
+
+        Node ``j`` is the bus ``buses.index[j]`` and line ``k`` the line ``lines.index[k]``.
+        """
+        ends_a = self.buses.index.get_indexer(self.lines.from_bus)
+        ends_b = self.buses.index.get_indexer(self.lines.to_bus)
+        root = self.buses.index.get_loc(self.source_bus)
+        return build_tree(len(self.buses), ends_a, ends_b, int(root))
+
     def path_lines(self, bus_a: int, bus_b: int) -> list[str]:
-        """Names of the original lines on the (unique) path between two buses."""
+        """Names of the original lines on the (unique) path between two buses, from ``bus_a``."""
         for bus in (bus_a, bus_b):
             if bus not in self.buses.index:
                 raise FeederError(f"unknown bus {bus} in path query on feeder {self.name!r}")
-        g = self.graph()
-        path = nx.shortest_path(g, bus_a, bus_b)
-        return [g.edges[u, v]["line"] for u, v in zip(path[:-1], path[1:], strict=True)]
+        a, b = self.buses.index.get_indexer([bus_a, bus_b])
+        return self.lines.index[tree_path_lines(self.bus_tree(), a, b)].tolist()
 
 
 def validate_feeder(feeder: Feeder) -> None:
-    """Raise :class:`FeederError` unless the feeder is a connected tree with sane line data."""
+    """Raise :class:`FeederError` unless the feeder is a connected tree with sane line data.
+
+    Vectorised (pandas, numpy, :mod:`scipy.sparse.csgraph`): a 100,000-bus feeder validates in
+    a fraction of a second. The first problem found is reported, naming its element.
+    """
     buses, lines = feeder.buses, feeder.lines
     if feeder.source_bus not in buses.index:
         raise FeederError(f"source bus {feeder.source_bus} is not a bus of feeder {feeder.name!r}")
@@ -116,30 +136,53 @@ def validate_feeder(feeder: Feeder) -> None:
 
 
 def _check_radial(feeder: Feeder) -> None:
-    g = feeder.graph()
-    if g.number_of_edges() != len(feeder.lines):
-        dup = feeder.lines[
-            feeder.lines[["from_bus", "to_bus"]]
-            .apply(lambda r: tuple(sorted(r)), axis=1)
-            .duplicated()
-        ].index[0]
+    """Parallel lines, then unreachable buses, then loops; scipy graph code, no networkx."""
+    buses, lines = feeder.buses, feeder.lines
+    n = len(buses)
+    ends_a = buses.index.get_indexer(lines.from_bus)
+    ends_b = buses.index.get_indexer(lines.to_bus)
+    low, high = np.minimum(ends_a, ends_b), np.maximum(ends_a, ends_b)
+    parallel = pd.Series(low * n + high).duplicated().to_numpy()  # later copies of a bus pair
+    if parallel.any():
         raise FeederError(
-            f"line {dup!r} is parallel to another line: feeder is meshed "
-            "(popdispatch supports radial feeders only)"
+            f"line {lines.index[parallel.argmax()]!r} is parallel to another line: feeder is "
+            "meshed (popdispatch supports radial feeders only)"
         )
-    reachable = nx.node_connected_component(g, feeder.source_bus)
-    if len(reachable) != g.number_of_nodes():
-        lonely = next(b for b in feeder.buses.index if b not in reachable)
+    graph = csr_array((np.ones(len(lines), dtype=np.int8), (ends_a, ends_b)), shape=(n, n))
+    _, component = connected_components(graph, directed=False)
+    source = buses.index.get_loc(feeder.source_bus)
+    reached = component == component[source]
+    if not reached.all():
+        lonely = buses.index[~reached][0]
         raise FeederError(
             f"bus {lonely} is not connected to source bus {feeder.source_bus}: feeder is "
             "disconnected (popdispatch supports connected radial feeders only)"
         )
-    if g.number_of_edges() != g.number_of_nodes() - 1:
-        cycle = nx.find_cycle(g, feeder.source_bus)
-        # Name the loop's last line in table order: the one that closes it.
-        order = {name: k for k, name in enumerate(feeder.lines.index)}
-        u, v = max((e[:2] for e in cycle), key=lambda e: order[g.edges[e]["line"]])
-        raise FeederError(
-            f"line {g.edges[u, v]['line']!r} closes a loop through buses "
-            f"{[e[0] for e in cycle]}: feeder is meshed (popdispatch supports radial feeders only)"
-        )
+    if len(lines) != n - 1:
+        raise FeederError(_loop_message(feeder, ends_a, ends_b, int(source)))
+
+
+def _loop_message(feeder: Feeder, ends_a: np.ndarray, ends_b: np.ndarray, source: int) -> str:
+    """Name the first line, in table order, that closes a loop, and the buses of that loop.
+
+    Kruskal's algorithm with the table order as weights keeps a line iff it joins two parts not
+    yet connected by earlier lines: the first line it rejects closes a loop with earlier lines
+    only, the path between its ends in the spanning tree.
+    """
+    n = len(feeder.buses)
+    order = np.arange(1, len(ends_a) + 1, dtype=float)  # weights must be positive
+    spanning = minimum_spanning_tree(csr_array((order, (ends_a, ends_b)), shape=(n, n)))
+    kept = np.zeros(len(ends_a), dtype=bool)
+    kept[np.rint(spanning.data).astype(np.int64) - 1] = True
+    closing = int(np.flatnonzero(~kept)[0])
+    tree_lines = np.flatnonzero(kept)
+    tree = build_tree(n, ends_a[tree_lines], ends_b[tree_lines], source)
+    path = tree_path_lines(tree, int(ends_a[closing]), int(ends_b[closing]))
+    loop = [int(ends_a[closing])]
+    for k in tree_lines[path]:
+        loop.append(int(ends_b[k] if ends_a[k] == loop[-1] else ends_a[k]))
+    buses = feeder.buses.index[loop].tolist()
+    return (
+        f"line {feeder.lines.index[closing]!r} closes a loop through buses {buses}: "
+        "feeder is meshed (popdispatch supports radial feeders only)"
+    )
