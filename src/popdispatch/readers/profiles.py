@@ -79,8 +79,26 @@ def _table(columns: dict[str, np.ndarray]) -> pd.DataFrame:
     return table
 
 
+def _fast_values(values: list[str]) -> np.ndarray | None:
+    """The numbers if every token is a finite number >= 0 (surrounding blanks allowed), else
+    None (then :func:`_check_values` finds and names the bad token)."""
+    try:
+        out = np.fromiter(map(float, values), dtype=float, count=len(values))
+    except ValueError:
+        return None
+    return out if np.isfinite(out).all() and (out >= 0).all() else None
+
+
 def _check_values(values: list[str], path: Path, load: str, first_line: int) -> np.ndarray:
     """Parse ``MINUTES_PER_DAY`` non-negative finite numbers (line numbers for messages)."""
+    fast = _fast_values(values)  # the loop below only runs to name a bad value
+    if fast is not None:
+        if len(values) != MINUTES_PER_DAY:
+            raise ProfileError(
+                f"{path}: profile of load {load!r} has {len(values)} values, "
+                f"expected {MINUTES_PER_DAY}"
+            )
+        return fast
     out = np.empty(len(values))
     for i, token in enumerate(values):
         try:
@@ -170,10 +188,11 @@ def _read_mult_file(path: Path, load: str) -> np.ndarray:
         text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise ProfileError(f"cannot read profile file {path} of load {load!r}: {exc}") from None
-    rows = [r.strip() for r in text.splitlines()]
-    while rows and not rows[-1]:
-        rows.pop()
-    return _check_values(rows, path, load, 1)
+    rows = text.rstrip().splitlines()  # blank lines at the end dropped
+    fast = _fast_values(rows)
+    if fast is not None and len(fast) == MINUTES_PER_DAY:
+        return fast
+    return _check_values([r.strip() for r in rows], path, load, 1)
 
 
 # -- IEEE CSV form ------------------------------------------------------------------------------
