@@ -75,6 +75,33 @@ def test_mode_choices_come_from_the_engine():
         assert mode in text
 
 
+def test_minutes_per_day_is_the_profiles_constant():
+    from popdispatch.cli import MINUTES_PER_DAY
+    from popdispatch.feeder.profiles import MINUTES_PER_DAY as PROFILE_MINUTES
+
+    assert MINUTES_PER_DAY == PROFILE_MINUTES
+
+
+HEAVY = ("numpy", "pandas", "numba", "scipy", "networkx", "pandapower", "matplotlib", "tqdm")
+
+
+def loaded_after(code: str) -> tuple[subprocess.CompletedProcess, list[str]]:
+    """Run ``code`` in a fresh interpreter; which of :data:`HEAVY` it imported."""
+    report = f"import json, sys; print(json.dumps([m for m in {HEAVY!r} if m in sys.modules]))"
+    result = subprocess.run(
+        [sys.executable, "-c", f"{code}\n{report}"], capture_output=True, text=True,
+        env=clean_env(), timeout=900,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    return result, json.loads(result.stdout.strip().splitlines()[-1])
+
+
+def test_importing_the_cli_imports_no_heavy_library():
+    result, loaded = loaded_after("import popdispatch.cli")
+    assert result.returncode == 0
+    assert loaded == []
+
+
 # -- feeder and opf -----------------------------------------------------------------------------
 
 
@@ -167,7 +194,7 @@ def test_out_that_is_a_file_is_a_usage_error(tmp_path):
 SNAPSHOT_KEYS = {
     "status", "minute", "demand_kw", "mode", "dynamics", "x0", "profile_source", "generators",
     "iterations", "first_congestion_iteration", "max_overflow_kw", "max_abs_error_kw",
-    "wall_seconds",
+    "wall_seconds", "command_seconds",
 }  # fmt: skip
 
 
@@ -178,6 +205,7 @@ def test_snapshot_congestion_json_and_out(tmp_path):
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary.keys() >= SNAPSHOT_KEYS
+    assert 0 <= summary["wall_seconds"] <= summary["command_seconds"]
     assert summary["status"] == "converged"
     assert (summary["mode"], summary["dynamics"], summary["x0"]) == ("paper", "smith", "uniform")
     assert "official minute 566" in summary["profile_source"]
@@ -226,7 +254,7 @@ def test_snapshot_infeasible_limits_write_nothing(tmp_path):
 DAY_KEYS = {
     "status", "minutes", "profile_source", "mode", "dynamics", "max_abs_error_kw",
     "mean_abs_error_kw", "energy_kwh", "opf_energy_kwh", "cost", "opf_cost", "max_overflow_kw",
-    "wall_seconds",
+    "wall_seconds", "command_seconds",
 }  # fmt: skip
 
 
@@ -237,6 +265,8 @@ def test_day_with_an_outage_json_and_out(tmp_path):
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary.keys() >= DAY_KEYS
+    # the engine's own time, and the whole command's (from the process start), which holds it
+    assert 0 <= summary["wall_seconds"] <= summary["command_seconds"]
     assert summary["minutes"] == 21
     assert summary["events"] == ["817:off@605", "817:on@612"]
     assert summary["profile_source"].startswith("synthetic default")
@@ -255,6 +285,17 @@ def test_day_with_an_outage_json_and_out(tmp_path):
     assert (setpoints - demand).abs().max() < 1e-6
     assert json.loads((out / "summary.json").read_text()) == summary
     assert (out / "setpoints.png").stat().st_size > 0
+
+
+def test_day_imports_neither_pandapower_nor_matplotlib_once_cached():
+    code = "from popdispatch.cli import main; main(['day', '--minutes', '600-602', '-q'])"
+    loaded_after(code)  # fills the feeder cache if this is the first run
+    result, loaded = loaded_after(code)
+    assert result.returncode == 0, result.stderr
+    assert "pandapower" not in loaded
+    assert "matplotlib" not in loaded  # drawing is for --out only
+    text = result.stdout
+    assert "engine" in text and "whole command" in text  # both times, in words too
 
 
 # -- export -------------------------------------------------------------------------------------
@@ -325,9 +366,11 @@ def test_reproduce_in_exact_mode_lands_on_the_dc_opf(tmp_path):
 
 def test_ctrl_c_leaves_no_partial_output(tmp_path):
     out = tmp_path / "results"
+    # Without the feeder cache, loading the feeder imports pandapower (seconds), so its step
+    # is logged (steps over a second are) and tells us the experiments are next.
     process = subprocess.Popen(
         command("reproduce", "--out", str(out)),
-        env=clean_env(),
+        env={**clean_env(), "POPDISPATCH_CACHE_DIR": "off"},
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -5,33 +5,79 @@ a command prints exactly one JSON object on stdout (see README, "JSON output"); 
 notes go to stderr. Exit codes: 0 success, 1 a problem (bad data, infeasible dispatch, cannot
 write), 2 bad usage (malformed or unknown option values), 130 interrupted. Every error is one
 line on stderr, without traceback (set ``POPDISPATCH_DEBUG=1`` to see one).
+
+Importing this module imports only click and the standard library: numpy, pandas, numba,
+pandapower, scipy and matplotlib are imported by the commands that use them, so ``--help`` and
+usage errors are quick and a command pays only for what it runs.
+
+``day`` and ``snapshot`` report two times: ``wall_seconds``, the engine's own time (see
+:class:`popdispatch.online.DayResult`), and ``command_seconds``, the whole command's time: from
+the start of the process when run as the ``popdispatch`` program (read from ``/proc`` on Linux;
+elsewhere, and when :func:`main` is called with arguments, from :func:`main`'s entry) until
+the output is complete (files in ``--out`` written, before the JSON is printed).
 """
 
 from __future__ import annotations
 
+import importlib
 import os
 import re
 import signal
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
 import click
 
-from popdispatch.dynamics import DYNAMICS
-from popdispatch.dynamics.graph import GRAPHS
 from popdispatch.errors import PopdispatchError
-from popdispatch.feeder.profiles import MINUTES_PER_DAY
-from popdispatch.modes import MODES
 from popdispatch.report.output import json_text, staged_folder
 from popdispatch.report.progress import Progress
 
 Limit = tuple[int, int, float]
 EXIT_PROBLEM, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
+#: Minutes in a day; equals :data:`popdispatch.feeder.profiles.MINUTES_PER_DAY` (a test checks),
+#: not imported from there because that imports pandas.
+MINUTES_PER_DAY = 1440
 
 
 class Failure(Exception):
     """A problem to report on one line with exit code 1 (after any ``--json`` output)."""
+
+
+# -- the command's own clock --------------------------------------------------------------------
+
+
+def process_age_seconds() -> float | None:
+    """Seconds since this process started (Linux ``/proc/self/stat``), None where unknown."""
+    try:
+        with open("/proc/self/stat", "rb") as handle:
+            stat = handle.read()
+        start_ticks = int(stat[stat.rindex(b")") + 2 :].split()[19])  # field 22, starttime
+        age = time.clock_gettime(time.CLOCK_BOOTTIME) - start_ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, AttributeError):
+        return None
+    return age if 0.0 <= age < 3600.0 else None  # anything else is not this command's start
+
+
+class _Clock:
+    """``perf_counter()`` value at which the running command started (None: not running)."""
+
+    start: float | None = None
+
+
+def command_seconds() -> float:
+    """Seconds since the command started (see the module docstring)."""
+    if _Clock.start is None:
+        _Clock.start = time.perf_counter()
+    return time.perf_counter() - _Clock.start
+
+
+def stamp(summary: dict) -> dict:
+    """Add ``command_seconds`` to a summary once, when its output is complete."""
+    if summary.get("command_seconds") is None:
+        summary["command_seconds"] = command_seconds()
+    return summary
 
 
 # -- option types -------------------------------------------------------------------------------
@@ -134,6 +180,25 @@ class MinutesType(click.ParamType):
 FOLDER = click.Path(exists=True, file_okay=False, dir_okay=True, readable=True, path_type=Path)
 
 
+class EngineChoice(click.Choice):
+    """A choice among names the engine defines (``"module:ATTRIBUTE"``), looked up only when
+    click needs them (parsing, help): importing the CLI must not import the engine (numba)."""
+
+    def __init__(self, source: str, case_sensitive: bool = True) -> None:
+        self.source = source
+        self.case_sensitive = case_sensitive
+
+    @property
+    def choices(self) -> tuple[str, ...]:
+        module, _, attribute = self.source.partition(":")
+        return tuple(getattr(importlib.import_module(module), attribute))
+
+
+DYNAMICS_CHOICE = EngineChoice("popdispatch.dynamics:DYNAMICS")
+MODE_CHOICE = EngineChoice("popdispatch.modes:MODES")
+GRAPH_CHOICE = EngineChoice("popdispatch.dynamics.graph:GRAPHS")
+
+
 option = click.option
 
 
@@ -171,14 +236,14 @@ def run_options(func):
     decorators = [
         option(
             "--dynamics",
-            type=click.Choice(list(DYNAMICS)),
+            type=DYNAMICS_CHOICE,
             default="smith",
             show_default=True,
             help="Population dynamics (paper eqs. 9-14).",
         ),
         option(
             "--mode",
-            type=click.Choice(list(MODES)),
+            type=MODE_CHOICE,
             default="paper",
             show_default=True,
             help="How node controllers turn flows into fitness signals.",
@@ -192,7 +257,7 @@ def run_options(func):
         ),
         option(
             "--graph",
-            type=click.Choice(list(GRAPHS)),
+            type=GRAPH_CHOICE,
             default="complete",
             show_default=True,
             help="Communication graph (local-replicator and distributed-smith only).",
@@ -212,11 +277,13 @@ def settings_from(dynamics: str, mode: str, x0, graph: str):
 # -- loading inputs -----------------------------------------------------------------------------
 
 
-def check_limits(limits: Sequence[Limit]) -> None:
-    """Usage error (exit 2) for a limit naming a bus the ieee-elv feeder does not have."""
-    from popdispatch.feeder.cases import ieee_elv
+def check_limits(limits: Sequence[Limit], feeder=None) -> None:
+    """Usage error (exit 2) for a limit naming a bus the feeder (default ieee-elv) lacks."""
+    if feeder is None:
+        from popdispatch.feeder.cases import ieee_elv
 
-    buses = ieee_elv().buses.index
+        feeder = ieee_elv()
+    buses = feeder.buses.index
     for a, b, kw in limits:
         for bus in (a, b):
             if bus not in buses:
@@ -243,12 +310,14 @@ def load_profiles(folder: Path | None, minute: int | None, progress: Progress):
 
 
 def build(profiles, limits: Sequence[Limit], progress: Progress):
-    """The ieee-elv dispatch problem with path limits (feeder loading can take seconds)."""
+    """The ieee-elv dispatch problem with path limits (seconds if the feeder is not cached)."""
+    from popdispatch.feeder.cases import ieee_elv
     from popdispatch.scenarios import elv_problem
 
     with progress.step("loading the ieee-elv feeder"):
-        check_limits(limits)
-        return elv_problem(profiles, limits)
+        feeder = ieee_elv()
+        check_limits(limits, feeder)
+        return elv_problem(profiles, limits, feeder)
 
 
 def check_out(out: Path | None) -> None:
@@ -284,9 +353,13 @@ def _fmt(value, unit: str = "", digits: int = 3) -> str:
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="popdispatch")
-def cli() -> None:
+@click.pass_context
+def cli(ctx: click.Context) -> None:
     """Online, distributed, network-constrained dispatch of distributed generators
     with population dynamics, compared with an exact DC-OPF (IEEE European LV feeder)."""
+    if _Clock.start is None:  # invoked without main() (e.g. click's test runner)
+        _Clock.start = time.perf_counter()
+        ctx.call_on_close(lambda: setattr(_Clock, "start", None))
 
 
 @cli.command()
@@ -363,11 +436,11 @@ def snapshot(minute, limits, dynamics, mode, x0, graph, profiles, out, as_json, 
         result = snapshot_vs_opf(problem, minute, settings)
     summary = snapshot_summary(problem, result, limits)
     if summary["status"] == "infeasible":
-        emit(summary, as_json, snapshot_text(summary))
+        emit(stamp(summary), as_json, snapshot_text(summary))
         raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given line limits")
     if out is not None:
         write_snapshot(out, summary, trajectory_table(result), result, progress)
-    emit(summary, as_json, snapshot_text(summary))
+    emit(stamp(summary), as_json, snapshot_text(summary))
     return 0
 
 
@@ -377,7 +450,8 @@ def snapshot_text(s: dict) -> str:
         f"{s['mode']} mode, x0 {s['x0']}\nprofiles: {s['profile_source']}\n"
         f"status: {s['status']} (converged at iteration {_fmt(s['converged_iteration'], '', 0)}"
         f" of {s['iterations']}; first congestion at iteration "
-        f"{_fmt(s['first_congestion_iteration'], '', 0)}; {s['wall_seconds']:.2f} s)\n"
+        f"{_fmt(s['first_congestion_iteration'], '', 0)}; engine {s['wall_seconds']:.3f} s, "
+        f"whole command {s['command_seconds']:.1f} s)\n"
         + generator_lines(s["generators"], ["setpoint_kw", "opf_kw"])
         + f"\nmax |set point - DC-OPF| = {_fmt(s['max_abs_error_kw'], ' kW')}; "
         f"max overflow = {s['max_overflow_kw']:.3f} kW"
@@ -390,7 +464,7 @@ def write_snapshot(out: Path, summary: dict, table, result, progress: Progress) 
     with progress.step(f"writing {out}"), staged_folder(out) as folder:
         folder.write_csv("trajectory.csv", table)
         figures.save_figure(figures.congestion_figure(result), folder.file("setpoints"))
-        folder.write_json("summary.json", summary)
+        folder.write_json("summary.json", stamp(summary))
 
 
 @cli.command()
@@ -426,11 +500,11 @@ def day(limits, dynamics, mode, x0, graph, events, minutes, profiles, out, as_js
     labels = [f"{bus}:{state}@{minute}" for bus, state, minute in events]
     summary = day_summary(problem, result, limits, labels)
     if summary["status"] == "infeasible":
-        emit(summary, as_json, day_text(summary))
+        emit(stamp(summary), as_json, day_text(summary))
         raise Failure("the DC-OPF is infeasible at some minute with the given limits and events")
     if out is not None:
         write_day(out, summary, day_table(result), result, problem, progress)
-    emit(summary, as_json, day_text(summary))
+    emit(stamp(summary), as_json, day_text(summary))
     return 0
 
 
@@ -468,8 +542,9 @@ def day_text(s: dict) -> str:
     return (
         f"online day, minutes {s['first_minute']}-{s['last_minute']}: {s['dynamics']} dynamics, "
         f"{s['mode']} mode\nprofiles: {s['profile_source']}\nstatus: {s['status']} "
-        f"({s['converged_minutes']} of {s['minutes']} minutes converged; "
-        f"{s['wall_seconds']:.1f} s)\n{s['minutes_within_0_1_kw']} minutes within 0.1 kW of the "
+        f"({s['converged_minutes']} of {s['minutes']} minutes converged; engine "
+        f"{s['wall_seconds']:.2f} s, whole command {s['command_seconds']:.1f} s)\n"
+        f"{s['minutes_within_0_1_kw']} minutes within 0.1 kW of the "
         f"DC-OPF; max |error| {_fmt(s['max_abs_error_kw'], ' kW')}, mean "
         f"{_fmt(s['mean_abs_error_kw'], ' kW')}\ncost {s['cost']:.5f} EUR (DC-OPF "
         f"{s['opf_cost']:.5f} EUR); max overflow {s['max_overflow_kw']:.3f} kW\n"
@@ -485,7 +560,7 @@ def write_day(out: Path, summary: dict, table, result, problem, progress: Progre
         folder.write_csv("day.csv", table)
         fig = figures.base_day_figure(result, generator_buses(problem))
         figures.save_figure(fig, folder.file("setpoints"))
-        folder.write_json("summary.json", summary)
+        folder.write_json("summary.json", stamp(summary))
 
 
 @cli.command()
@@ -498,7 +573,7 @@ def write_day(out: Path, summary: dict, table, result, problem, progress: Progre
 )
 @option(
     "--mode",
-    type=click.Choice(list(MODES)),
+    type=MODE_CHOICE,
     default="paper",
     show_default=True,
     help="Dispatch mode of every experiment.",
@@ -580,6 +655,16 @@ class _Interrupt:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0, 1 problem, 2 usage, 130 interrupted)."""
+    entered = time.perf_counter()
+    age = process_age_seconds() if argv is None else None
+    _Clock.start = entered - (age or 0.0)
+    try:
+        return _main(argv)
+    finally:
+        _Clock.start = None
+
+
+def _main(argv: Sequence[str] | None) -> int:
     debug = bool(os.environ.get("POPDISPATCH_DEBUG"))
     interrupt = _Interrupt()
     signal.signal(signal.SIGINT, interrupt)

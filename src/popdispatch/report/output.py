@@ -16,9 +16,10 @@ import shutil
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-import pandas as pd
+if TYPE_CHECKING:  # numpy and pandas are imported where used: the CLI imports this module
+    import pandas as pd
 
 
 def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
@@ -56,6 +57,9 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
 
 def to_jsonable(value):
     """Numpy scalars and arrays to plain Python; NaN and infinities to ``None``."""
+    import numpy as np
+    import pandas as pd
+
     if isinstance(value, dict):
         return {str(k): to_jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple | np.ndarray | pd.Index):

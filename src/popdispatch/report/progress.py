@@ -12,9 +12,14 @@ import threading
 import time
 from collections.abc import Iterable, Iterator
 
-from tqdm import tqdm
-
 DELAY_S = 1.0
+
+
+def tqdm(*args, **kwargs):
+    """``tqdm.tqdm``, imported on first use (the CLI imports this module for every command)."""
+    from tqdm import tqdm as bar
+
+    return bar(*args, **kwargs)
 
 
 class Progress:
@@ -26,7 +31,7 @@ class Progress:
     def note(self, message: str) -> None:
         """A one-line remark on stderr (e.g. which profiles are used), unless quiet."""
         if not self.quiet:
-            tqdm.write(f"popdispatch: {message}", file=sys.stderr)
+            _write(f"popdispatch: {message}")
 
     def _bar_options(self) -> dict:
         """tqdm settings shared by every bar: stderr, shown after a second, gone when done."""
@@ -67,7 +72,7 @@ class Progress:
             yield
             elapsed = time.perf_counter() - start
             if elapsed > DELAY_S:
-                tqdm.write(f"{description}: {elapsed:.1f} s", file=sys.stderr)
+                _write(f"{description}: {elapsed:.1f} s")
             return
         with self._spinner(description):
             yield
@@ -104,3 +109,10 @@ class Progress:
                 bar.refresh()
                 sys.stderr.write("\n")
             bar.close()
+
+
+def _write(line: str) -> None:
+    """A line on stderr that does not break a progress bar being drawn (``tqdm.write``)."""
+    from tqdm import tqdm as bar
+
+    bar.write(line, file=sys.stderr)
