@@ -24,11 +24,13 @@ from popdispatch.integrate import Integrator
 
 
 def game_parameters(problem: DispatchProblem, minute: int, fp: FitnessParameters) -> tuple:
-    """The parameter tuple every game takes (one layout for all modes, so one compiled kernel)."""
+    """The parameter tuple every game takes (one layout for all modes, so one compiled kernel):
+    costs, limits (MW), constants, and the tree of limited lines with their loads-only flows at
+    the 1-based ``minute``."""
     return (
         problem.b, problem.c, problem.pmin, problem.pmax, float(fp.B), float(fp.m), float(fp.C),
-        float(fp.gain), float(fp.price_rate), problem.limit, problem.down,
-        problem.load_flow[minute - 1],
+        float(fp.gain), float(fp.price_rate), problem.limit, problem.generator_line,
+        problem.line_up, problem.line_preorder, problem.load_flow[minute - 1],
     )  # fmt: skip
 
 
@@ -38,7 +40,8 @@ class Mode:
 
     ``code``: its branch in :func:`popdispatch.game.payoffs.game`. ``bounded``: generator
     limits are kept by a capacity-constrained revision rule (the dynamics' ``bounded_field``)
-    and warm starts are projected onto the limits, instead of a barrier.
+    and warm starts respect the limits, instead of a barrier. ``warm_start``: the default
+    policy between minutes (:mod:`popdispatch.warm_start`).
     """
 
     name: str
@@ -46,6 +49,7 @@ class Mode:
     controller_states: Callable[[DispatchProblem], int]
     bounded: bool
     integrator: Integrator
+    warm_start: str = "shares"
 
     def price_cap(self, problem: DispatchProblem) -> float:
         """Price (EUR/MW) beyond which congestion is deemed impossible to relieve: ten times
@@ -62,6 +66,7 @@ MODES = {
         lambda problem: 2 * len(problem.limit),
         True,
         Integrator(method="heun", tol_kw=1e-5, window=5, extrapolate=True),
+        "setpoints",
     ),
 }
 

@@ -1,10 +1,14 @@
 """Running the population game: one minute (snapshot) or the online day.
 
-Online: each minute the demand changes and the dynamics continue from the shares they had
-(warm start: ``p = x * P_d`` with the new ``P_d``). Generators may go off- and on-line at given
-minutes; the mass of a generator that trips is handed to the online generators in proportion
-to their shares, and the offline one is cut out of the communication graph until it returns
-(at zero share; imitative dynamics cannot bring it back: extinction).
+Online: each minute the demand changes and the dynamics continue from where they were (warm
+start, :mod:`popdispatch.warm_start`: the paper continues the shares, ``p = x * P_d`` with the
+new ``P_d``; exact mode by default continues the set points). Generators may go off- and
+on-line at given minutes; the mass of a generator that trips is handed to the online generators
+in proportion to their shares, and the offline one takes no part in any revision until it
+returns (at zero share; imitative dynamics cannot bring it back: extinction).
+
+The day runs as one compiled loop (:func:`popdispatch.integrate.integrate_day`), called in
+chunks of minutes so that progress can be reported; a day keeps only per-minute arrays.
 """
 
 from __future__ import annotations
@@ -16,20 +20,25 @@ from dataclasses import dataclass, field
 import networkx as nx
 import numpy as np
 import pandas as pd
+from scipy import sparse
 
-from popdispatch.dynamics import communication_graph, get_dynamics, project_to_box
+from popdispatch.dynamics import communication_graph, get_dynamics
 from popdispatch.game.fitness import FitnessParameters
+from popdispatch.game.flows import limited_line_flows
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
-from popdispatch.integrate import INFEASIBLE, Integrator, integrate
+from popdispatch.integrate import INFEASIBLE, Integrator, integrate, integrate_day, workspace
 from popdispatch.modes import game_parameters, get_mode
 from popdispatch.opf import generation_cost
+from popdispatch.warm_start import WARM_STARTS, warm_start
 
 X0_CHOICES = ("uniform", "capacity")
 
 
 @dataclass(frozen=True)
 class RunSettings:
-    """What to run: dynamics, mode, communication graph, initial state, constants, integrator."""
+    """What to run: dynamics, mode, communication graph, initial state, constants, integrator,
+    warm start between minutes (``None``: the mode's default; see :mod:`popdispatch.warm_start`).
+    """
 
     dynamics: str = "smith"
     mode: str = "paper"
@@ -37,11 +46,23 @@ class RunSettings:
     x0: str | dict[str, float] = "uniform"
     fitness: FitnessParameters = field(default_factory=FitnessParameters)
     integrator: Integrator | None = None  # None: the mode's default
+    warm_start: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.warm_start is not None and self.warm_start not in WARM_STARTS:
+            raise ValueError(
+                f"unknown warm start {self.warm_start!r} (known: {', '.join(WARM_STARTS)})"
+            )
 
     @property
     def stepping(self) -> Integrator:
         """The integrator in force: the given one, else the mode's default."""
         return self.integrator or get_mode(self.mode).integrator
+
+    @property
+    def warm_start_policy(self) -> str:
+        """The warm start in force: the given one, else the mode's default."""
+        return self.warm_start or get_mode(self.mode).warm_start
 
     def x0_label(self) -> str:
         if isinstance(self.x0, str):
@@ -121,10 +142,6 @@ class Engine:
         self.settings = settings
         self.dynamics = get_dynamics(settings.dynamics)
         self.mode = get_mode(settings.mode)
-        names = list(problem.generators)
-        self.graph = communication_graph(
-            settings.graph if self.dynamics.uses_graph else "complete", names
-        )
         self.field = self.dynamics.bounded_field if self.mode.bounded else self.dynamics.field
         if self.field is None:
             raise ValueError(
@@ -132,54 +149,118 @@ class Engine:
                 "imitative, so a generator at zero share stays at zero (extinction) and the "
                 "DC-OPF is out of reach whenever it uses one; use smith or distributed-smith"
             )
+        self.rules = (self.field, self.mode.code, *self._graph())
         self.z = np.zeros(self.mode.controller_states(problem))
-        self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
-
-    def warm_up(self, x: np.ndarray, minute: int) -> None:
-        """Compile (or load from the disk cache) the kernels outside any timed region."""
-        z = self.z.copy()
-        self.run_minute(x.copy(), minute, max_iterations=1)
-        self.z = z
-
-    def run_minute(self, x: np.ndarray, minute: int, max_iterations: int | None = None):
-        """Integrate one minute from shares ``x``; returns the kernel's raw outputs."""
-        problem, settings = self.problem, self.settings
+        z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         integrator = settings.stepping
+        self.kernel_settings = integrator.settings(integrator.tol_kw / KW_PER_MW, z_cap)
+        self.ws = workspace(
+            problem.n_generators, len(problem.limit), len(self.z), integrator.window
+        )
+        self.h_try = integrator.dt
+
+    def _graph(self) -> tuple[bool, np.ndarray, np.ndarray]:
+        """``(complete?, indptr, indices)`` of the communication graph (CSR)."""
+        names = list(self.problem.generators)
+        if not self.dynamics.uses_graph or self.settings.graph == "complete":
+            communication_graph("complete", names)  # validates the names
+            empty = np.zeros(0, dtype=np.int64)
+            return True, empty, empty
+        adjacency = sparse.csr_matrix(communication_graph(self.settings.graph, names))
+        return False, adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64)
+
+    def _minute_problem(self, minute: int) -> tuple:
+        problem = self.problem
         online = problem.online[minute - 1]
-        graph = self.graph * online[:, None] * online[None, :]
         demand = float(problem.demand[minute - 1])
         lo = np.where(online, problem.pmin, 0.0) / demand
         hi = np.where(online, problem.pmax, 0.0) / demand
-        if self.mode.bounded:
-            x = project_to_box(x, lo, hi)
-        params = game_parameters(problem, minute, settings.fitness)
-        out = integrate(
-            self.field,
-            self.mode.code,
-            x,
-            self.z,
-            demand,
-            graph,
-            lo,
-            hi,
-            params,
-            integrator.dt,
-            integrator.method_code,
-            integrator.substeps,
-            (integrator.rtol, integrator.atol, integrator.price_atol),
-            integrator.tol_kw / KW_PER_MW,
-            integrator.window,
-            max_iterations or integrator.max_iterations,
-            self.z_cap,
-            integrator.extrapolate,
+        params = game_parameters(problem, minute, self.settings.fitness)
+        return params, lo, hi, online
+
+    def warm_up(self, x: np.ndarray, minute: int) -> None:
+        """Compile (or load from the disk cache) the kernels outside any timed region."""
+        z, h_try = self.z.copy(), self.h_try
+        self.run_minute(x.copy(), minute, max_iterations=1)
+        self.run_day_chunk(x.copy(), np.array([minute]), _DayArrays.empty(1, len(x)))
+        self.z, self.h_try = z, h_try
+
+    def run_minute(
+        self, x: np.ndarray, minute: int, max_iterations: int | None = None, record: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, int, int]:
+        """Integrate one minute from shares ``x`` at the given minute's demand (no warm-start
+        step: ``x`` is projected onto the limits in bounded modes).
+
+        Returns ``(setpoints per iteration (MW), final shares, converged_at,
+        first_congestion)``; without ``record`` no per-iteration history is kept and the
+        first element is the number of iterations run instead.
+        """
+        x = np.array(x, dtype=float)
+        demand = float(self.problem.demand[minute - 1])
+        online = self.problem.online[minute - 1]
+        weight = np.empty_like(x)
+        warm_start(0, self.mode.bounded, x, 0.0, demand, self.problem.pmin,
+                   self.problem.pmax, online, weight)  # fmt: skip
+        settings = self.kernel_settings
+        if max_iterations is not None:
+            settings = settings[:8] + (int(max_iterations),) + settings[9:]
+        history = np.empty((settings[8] + 1 if record else 0, len(x)))
+        steps, converged_at, first_congestion, self.h_try = integrate(
+            x, self.z, demand, self.rules, self._minute_problem(minute), self.ws, settings,
+            self.h_try, history,
+        )  # fmt: skip
+        if not record:
+            return steps, x, converged_at, first_congestion
+        return history[: steps + 1], x, converged_at, first_congestion
+
+    def run_day_chunk(self, x: np.ndarray, minutes: np.ndarray, out: _DayArrays) -> None:
+        """Run consecutive ``minutes`` (1-based) from shares ``x`` (updated in place)."""
+        problem = self.problem
+        rows = minutes - 1
+        params = game_parameters(problem, int(minutes[0]), self.settings.fitness)
+        policy = WARM_STARTS[self.settings.warm_start_policy]
+        day = (
+            params, problem.demand[rows], problem.load_flow[rows], problem.online[rows],
+            problem.pmin, problem.pmax, self.mode.bounded, policy, out.last_demand,
+        )  # fmt: skip
+        self.h_try, out.last_demand = integrate_day(
+            x, self.z, self.rules, day, self.ws, self.kernel_settings, self.h_try,
+            0, len(minutes), out.chunk_views(),
+        )  # fmt: skip
+
+
+@dataclass
+class _DayArrays:
+    """Per-minute outputs of a chunk of the compiled day loop."""
+
+    setpoints: np.ndarray
+    iterations: np.ndarray
+    converged_at: np.ndarray
+    last_demand: float = 0.0
+
+    @classmethod
+    def empty(cls, minutes: int, n: int) -> _DayArrays:
+        return cls(
+            np.zeros((minutes, n)), np.zeros(minutes, np.int64), np.zeros(minutes, np.int64)
         )
-        setpoints, x, self.z, converged_at, first_congestion = out
-        return setpoints, x, converged_at, first_congestion
+
+    def chunk_views(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.setpoints, self.iterations, self.converged_at
+
+
+def limited_flows_mw(problem: DispatchProblem, p_mw: np.ndarray, minute: int) -> np.ndarray:
+    """Flows (MW) on the limited lines for set points ``p_mw`` (MW) at a 1-based minute."""
+    flow = np.empty(len(problem.limit))
+    limited_line_flows(
+        problem.load_flow[minute - 1], np.ascontiguousarray(p_mw, dtype=float),
+        problem.generator_line, problem.line_up, problem.line_preorder, flow,
+    )  # fmt: skip
+    return flow
 
 
 def overflow_kw(problem: DispatchProblem, p_mw: np.ndarray, minute: int) -> np.ndarray:
-    """Overflow (kW) per limited line: ``max(|flow| - U, 0)``; ``p_mw`` may be (..., n)."""
-    flows = problem.load_flow[minute - 1] - p_mw @ problem.down.T
+    """Overflow (kW) per limited line: ``max(|flow| - U, 0)`` for set points ``p_mw`` (MW)."""
+    flows = limited_flows_mw(problem, p_mw, minute)
     return np.maximum(np.abs(flows) - problem.limit, 0.0) * KW_PER_MW
 
 
@@ -195,7 +276,7 @@ def run_snapshot(
     setpoints, x, converged_at, first_congestion = engine.run_minute(x, minute)
     wall = time.perf_counter() - start
     final = setpoints[-1]
-    flows = problem.load_flow[minute - 1] - problem.down @ final
+    flows = limited_flows_mw(problem, final, minute)
     return SnapshotResult(
         minute=minute,
         demand_kw=float(problem.demand[minute - 1] * KW_PER_MW),
@@ -253,6 +334,10 @@ def redistribute_tripped(x: np.ndarray, online: np.ndarray) -> np.ndarray:
     return kept / total
 
 
+#: Minutes per call of the compiled day loop when progress is reported.
+PROGRESS_CHUNK = 60
+
+
 def run_day(
     problem: DispatchProblem,
     settings: RunSettings | None = None,
@@ -261,32 +346,32 @@ def run_day(
 ) -> DayResult:
     """The online day: every minute continues from the previous state until converged.
 
-    ``minutes``: 1-based minutes to simulate in order (default the whole day 1..1440).
-    ``progress``: called with each minute once it is done (e.g. to advance a progress bar).
+    ``minutes``: 1-based minutes to simulate in order (default the whole day 1..1440); each
+    minute warm-starts from the state the previous simulated minute ended in.
+    ``progress``: called with each minute once it is done (e.g. to advance a progress bar);
+    the compiled loop then runs in chunks of :data:`PROGRESS_CHUNK` minutes.
     """
     settings = settings or RunSettings()
     minutes = np.arange(1, len(problem.demand) + 1) if minutes is None else np.asarray(minutes)
+    minutes = minutes.astype(np.int64)
     engine = Engine(problem, settings)
-    n = problem.n_generators
-    setpoints = np.empty((len(minutes), n))
-    iterations = np.empty(len(minutes), dtype=np.int64)
-    converged = np.empty(len(minutes), dtype=bool)
-    infeasible = np.zeros(len(minutes), dtype=bool)
     x = initial_shares(problem, settings.x0, int(minutes[0]))
     engine.warm_up(x, int(minutes[0]))
+    out = _DayArrays.empty(len(minutes), problem.n_generators)
+    chunk = PROGRESS_CHUNK if progress is not None else len(minutes)
     start = time.perf_counter()
-    for row, minute in enumerate(minutes):
-        online = problem.online[minute - 1]
-        if (x[~online] > 0).any():
-            x = redistribute_tripped(x, online)
-        trajectory, x, converged_at, _ = engine.run_minute(x, int(minute))
-        setpoints[row] = trajectory[-1]
-        iterations[row] = len(trajectory) - 1
-        converged[row] = converged_at >= 0
-        infeasible[row] = converged_at == INFEASIBLE
+    for first in range(0, len(minutes), chunk):
+        part = slice(first, first + chunk)
+        view = _DayArrays(
+            out.setpoints[part], out.iterations[part], out.converged_at[part], out.last_demand
+        )
+        engine.run_day_chunk(x, minutes[part], view)
+        out.last_demand = view.last_demand
         if progress is not None:
-            progress(int(minute))
+            for minute in minutes[part]:
+                progress(int(minute))
     wall = time.perf_counter() - start
+    setpoints = out.setpoints
     overflow = np.stack([overflow_kw(problem, setpoints[r], m) for r, m in enumerate(minutes)])
     online = problem.online[minutes - 1]
     return DayResult(
@@ -295,12 +380,12 @@ def run_day(
         generators=problem.generators,
         demand_kw=problem.demand[minutes - 1] * KW_PER_MW,
         setpoints_kw=setpoints * KW_PER_MW,
-        iterations=iterations,
-        converged=converged,
+        iterations=out.iterations,
+        converged=out.converged_at >= 0,
         overflow_kw=overflow,
         cost=generation_cost(problem, setpoints, online),
         online=online,
         wall_seconds=wall,
         profile_source=problem.profile_source,
-        infeasible=infeasible,
+        infeasible=out.converged_at == INFEASIBLE,
     )

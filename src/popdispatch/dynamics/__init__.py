@@ -1,7 +1,9 @@
 """Mean dynamics as vector fields on the population shares ``x`` (``x_i = p_i / P_d``).
 
-Each dynamic is a :class:`Dynamics` record naming its compiled vector field, so the integrator
-never needs to know which one it runs, and adding one never touches the integrator.
+Every dynamic is a pairwise-comparison flow (:mod:`popdispatch.dynamics.pairwise`) fixed by
+its receiver and sender weights. Each is a :class:`Dynamics` record naming its compiled
+weights, so the integrator never needs to know which one it runs, and adding one never touches
+the integrator.
 """
 
 from __future__ import annotations
@@ -9,11 +11,15 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+from scipy import sparse
+
 from popdispatch.dynamics.capacity import project_to_box
 from popdispatch.dynamics.fields import CAPACITY_SMITH, LOCAL_REPLICATOR, REPLICATOR, SMITH
 from popdispatch.dynamics.graph import GRAPHS, communication_graph
-from popdispatch.dynamics.replicator import local_replicator_rates, replicator_rates
-from popdispatch.dynamics.smith import smith_rates
+from popdispatch.dynamics.pairwise import pairwise_flows, sort_by_fitness
+from popdispatch.dynamics.replicator import replicator_weights
+from popdispatch.dynamics.smith import smith_weights
 
 
 @dataclass(frozen=True)
@@ -23,8 +29,9 @@ class Dynamics:
     Attributes
     ----------
     name : CLI name.
-    rates : compiled vector field ``(x, f, graph, lo, hi) -> (inflow, out_rate, rate_bound)``.
-    field : its code for :func:`popdispatch.dynamics.fields.vector_field`.
+    weights : compiled ``(x, lo, hi, active, w, v, room)``: fills the receiver weight ``w``,
+        the movable mass ``v`` and the room below the upper limit (shares, dimensionless).
+    field : its code for :func:`popdispatch.dynamics.fields.field_weights`.
     uses_graph : whether the communication graph matters (else the complete graph is used).
     extinction : whether a strategy at zero share stays at zero (imitative dynamics).
     equation : the paper's equation number.
@@ -33,7 +40,7 @@ class Dynamics:
     """
 
     name: str
-    rates: Callable
+    weights: Callable
     field: int
     uses_graph: bool
     extinction: bool
@@ -44,12 +51,40 @@ class Dynamics:
 DYNAMICS = {
     d.name: d
     for d in (
-        Dynamics("smith", smith_rates, SMITH, False, False, "13", CAPACITY_SMITH),
-        Dynamics("replicator", replicator_rates, REPLICATOR, False, True, "9"),
-        Dynamics("local-replicator", local_replicator_rates, LOCAL_REPLICATOR, True, True, "12"),
-        Dynamics("distributed-smith", smith_rates, SMITH, True, False, "14", CAPACITY_SMITH),
+        Dynamics("smith", smith_weights, SMITH, False, False, "13", CAPACITY_SMITH),
+        Dynamics("replicator", replicator_weights, REPLICATOR, False, True, "9"),
+        Dynamics("local-replicator", replicator_weights, LOCAL_REPLICATOR, True, True, "12"),
+        Dynamics("distributed-smith", smith_weights, SMITH, True, False, "14", CAPACITY_SMITH),
     )
 }
+
+
+def field_rate(
+    field: int,
+    x: np.ndarray,
+    f: np.ndarray,
+    adjacency: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    active: np.ndarray | None = None,
+) -> np.ndarray:
+    """``x'`` of the field ``field`` (a code of :mod:`popdispatch.dynamics.fields`) at shares
+    ``x`` and fitness ``f``, on a dense 0/1 ``adjacency``, with the compiled kernels."""
+    from popdispatch.dynamics.fields import field_weights
+
+    n = len(x)
+    x, f = np.asarray(x, dtype=float), np.asarray(f, dtype=float)
+    active = np.ones(n, dtype=bool) if active is None else np.asarray(active, dtype=bool)
+    w, v, room, inflow, outflow = (np.empty(n) for _ in range(5))
+    field_weights(field, x, np.asarray(lo, float), np.asarray(hi, float), active, w, v, room)
+    complete = bool((adjacency + np.eye(n) > 0).all())
+    csr = sparse.csr_matrix(adjacency)
+    order = np.arange(n, dtype=np.int64)
+    if complete:
+        sort_by_fitness(f, order)
+    indptr, indices = csr.indptr.astype(np.int64), csr.indices.astype(np.int64)
+    pairwise_flows(f, w, v, complete, indptr, indices, order, inflow, outflow)
+    return inflow - outflow
 
 
 def get_dynamics(name: str) -> Dynamics:
@@ -65,6 +100,7 @@ __all__ = [
     "GRAPHS",
     "Dynamics",
     "communication_graph",
+    "field_rate",
     "get_dynamics",
     "project_to_box",
 ]

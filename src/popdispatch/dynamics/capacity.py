@@ -7,7 +7,9 @@ one at its lower limit ``lo`` (shares ``x = p / P_d``; ``lo = Pmin / P_d``, ``hi
 Its rest points are exactly the box-constrained equilibria: interior strategies have equal
 fitness, a strategy at ``hi`` may be better and one at ``lo`` worse. That is the KKT condition
 of the economic dispatch with generator limits. ``kappa`` = 1 here; the exact mode scales the
-fitness instead (see :mod:`popdispatch.modes`).
+fitness instead (see :mod:`popdispatch.modes`). As a pairwise flow
+(:mod:`popdispatch.dynamics.pairwise`): receiver weight ``(hi_i - x_i) / (hi_i - lo_i)``, sender
+weight ``x_j - lo_j``.
 
 Cf. the capacity-constrained pairwise-comparison protocols of the popgames library and
 Martinez-Piazuelo, Quijano and Ocampo-Martinez (primal-dual evolutionary dynamics).
@@ -19,36 +21,20 @@ import numba as nb
 import numpy as np
 
 
-@nb.njit(cache=True)
-def capacity_smith_rates(x, f, graph, lo, hi):
-    """Capacity-constrained (distributed) Smith field; see module docstring.
-
-    Returns ``(inflow, out_rate, rate_bound)`` with ``x' = inflow - x * out_rate``.
-    """
-    n = x.shape[0]
-    inflow = np.zeros(n)
-    out_rate = np.zeros(n)
-    in_rate = np.zeros(n)  # per unit of room below hi
-    leave_rate = np.zeros(n)  # per unit of mass above lo
-    for i in range(n):
+@nb.njit(cache=True, inline="always")
+def capacity_smith_weights(x, lo, hi, active, w, v, room):
+    """Receiver weight ``(hi - x) / (hi - lo)``, movable mass ``x - lo``, room ``hi - x``
+    (dimensionless shares); a strategy with no width (offline, ``hi = lo``) takes no part."""
+    for i in range(x.shape[0]):
         width = hi[i] - lo[i]
-        if width <= 0.0:
+        if width <= 0.0 or not active[i]:
+            w[i] = 0.0
+            v[i] = 0.0
+            room[i] = 0.0
             continue
-        room = max(hi[i] - x[i], 0.0) / width
-        for j in range(n):
-            if graph[i, j] == 0.0 or hi[j] - lo[j] <= 0.0:
-                continue
-            gap = f[i] - f[j]
-            if gap <= 0.0:
-                continue
-            movable = max(x[j] - lo[j], 0.0)
-            inflow[i] += movable * gap * room
-            in_rate[i] += movable * gap / width
-            leave_rate[j] += gap * room
-    for j in range(n):
-        if x[j] > 0.0:
-            out_rate[j] = leave_rate[j] * max(x[j] - lo[j], 0.0) / x[j]
-    return inflow, out_rate, (in_rate + leave_rate).max()
+        room[i] = max(hi[i] - x[i], 0.0)
+        w[i] = room[i] / width
+        v[i] = max(x[i] - lo[i], 0.0)
 
 
 @nb.njit(cache=True)

@@ -1,30 +1,31 @@
-"""Compiled dispatch from a vector-field code to its field.
+"""Compiled dispatch from a vector-field code to its weights.
 
-The integrator calls :func:`vector_field` with an integer code instead of receiving the field
-as a function argument: numba caches kernels that take functions as arguments poorly (every
-new process recompiled them, about 9 s), while a static dispatch caches on disk. Adding a
-dynamic means adding its field module, a code here and a branch below; the integrator does not
-change.
+Every dynamic is a pairwise-comparison flow (:mod:`popdispatch.dynamics.pairwise`) defined by a
+receiver weight ``w``, a sender weight ``v`` (the movable mass) and the ``room`` each strategy
+has left below its upper limit (``inf`` when unbounded). The integrator calls
+:func:`field_weights` with an integer code rather than receiving a function: numba caches kernels
+that take functions as arguments poorly (every new process recompiled them, about 9 s), while a
+static dispatch caches on disk. Adding a dynamic means adding its weights to its module, a code
+here and a branch below; the integrator does not change.
 """
 
 from __future__ import annotations
 
 import numba as nb
 
-from popdispatch.dynamics.capacity import capacity_smith_rates
-from popdispatch.dynamics.replicator import local_replicator_rates, replicator_rates
-from popdispatch.dynamics.smith import smith_rates
+from popdispatch.dynamics.capacity import capacity_smith_weights
+from popdispatch.dynamics.replicator import replicator_weights
+from popdispatch.dynamics.smith import smith_weights
 
 SMITH, REPLICATOR, LOCAL_REPLICATOR, CAPACITY_SMITH = range(4)
 
 
-@nb.njit(cache=True)
-def vector_field(code, x, f, graph, lo, hi):
-    """``(inflow, out_rate, rate_bound)`` of the field ``code`` (see the module constants)."""
+@nb.njit(cache=True, inline="always")
+def field_weights(code, x, lo, hi, active, w, v, room):
+    """Fill ``w``, ``v``, ``room`` for the field ``code`` (see the module constants) at ``x``."""
     if code == SMITH:
-        return smith_rates(x, f, graph, lo, hi)
-    if code == REPLICATOR:
-        return replicator_rates(x, f, graph, lo, hi)
-    if code == LOCAL_REPLICATOR:
-        return local_replicator_rates(x, f, graph, lo, hi)
-    return capacity_smith_rates(x, f, graph, lo, hi)
+        smith_weights(x, lo, hi, active, w, v, room)
+    elif code in (REPLICATOR, LOCAL_REPLICATOR):
+        replicator_weights(x, lo, hi, active, w, v, room)
+    else:
+        capacity_smith_weights(x, lo, hi, active, w, v, room)

@@ -2,12 +2,15 @@
 
 Everything people give in kW is converted here, once. Flows on the limited lines are affine in
 the set points: ``flow = load_flow - D @ p`` where ``D[k, i] = 1`` if generator ``i`` sits below
-line ``k`` (on its child side) and ``load_flow`` is the flow the loads alone would cause.
+line ``k`` (on its child side) and ``load_flow`` is the flow the loads alone would cause. The
+engine never forms ``D``: it works on the tree of limited lines (:mod:`popdispatch.game.flows`);
+``D`` is built on demand for the DC-OPF and reports.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 import pandas as pd
@@ -15,7 +18,8 @@ import pandas as pd
 from popdispatch.errors import InfeasibleError, ProfileError
 from popdispatch.feeder.profiles import LoadProfiles, check_minute
 from popdispatch.feeder.reduction import ReducedFeeder
-from popdispatch.feeder.tree import line_flows
+from popdispatch.feeder.tree import downstream, line_flows
+from popdispatch.game.flows import limited_ancestors
 
 KW_PER_MW = 1000.0
 
@@ -31,10 +35,12 @@ class DispatchProblem:
     pmin, pmax : generator limits, MW.
     lines : reduced line numbers of the limited lines (finite ``limit_kw``).
     limit : their flow limits U, MW.
-    down : ``(limited lines, generators)`` 1.0 where the generator is below the line.
-    demand : total demand per minute, MW, shape (1440,).
-    load_flow : flow on each limited line caused by the loads alone, MW, shape (1440, lines).
-    online : per minute and generator, whether it is available, shape (1440, generators).
+    line_up : per limited line, the nearest limited line above it (towards the source), -1.
+    line_preorder : the limited lines in tree pre-order (every line after the one above it).
+    generator_line : per generator, the nearest limited line above its node, -1 if none.
+    demand : total demand per minute, MW, shape (minutes,) (1440 for a day).
+    load_flow : flow on each limited line caused by the loads alone, MW, (minutes, lines).
+    online : per minute and generator, whether it is available, (minutes, generators).
     profile_source : where the loads come from.
     """
 
@@ -47,7 +53,9 @@ class DispatchProblem:
     pmax: np.ndarray
     lines: np.ndarray
     limit: np.ndarray
-    down: np.ndarray
+    line_up: np.ndarray
+    line_preorder: np.ndarray
+    generator_line: np.ndarray
     demand: np.ndarray
     load_flow: np.ndarray
     online: np.ndarray
@@ -56,6 +64,13 @@ class DispatchProblem:
     @property
     def n_generators(self) -> int:
         return len(self.generators)
+
+    @cached_property
+    def down(self) -> np.ndarray:
+        """``(limited lines, generators)``: 1.0 where the generator is below the line (dense;
+        for the DC-OPF and reports, never for the engine)."""
+        nodes = self.feeder.generators["node"].to_numpy()
+        return downstream(self.feeder.tree, nodes)[self.lines].astype(float)
 
     def flows(self, p: np.ndarray, minute: int) -> np.ndarray:
         """Flows (MW) on the limited lines for set points ``p`` (MW) at a 1-based minute."""
@@ -83,10 +98,19 @@ class DispatchProblem:
 def build_problem(feeder: ReducedFeeder, profiles: LoadProfiles) -> DispatchProblem:
     """Assemble the engine arrays for a reduced feeder and a day of load profiles."""
     profiles = profiles.for_loads(feeder.original.loads.index)
+    return build_problem_from_loads(feeder, profiles.kw.to_numpy(float), profiles.source)
+
+
+def build_problem_from_loads(
+    feeder: ReducedFeeder, load_kw: np.ndarray, source: str
+) -> DispatchProblem:
+    """Engine arrays from per-load demand ``load_kw`` (kW, shape (minutes, loads) in the order
+    of ``feeder.original.loads``); any number of minutes (1440 for a day, 1 for a snapshot)."""
     gens = feeder.generators
-    load_kw = profiles.kw.to_numpy(float)
+    load_kw = np.atleast_2d(np.asarray(load_kw, dtype=float))
     flows_kw = line_flows(feeder.tree, -feeder.load_injection_kw(load_kw))
     limited = np.flatnonzero(np.isfinite(feeder.lines.limit_kw.to_numpy(float)))
+    line_up, line_preorder, generator_line = limited_line_tree(feeder, limited)
     problem = DispatchProblem(
         feeder=feeder,
         generators=gens.index,
@@ -97,14 +121,30 @@ def build_problem(feeder: ReducedFeeder, profiles: LoadProfiles) -> DispatchProb
         pmax=gens.pmax_kw.to_numpy(float) / KW_PER_MW,
         lines=limited,
         limit=feeder.lines.limit_kw.to_numpy(float)[limited] / KW_PER_MW,
-        down=feeder.generator_downstream()[limited].astype(float),
+        line_up=line_up,
+        line_preorder=line_preorder,
+        generator_line=generator_line,
         demand=load_kw.sum(axis=1) / KW_PER_MW,
         load_flow=np.ascontiguousarray(flows_kw[:, limited]) / KW_PER_MW,
         online=np.ones((len(load_kw), len(gens)), dtype=bool),
-        profile_source=profiles.source,
+        profile_source=source,
     )
     check_capacity(problem)
     return problem
+
+
+def limited_line_tree(
+    feeder: ReducedFeeder, limited: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(line_up, line_preorder, generator_line)`` of the limited lines (see the class)."""
+    tree = feeder.tree
+    limited_index = np.full(tree.n_lines, -1, dtype=np.int64)
+    limited_index[limited] = np.arange(len(limited))
+    nearest = limited_ancestors(tree.preorder, tree.parent, tree.parent_line, limited_index)
+    line_up = nearest[tree.line_parent[limited]]
+    line_preorder = np.argsort(tree.start[tree.line_child[limited]], kind="stable")
+    generator_line = nearest[feeder.generators["node"].to_numpy()]
+    return line_up, line_preorder.astype(np.int64), generator_line
 
 
 def check_capacity(problem: DispatchProblem) -> None:
