@@ -1,0 +1,182 @@
+"""Plain-numpy reference of one minute of dynamics (the compiled engine's yardstick).
+
+Written for clarity, not speed: the dense ``(lines x generators)`` matrix ``D`` for flows and
+signals, the full ``(n x n)`` matrix of pairwise flows, Python loops over steps. It follows
+the same equations and the same numerical scheme as the compiled kernels
+(:mod:`popdispatch.integrate`, :mod:`popdispatch.game.payoffs`,
+:mod:`popdispatch.dynamics.pairwise`), so both must give the same trajectories; the tests
+check that they do. Powers in MW, shares dimensionless.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.dynamics.fields import CAPACITY_SMITH, SMITH
+from popdispatch.game.fitness import FitnessParameters
+from popdispatch.game.payoffs import PAPER
+from popdispatch.game.problem import KW_PER_MW, DispatchProblem
+from popdispatch.integrate import INFEASIBLE
+from popdispatch.modes import get_mode
+
+
+def overflow_signals(flow: np.ndarray, limit: np.ndarray, C: float) -> np.ndarray:
+    """Eq. 8 for controllers measuring ``flow`` (MW, + leaving their node): EUR/MW."""
+    below = np.where(flow < -limit, -(flow + limit) * C, 0.0)
+    return np.where(flow > limit, -(flow - limit) * C, below)
+
+
+def game(mode: int, p, z, problem: DispatchProblem, minute: int, fp: FitnessParameters):
+    """``(fitness, z_rate, congestion, residual)`` of a mode at set points ``p`` (MW)."""
+    down = problem.down
+    flow = problem.load_flow[minute - 1] - down @ p
+    cost = problem.b + 2.0 * problem.c * p
+    if mode == PAPER:
+        parent = overflow_signals(flow, problem.limit, fp.C)
+        child = np.where(parent != 0.0, overflow_signals(-flow, problem.limit, fp.C), 0.0)
+        signal = (1.0 - down).T @ parent + down.T @ child
+        barrier = np.where(p < problem.pmin, fp.m * p, np.where(p > problem.pmax, -fp.m * p, 0.0))
+        congestion = np.abs(signal).max() if len(signal) else 0.0
+        return fp.B - cost + barrier + signal, np.zeros_like(z), congestion, 0.0
+    excess = np.concatenate([flow - problem.limit, -flow - problem.limit])
+    z_rate = fp.price_rate * excess
+    slack = np.where(z > 0.0, np.abs(excess), np.maximum(excess, 0.0))
+    mu = np.maximum(0.0, z + fp.C * excess)
+    nu = mu[: len(flow)] - mu[len(flow) :]
+    signal = down.T @ (0.5 * nu) - (1.0 - down).T @ (0.5 * nu)
+    congestion = np.abs(nu).max() if len(nu) else 0.0
+    residual = slack.max() if len(slack) else 0.0
+    return fp.gain * (fp.B - cost + signal), z_rate, congestion, residual
+
+
+def weights(field: int, x, lo, hi, active):
+    """Receiver weight, movable mass and room of a field (see :mod:`popdispatch.dynamics`)."""
+    if field == SMITH:
+        return active * 1.0, np.where(active, np.maximum(x, 0.0), 0.0), np.full(len(x), np.inf)
+    if field == CAPACITY_SMITH:
+        width = hi - lo
+        part = active & (width > 0.0)
+        room = np.where(part, np.maximum(hi - x, 0.0), 0.0)
+        w = np.where(part, room / np.where(part, width, 1.0), 0.0)
+        return w, np.where(part, np.maximum(x - lo, 0.0), 0.0), room
+    share = np.where(active, np.maximum(x, 0.0), 0.0)
+    return share, share, np.full(len(x), np.inf)
+
+
+def pair_flows(f, w, v, graph):
+    """``(inflow, outflow)``: ``T[i, j] = g_ij w_i v_j [f_i - f_j]_+`` summed over j / over i."""
+    T = graph * w[:, None] * v[None, :] * np.maximum(f[:, None] - f[None, :], 0.0)
+    return T.sum(axis=1), T.sum(axis=0)
+
+
+class ReferenceMinute:
+    """One minute of a run configuration (problem, settings) in plain numpy."""
+
+    def __init__(self, problem: DispatchProblem, settings, minute: int):
+        self.problem, self.minute = problem, minute
+        self.fp = settings.fitness
+        self.mode = get_mode(settings.mode)
+        dynamics = get_dynamics(settings.dynamics)
+        self.field = dynamics.bounded_field if self.mode.bounded else dynamics.field
+        kind = settings.graph if dynamics.uses_graph else "complete"
+        self.graph = communication_graph(kind, list(problem.generators))
+        self.active = problem.online[minute - 1]
+        self.demand = float(problem.demand[minute - 1])
+        self.lo = np.where(self.active, problem.pmin, 0.0) / self.demand
+        self.hi = np.where(self.active, problem.pmax, 0.0) / self.demand
+        self.integrator = settings.stepping
+        self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
+
+    def evaluate(self, x, z):
+        f, z_rate, congestion, residual = game(
+            self.mode.code, x * self.demand, z, self.problem, self.minute, self.fp
+        )
+        w, v, room = weights(self.field, x, self.lo, self.hi, self.active)
+        inflow, outflow = pair_flows(f, w, v, self.graph)
+        return (f, w, v, room, inflow, outflow, z_rate), congestion, residual
+
+    def limited_stage(self, h, x, z, point):
+        f, w, v, room, inflow, outflow, z_rate = point
+        with np.errstate(divide="ignore", invalid="ignore"):
+            alpha = np.where(h * outflow > v, v / (h * outflow), 1.0)
+            beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
+        if (alpha < 1.0).any() or (beta < 1.0).any():
+            inflow, outflow = pair_flows(f, beta * w, alpha * v, self.graph)
+        return x + h * (inflow - outflow), np.maximum(z + h * z_rate, 0.0)
+
+    def heun_combination(self, h, x, z, one, two):
+        (f1, w1, v1, room1, in1, out1, zr1), (f2, w2, v2, _, in2, out2, zr2) = one, two
+        half = 0.5 * h
+        out, into = half * (out1 + out2), half * (in1 + in2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            alpha = np.where(out > v1, v1 / out, 1.0)
+            beta = np.where(into > room1, room1 / into, 1.0)
+        if (alpha < 1.0).any() or (beta < 1.0).any():
+            in1, out1 = pair_flows(f1, beta * w1, alpha * v1, self.graph)
+            in2, out2 = pair_flows(f2, beta * w2, alpha * v2, self.graph)
+        return x + half * (in1 - out1 + in2 - out2), np.maximum(z + half * (zr1 + zr2), 0.0)
+
+    def advance(self, x, z, h_try):
+        """One iteration (``dt`` seconds): ``(x, z, congested, residual, h_try)``."""
+        it = self.integrator
+        congested = residual = 0.0
+        if it.method == "euler":
+            h = it.dt / it.substeps
+            for _ in range(it.substeps):
+                point, congestion, residual = self.evaluate(x, z)
+                congested = max(congested, congestion)
+                x, z = self.limited_stage(h, x, z, point)
+            return x, z, congested, residual, h_try
+        remaining, point = it.dt, None
+        while remaining > 1e-12 * it.dt:
+            if point is None:
+                point, congestion, residual = self.evaluate(x, z)
+                congested = max(congested, congestion)
+            h = min(h_try, remaining)
+            x1, z1 = self.limited_stage(h, x, z, point)
+            second, _, _ = self.evaluate(x1, z1)
+            x2, z2 = self.heun_combination(h, x, z, point, second)
+            scale_x = it.atol + it.rtol * np.abs(x2)
+            scale_z = it.price_atol + it.rtol * np.abs(z2)
+            err = max(
+                np.max(np.abs(x2 - x1) / scale_x), np.max(np.abs(z2 - z1) / scale_z, initial=0.0)
+            )
+            if err <= 1.0:
+                x, z, remaining, point = x2, z2, remaining - h, None
+            h_try = h * min(5.0, max(0.2, 0.9 / np.sqrt(err))) if err > 0.0 else 5.0 * h
+        return x, z, congested, residual, min(h_try, it.dt)
+
+    def run(self, x, z=None, max_iterations: int | None = None):
+        """``(setpoints per iteration (MW), x, z, converged_at)`` from shares ``x``."""
+        it = self.integrator
+        horizon = max_iterations or it.max_iterations
+        z = np.zeros(self.mode.controller_states(self.problem)) if z is None else z
+        tol = it.tol_kw / KW_PER_MW
+        need = (3 if it.extrapolate else 2) * it.window
+        samples = [x * self.demand]
+        h_try = it.dt
+        for k in range(1, horizon + 1):
+            x, z, _, residual, h_try = self.advance(x, z, h_try)
+            samples.append(x * self.demand)
+            if len(z) and z.max() > self.z_cap:
+                return np.array(samples), x, z, INFEASIBLE
+            if k >= need and residual <= tol and self._windows_agree(samples, tol):
+                return np.array(samples), x, z, k - it.window
+        return np.array(samples), x, z, -1
+
+    def _windows_agree(self, samples, tol) -> bool:
+        window = self.integrator.window
+        means = [
+            np.mean(samples[len(samples) - (j + 1) * window :][:window], axis=0) for j in range(3)
+        ]
+        step = means[0] - means[1]
+        if np.abs(step).max() > tol:
+            return False
+        if self.integrator.extrapolate:
+            previous = means[1] - means[2]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = np.where(previous != 0.0, step / previous, 0.0)
+            tail = np.where((ratio > 0) & (ratio < 1), np.abs(step) * ratio / (1 - ratio), 0.0)
+            return bool(tail.max() <= tol)
+        return True

@@ -1,0 +1,157 @@
+"""The compiled engine against its plain-numpy reference (:mod:`popdispatch.reference`), and
+the tree kernels against the dense matrix they replace."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import sparse
+
+from popdispatch.dynamics.pairwise import complete_graph_flows, graph_flows, sort_by_fitness
+from popdispatch.feeder.profiles import single_minute_profiles
+from popdispatch.feeder.reduction import reduce_feeder
+from popdispatch.game.controllers import broadcast_signals, overflow_signal
+from popdispatch.game.flows import broadcast, limited_line_flows
+from popdispatch.game.problem import build_problem
+from popdispatch.integrate import Integrator
+from popdispatch.online import Engine, RunSettings, initial_shares
+from popdispatch.reference import ReferenceMinute, pair_flows
+from popdispatch.scenarios import CONGESTION_PATH, PEAK_MINUTE, elv_problem
+
+from helpers import random_feeder
+
+
+def limited_random_problem(seed: int, n_buses: int = 60, n_gens: int = 8, share: float = 0.5):
+    """A random feeder with about ``share`` of its lines limited near their loads-only flow."""
+    rng = np.random.default_rng(seed)
+    feeder = random_feeder(rng, n_buses, n_gens)
+    loads = feeder.loads.index
+    load_kw = np.round(rng.uniform(0.5, 3.0, len(loads)), 3)
+    profiles = single_minute_profiles(1, pd.Series(load_kw, index=loads), "random")
+    chosen = feeder.lines.index[rng.random(len(feeder.lines)) < share]
+    limits = pd.Series(rng.uniform(2.0, 15.0, len(chosen)), index=chosen)
+    return build_problem(reduce_feeder(feeder.with_line_limits(limits)), profiles)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_tree_flows_and_broadcast_equal_the_dense_matrix(seed):
+    problem = limited_random_problem(seed)
+    assert len(problem.limit) > 3
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(0, 0.01, problem.n_generators)
+    flow = np.empty(len(problem.limit))
+    limited_line_flows(problem.load_flow[0], p, problem.generator_line, problem.line_up,
+                       problem.line_preorder, flow)  # fmt: skip
+    np.testing.assert_allclose(flow, problem.load_flow[0] - problem.down @ p, atol=1e-15)
+    parent_side, child_side = rng.normal(size=(2, len(flow)))
+    signal = np.empty(problem.n_generators)
+    broadcast(parent_side, child_side, problem.generator_line, problem.line_up,
+              problem.line_preorder, np.empty(len(flow)), signal)  # fmt: skip
+    dense = (1 - problem.down).T @ parent_side + problem.down.T @ child_side
+    np.testing.assert_allclose(signal, dense, atol=1e-12)
+    limit = np.abs(flow) * rng.uniform(0.5, 1.5, len(flow))
+    compiled = np.empty(problem.n_generators)
+    par = np.array([overflow_signal(f, u, 1000.0) for f, u in zip(flow, limit, strict=True)])
+    chi = np.array([overflow_signal(-f, u, 1000.0) if q else 0.0
+                    for f, u, q in zip(flow, limit, par != 0, strict=True)])  # fmt: skip
+    broadcast(par, chi, problem.generator_line, problem.line_up, problem.line_preorder,
+              np.empty(len(flow)), compiled)  # fmt: skip
+    np.testing.assert_allclose(
+        compiled, broadcast_signals(flow, limit, problem.down, 1000.0), atol=1e-9
+    )
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 40, 300])
+def test_sorted_prefix_sums_equal_all_pairs(n):
+    rng = np.random.default_rng(n)
+    f = rng.normal(size=n) * 100
+    f[: n // 3] = f[0]  # ties give exactly zero flow between them
+    w, v = rng.random(n), rng.random(n)
+    order = rng.permutation(n).astype(np.int64)
+    sort_by_fitness(f, order)
+    assert (np.diff(f[order]) >= 0).all()
+    inflow, outflow = np.empty(n), np.empty(n)
+    complete_graph_flows(f, w, v, order, inflow, outflow)
+    complete = np.ones((n, n)) - np.eye(n)
+    ref_in, ref_out = pair_flows(f, w, v, complete)
+    np.testing.assert_allclose(inflow, ref_in, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(outflow, ref_out, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(inflow.sum(), outflow.sum(), rtol=1e-12)
+    ring = np.zeros((n, n))
+    for i in range(n):
+        ring[i, (i + 1) % n] = ring[(i + 1) % n, i] = 1.0 if n > 1 else 0.0
+    csr = sparse.csr_matrix(ring)
+    graph_flows(f, w, v, csr.indptr.astype(np.int64), csr.indices.astype(np.int64),
+                inflow, outflow)  # fmt: skip
+    ref_in, ref_out = pair_flows(f, w, v, ring)
+    np.testing.assert_allclose(inflow, ref_in, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(outflow, ref_out, rtol=1e-12, atol=1e-12)
+
+
+def compare(problem, settings, minute, iterations, atol=1e-9):
+    """Compiled and reference set points (MW) agree within ``atol`` at every iteration."""
+    engine = Engine(problem, settings)
+    x0 = initial_shares(problem, settings.x0, minute)
+    compiled, _, converged, _ = engine.run_minute(x0, minute, max_iterations=iterations)
+    reference = ReferenceMinute(problem, settings, minute)
+    x_ref = x0.copy()
+    if get_bounded(settings):
+        x_ref = compiled[0] / reference.demand  # both start from the projected shares
+    ref, _, _, ref_converged = reference.run(x_ref, max_iterations=iterations)
+    rows = min(len(ref), len(compiled))
+    assert rows > 10
+    np.testing.assert_allclose(compiled[:rows], ref[:rows], atol=atol, rtol=0)
+    assert converged == ref_converged
+    return compiled
+
+
+def get_bounded(settings):
+    return settings.mode == "exact"
+
+
+@pytest.fixture(scope="module")
+def congested():
+    return elv_problem(limits=[CONGESTION_PATH])
+
+
+@pytest.mark.parametrize(
+    ("mode", "dynamics", "graph"),
+    [
+        ("paper", "smith", "complete"),
+        ("paper", "replicator", "complete"),
+        ("paper", "local-replicator", "ring"),
+        ("paper", "distributed-smith", "star"),
+        ("exact", "smith", "complete"),
+        ("exact", "distributed-smith", "ring"),
+    ],
+)
+def test_compiled_trajectories_equal_the_numpy_reference(congested, mode, dynamics, graph):
+    integrator = Integrator(substeps=20, max_iterations=120) if mode == "paper" else None
+    settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph, integrator=integrator)
+    trajectory = compare(congested, settings, PEAK_MINUTE, 120)
+    assert np.ptp(trajectory, axis=0).max() > 1e-4  # things moved: the comparison is not vacuous
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_reference_agrees_on_random_limited_feeders(seed):
+    problem = limited_random_problem(seed + 10, n_gens=12)
+    # 12 generators and many prices: the adaptive steps see round-off of different summation
+    # orders (prefix sums vs all pairs); 1e-6 MW is 1 W.
+    compare(problem, RunSettings(mode="exact"), 1, 200, atol=1e-6)
+
+
+@pytest.mark.parametrize("method", ["euler", "heun"])
+def test_flux_limiter_keeps_every_step_inside_the_limits(congested, method):
+    """Steps far longer than the dynamics' time scale (1 s, no error control) stay feasible:
+    set points within their limits, total equal to the demand."""
+    loose = Integrator(method=method, dt=1.0, substeps=1, rtol=1e6, atol=1e6, max_iterations=50)
+    problem = congested
+    engine = Engine(problem, RunSettings(mode="exact", integrator=loose))
+    x0 = initial_shares(problem, "uniform", PEAK_MINUTE)
+    trajectory, _, _, _ = engine.run_minute(x0, PEAK_MINUTE)
+    assert len(trajectory) > 5
+    assert (trajectory >= problem.pmin - 1e-15).all()
+    assert (trajectory <= problem.pmax + 1e-15).all()
+    np.testing.assert_allclose(trajectory.sum(axis=1), problem.demand[PEAK_MINUTE - 1], rtol=1e-12)
+    assert (trajectory == problem.pmax).any()  # the limiter put a generator exactly on Pmax
