@@ -70,9 +70,12 @@ def main() -> None:
         settings = RunSettings(mode=mode)
         repeat = args.repeat if mode == "exact" else 1
         day = median_seconds(lambda s=settings: run_day(day_problem, s).wall_seconds, repeat)
+        result = run_day(day_problem, settings)
         print(
             f"population-dynamics day, {mode} mode: {day:.3f} s (engine), "
-            f"{opf_day / day:.2f}x the DC-OPF day's speed"
+            f"{opf_day / day:.2f}x the DC-OPF day's speed; {result.status}, "
+            f"{int(result.converged.sum())}/{len(result.converged)} minutes converged, "
+            f"{result.iterations.mean():.1f} iterations per minute"
         )
     memory = peak_memory_mb(lambda: run_day(day_problem, RunSettings(mode="exact")))
     print(f"peak Python memory of the exact-mode day run: {memory:.1f} MiB (tracemalloc)")
