@@ -485,7 +485,11 @@ def write_snapshot(out: Path, summary: dict, table, result, progress: Progress) 
 @json_option
 @quiet_option
 def day(limits, dynamics, mode, x0, graph, events, minutes, profiles, out, as_json, quiet) -> int:
-    """The online day: every minute continues from the last (warm start), against the DC-OPF."""
+    """The online day: every minute continues from the last (warm start), against the DC-OPF.
+
+    Times: wall_seconds is the engine's own (no start-up, imports, data loading or DC-OPF),
+    command_seconds the whole command's, from the process start.
+    """
     import numpy as np
 
     from popdispatch.report.reproduce import run_day_with_opf
