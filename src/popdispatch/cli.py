@@ -548,7 +548,7 @@ def day_text(s: dict) -> str:
         f"online day, minutes {s['first_minute']}-{s['last_minute']}: {s['dynamics']} dynamics, "
         f"{s['mode']} mode\nprofiles: {s['profile_source']}\nstatus: {s['status']} "
         f"({s['converged_minutes']} of {s['minutes']} minutes converged; engine "
-        f"{s['wall_seconds']:.2f} s, whole command {s['command_seconds']:.1f} s)\n"
+        f"{s['wall_seconds']:.3f} s, whole command {s['command_seconds']:.1f} s)\n"
         f"{s['minutes_within_0_1_kw']} minutes within 0.1 kW of the "
         f"DC-OPF; max |error| {_fmt(s['max_abs_error_kw'], ' kW')}, mean "
         f"{_fmt(s['mean_abs_error_kw'], ' kW')}\ncost {s['cost']:.5f} EUR (DC-OPF "
