@@ -58,6 +58,9 @@ METHODS = {"euler": 0, "heun": 1}
 #: ``converged_at`` value of a run stopped because a controller state exceeded ``z_cap``.
 INFEASIBLE = -2
 
+#: Largest ``h * rate`` a Heun step may take (its stability interval on the real axis is 2).
+STABLE_STEP = 1.5
+
 
 @dataclass(frozen=True)
 class Integrator:
@@ -243,6 +246,43 @@ def _heun_combination(h, x, z, rules, ws, x_out, z_out):
         z_out[k] = max(z[k] + half * (prices[0][k] + prices[1][k]), 0.0)
 
 
+@nb.njit(cache=True, inline="always")
+def _stiffness(h, x, z, ws, rtol, atol, price_atol):
+    """Largest rate the last step saw, ``||k2 - k1|| / ||x1 - x||`` (1/s), in the error norm's
+    scaling, over the components the limiter left alone.
+
+    Error control alone lets the step grow near a rest point (where the error vanishes) until
+    it meets the stability boundary of the price loop, and then hovers there with an
+    oscillation of the size of the error tolerance, far above the convergence tolerance.
+    Capping the step by this estimate keeps Heun inside its stability region. Strategies that
+    the limiter stopped at a limit are left out: their fast approach is absorbed exactly.
+    """
+    vectors, prices, _, _, _, _ = ws
+    v1, room1, in1, out1 = vectors[3], vectors[4], vectors[5], vectors[6]
+    in2, out2 = vectors[12], vectors[13]
+    moved = 0.0
+    turned = 0.0
+    for i in range(x.shape[0]):
+        if h * out1[i] > v1[i] or h * in1[i] > room1[i]:
+            continue
+        scale = atol + rtol * abs(x[i])
+        k1 = (in1[i] - out1[i]) / scale
+        k2 = (in2[i] - out2[i]) / scale
+        moved += k1 * k1
+        turned += (k2 - k1) * (k2 - k1)
+    for k in range(z.shape[0]):
+        if z[k] + h * prices[0][k] < 0.0:
+            continue
+        scale = price_atol + rtol * abs(z[k])
+        k1 = prices[0][k] / scale
+        k2 = prices[1][k] / scale
+        moved += k1 * k1
+        turned += (k2 - k1) * (k2 - k1)
+    if moved <= 0.0:
+        return 0.0
+    return np.sqrt(turned / moved) / h
+
+
 @nb.njit(cache=True)
 def _advance_heun(x, z, demand, rules, problem, ws, dt, h_try, tol):
     """One iteration of adaptive Heun steps; ``(congested, residual, next h_try)``."""
@@ -264,6 +304,7 @@ def _advance_heun(x, z, demand, rules, problem, ws, dt, h_try, tol):
         _evaluate(1, x1, z1, demand, rules, problem, ws)
         _heun_combination(h, x, z, rules, ws, x2, z2)
         err = _error_norm(x2, x1, z2, z1, rtol, atol, price_atol)
+        rate = _stiffness(h, x, z, ws, rtol, atol, price_atol)
         if err <= 1.0:
             x[:] = x2
             z[:] = z2
@@ -272,6 +313,8 @@ def _advance_heun(x, z, demand, rules, problem, ws, dt, h_try, tol):
         else:
             counters[1] += 1
         h_try = h * min(5.0, max(0.2, 0.9 / np.sqrt(err))) if err > 0.0 else 5.0 * h
+        if rate * h_try > STABLE_STEP:
+            h_try = STABLE_STEP / rate
     return congested, residual, min(h_try, dt)
 
 

@@ -17,7 +17,7 @@ from popdispatch.dynamics.fields import CAPACITY_SMITH, SMITH
 from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.payoffs import PAPER
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
-from popdispatch.integrate import INFEASIBLE
+from popdispatch.integrate import INFEASIBLE, STABLE_STEP
 from popdispatch.modes import get_mode
 
 
@@ -142,10 +142,27 @@ class ReferenceMinute:
             err = max(
                 np.max(np.abs(x2 - x1) / scale_x), np.max(np.abs(z2 - z1) / scale_z, initial=0.0)
             )
+            rate = self.stiffness(h, x, z, point, second)
             if err <= 1.0:
                 x, z, remaining, point = x2, z2, remaining - h, None
             h_try = h * min(5.0, max(0.2, 0.9 / np.sqrt(err))) if err > 0.0 else 5.0 * h
+            if rate * h_try > STABLE_STEP:
+                h_try = STABLE_STEP / rate
         return x, z, congested, residual, min(h_try, it.dt)
+
+    def stiffness(self, h, x, z, one, two) -> float:
+        """``||k2 - k1|| / ||x1 - x||`` over components the limiter left alone (1/s)."""
+        it = self.integrator
+        (_, _, v1, room1, in1, out1, zr1), (_, _, _, _, in2, out2, zr2) = one, two
+        free = ~((h * out1 > v1) | (h * in1 > room1))
+        scale = it.atol + it.rtol * np.abs(x)
+        k1, k2 = (in1 - out1)[free] / scale[free], (in2 - out2)[free] / scale[free]
+        open_ = z + h * zr1 >= 0.0
+        zscale = it.price_atol + it.rtol * np.abs(z)
+        q1, q2 = zr1[open_] / zscale[open_], zr2[open_] / zscale[open_]
+        moved = np.sum(k1**2) + np.sum(q1**2)
+        turned = np.sum((k2 - k1) ** 2) + np.sum((q2 - q1) ** 2)
+        return float(np.sqrt(turned / moved) / h) if moved > 0.0 else 0.0
 
     def run(self, x, z=None, max_iterations: int | None = None):
         """``(setpoints per iteration (MW), x, z, converged_at)`` from shares ``x``."""
