@@ -387,3 +387,20 @@ def test_ctrl_c_leaves_no_partial_output(tmp_path):
     assert "Traceback" not in stderr
     assert "interrupted" in stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_day_warm_start_choice_is_reported_and_both_reach_the_dc_opf():
+    runs = {}
+    for choice in (None, "shares"):
+        extra = ["--warm-start", choice] if choice else []
+        result = run("day", "--mode", "exact", "--minutes", "600-610", "--json", *extra)
+        assert result.returncode == 0, result.stderr
+        runs[choice] = json.loads(result.stdout)
+    assert runs[None]["warm_start"] == "setpoints"  # exact mode's default
+    assert runs["shares"]["warm_start"] == "shares"
+    for summary in runs.values():
+        assert summary["status"] == "converged"
+        assert summary["max_abs_error_kw"] < 1e-3
+    bad = run("day", "--warm-start", "sideways", "--minutes", "600-601")
+    assert bad.returncode == 2
+    assert "sideways" in bad.stderr

@@ -269,10 +269,10 @@ def run_options(func):
     return func
 
 
-def settings_from(dynamics: str, mode: str, x0, graph: str):
+def settings_from(dynamics: str, mode: str, x0, graph: str, warm_start: str | None = None):
     from popdispatch.online import RunSettings
 
-    return RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0)
+    return RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0, warm_start=warm_start)
 
 
 # -- loading inputs -----------------------------------------------------------------------------
@@ -480,11 +480,20 @@ def write_snapshot(out: Path, summary: dict, table, result, progress: Progress) 
     "BUS:on@MIN brings it back (repeatable).",
 )
 @option("--minutes", type=MinutesType(), help="Simulate only minutes START-END (default 1-1440).")
+@option(
+    "--warm-start",
+    type=EngineChoice("popdispatch.warm_start:WARM_STARTS"),
+    help="How a minute starts from the last: shares (the paper's rule, p = x * new demand; "
+    "paper mode's default) or setpoints (set points kept, the demand step taken by the "
+    "generators inside their limits; exact mode's default).",
+)
 @profiles_option
 @out_option
 @json_option
 @quiet_option
-def day(limits, dynamics, mode, x0, graph, events, minutes, profiles, out, as_json, quiet) -> int:
+def day(
+    limits, dynamics, mode, x0, graph, events, minutes, warm_start, profiles, out, as_json, quiet
+) -> int:
     """The online day: every minute continues from the last (warm start), against the DC-OPF.
 
     Times: wall_seconds is the engine's own (no start-up, imports, data loading or DC-OPF),
@@ -497,7 +506,7 @@ def day(limits, dynamics, mode, x0, graph, events, minutes, profiles, out, as_js
 
     progress = Progress(quiet)
     check_out(out)
-    settings = settings_from(dynamics, mode, x0, graph)
+    settings = settings_from(dynamics, mode, x0, graph, warm_start)
     problem = build(load_profiles(profiles, None, progress), limits, progress)
     problem = apply_events(problem, events)
     span = np.arange(minutes[0], minutes[1] + 1) if minutes else None

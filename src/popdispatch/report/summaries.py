@@ -159,6 +159,7 @@ def day_summary(
         "mode": settings.mode,
         "dynamics": settings.dynamics,
         "x0": settings.x0_label(),
+        "warm_start": settings.warm_start_policy,
         "graph": settings.graph if isinstance(settings.graph, str) else "custom",
         "limits": _limits(limits),
         "events": list(events),
