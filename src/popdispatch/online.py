@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import networkx as nx
 import numpy as np
@@ -29,7 +29,7 @@ from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.integrate import INFEASIBLE, Integrator, integrate, integrate_day, workspace
 from popdispatch.modes import game_parameters, get_mode
 from popdispatch.opf import generation_cost
-from popdispatch.warm_start import WARM_STARTS, warm_start
+from popdispatch.warm_start import SHARES, WARM_STARTS, warm_start
 
 X0_CHOICES = ("uniform", "capacity")
 
@@ -151,13 +151,16 @@ class Engine:
             )
         self.rules = (self.field, self.mode.code, *self._graph())
         self.z = np.zeros(self.mode.controller_states(problem))
-        z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
+        self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         integrator = settings.stepping
-        self.kernel_settings = integrator.settings(integrator.tol_kw / KW_PER_MW, z_cap)
+        self.kernel_settings = self._kernel_settings(integrator)
         self.ws = workspace(
             problem.n_generators, len(problem.limit), len(self.z), integrator.window
         )
         self.h_try = integrator.dt
+
+    def _kernel_settings(self, integrator: Integrator) -> tuple:
+        return integrator.settings(integrator.tol_kw / KW_PER_MW, self.z_cap)
 
     def _graph(self) -> tuple[bool, np.ndarray, np.ndarray]:
         """``(complete?, indptr, indices)`` of the communication graph (CSR)."""
@@ -199,12 +202,13 @@ class Engine:
         demand = float(self.problem.demand[minute - 1])
         online = self.problem.online[minute - 1]
         weight = np.empty_like(x)
-        warm_start(0, self.mode.bounded, x, 0.0, demand, self.problem.pmin,
+        warm_start(SHARES, self.mode.bounded, x, 0.0, demand, self.problem.pmin,
                    self.problem.pmax, online, weight)  # fmt: skip
-        settings = self.kernel_settings
+        integrator = self.settings.stepping
         if max_iterations is not None:
-            settings = settings[:8] + (int(max_iterations),) + settings[9:]
-        history = np.empty((settings[8] + 1 if record else 0, len(x)))
+            integrator = replace(integrator, max_iterations=int(max_iterations))
+        settings = self._kernel_settings(integrator)
+        history = np.empty((integrator.max_iterations + 1 if record else 0, len(x)))
         steps, converged_at, first_congestion, self.h_try = integrate(
             x, self.z, demand, self.rules, self._minute_problem(minute), self.ws, settings,
             self.h_try, history,
@@ -322,16 +326,6 @@ class DayResult:
         if self.infeasible is not None and self.infeasible.any():
             return "infeasible"
         return "converged" if self.converged.all() else "not_converged"
-
-
-def redistribute_tripped(x: np.ndarray, online: np.ndarray) -> np.ndarray:
-    """Hand the shares of offline generators to online ones, in proportion to their shares."""
-    kept = np.where(online, x, 0.0)
-    total = kept.sum()
-    if total <= 0:
-        kept = online.astype(float)
-        total = kept.sum()
-    return kept / total
 
 
 #: Minutes per call of the compiled day loop when progress is reported.
