@@ -31,9 +31,10 @@ from pathlib import Path
 
 import click
 
-from popdispatch.errors import PopdispatchError
+from popdispatch.errors import OptionError, PopdispatchError
 from popdispatch.report.output import json_text, staged_folder
 from popdispatch.report.progress import Progress
+from popdispatch.report.text import day_text, feeder_text, opf_text, snapshot_text
 
 Limit = tuple[int, int, float]
 EXIT_PROBLEM, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
@@ -335,20 +336,6 @@ def emit(summary: dict, as_json: bool, text: str) -> None:
     click.echo(json_text(summary) if as_json else text, nl=not as_json)
 
 
-def generator_lines(rows: list[dict], columns: Sequence[str]) -> str:
-    header = f"{'generator':<10}{'bus':>6}" + "".join(f"{c:>14}" for c in columns)
-    body = [
-        f"{r['name']:<10}{r['bus']:>6}"
-        + "".join(f"{r[c]:>14.3f}" if r[c] is not None else f"{'-':>14}" for c in columns)
-        for r in rows
-    ]
-    return "\n".join([header, *body])
-
-
-def _fmt(value, unit: str = "", digits: int = 3) -> str:
-    return "-" if value is None else f"{value:.{digits}f}{unit}"
-
-
 # -- commands -----------------------------------------------------------------------------------
 
 
@@ -379,16 +366,7 @@ def feeder(case: str | None, opendss: Path | None, as_json: bool, quiet: bool) -
     with Progress(quiet).step("loading the feeder"):
         net = read_opendss_feeder(opendss) if opendss else load_case(case or "ieee-elv")
         summary = feeder_summary(net, reduce_feeder(net))
-    gens = ", ".join(
-        f"{g['name']} (bus {g['bus']}, {g['pmax_kw']:g} kW)" for g in summary["generators"]
-    )
-    text = (
-        f"feeder {summary['case']}: {summary['buses']} buses, {summary['original_lines']} lines, "
-        f"source bus {summary['source_bus']}\nreduced to {summary['nodes']} key nodes and "
-        f"{summary['lines']} lines\n{summary['loads']} loads\ngenerators: {gens}\n"
-        f"total capacity: {summary['capacity_kw']:g} kW"
-    )
-    emit(summary, as_json, text)
+    emit(summary, as_json, feeder_text(summary))
 
 
 @cli.command()
@@ -405,12 +383,7 @@ def opf(minute: int, limits, profiles: Path | None, as_json: bool, quiet: bool) 
     progress = Progress(quiet)
     problem = build(load_profiles(profiles, minute, progress), limits, progress)
     summary = opf_summary(problem, solve_opf(problem, minute), limits)
-    text = (
-        f"DC-OPF, minute {minute}: {summary['status']}; demand {summary['demand_kw']:.3f} kW; "
-        f"cost {_fmt(summary['cost'], ' EUR/h', 6)}\nprofiles: {summary['profile_source']}\n"
-        + generator_lines(summary["generators"], ["p_kw"])
-    )
-    emit(summary, as_json, text)
+    emit(summary, as_json, opf_text(summary))
     if summary["status"] != "optimal":
         raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given line limits")
     return 0
@@ -443,20 +416,6 @@ def snapshot(minute, limits, dynamics, mode, x0, graph, profiles, out, as_json, 
         write_snapshot(out, summary, trajectory_table(result), result, progress)
     emit(stamp(summary), as_json, snapshot_text(summary))
     return 0
-
-
-def snapshot_text(s: dict) -> str:
-    return (
-        f"minute {s['minute']}, demand {s['demand_kw']:.3f} kW: {s['dynamics']} dynamics, "
-        f"{s['mode']} mode, x0 {s['x0']}\nprofiles: {s['profile_source']}\n"
-        f"status: {s['status']} (converged at iteration {_fmt(s['converged_iteration'], '', 0)}"
-        f" of {s['iterations']}; first congestion at iteration "
-        f"{_fmt(s['first_congestion_iteration'], '', 0)}; engine {s['wall_seconds']:.3f} s, "
-        f"whole command {s['command_seconds']:.1f} s)\n"
-        + generator_lines(s["generators"], ["setpoint_kw", "opf_kw"])
-        + f"\nmax |set point - DC-OPF| = {_fmt(s['max_abs_error_kw'], ' kW')}; "
-        f"max overflow = {s['max_overflow_kw']:.3f} kW"
-    )
 
 
 def write_snapshot(out: Path, summary: dict, table, result, progress: Progress) -> None:
@@ -501,6 +460,7 @@ def day(
     """
     import numpy as np
 
+    from popdispatch.events import apply_events, event_label
     from popdispatch.report.reproduce import run_day_with_opf
     from popdispatch.report.summaries import day_summary, day_table
 
@@ -511,7 +471,7 @@ def day(
     problem = apply_events(problem, events)
     span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
     result = run_day_with_opf(problem, settings, span, progress)
-    labels = [f"{bus}:{state}@{minute}" for bus, state, minute in events]
+    labels = [event_label(event) for event in events]
     summary = day_summary(problem, result, limits, labels)
     if summary["status"] == "infeasible":
         emit(stamp(summary), as_json, day_text(summary))
@@ -520,50 +480,6 @@ def day(
         write_day(out, summary, day_table(result), result, problem, progress)
     emit(stamp(summary), as_json, day_text(summary))
     return 0
-
-
-def apply_events(problem, events: Sequence[tuple[int, str, int]]):
-    """Turn ``BUS:off@MIN`` / ``BUS:on@MIN`` events into generator outages."""
-    buses = dict(zip(problem.feeder.generators.bus.astype(int), problem.generators, strict=True))
-    off_since: dict[str, int] = {}
-    for bus, state, minute in sorted(events, key=lambda e: e[2]):
-        text = f"{bus}:{state}@{minute}"
-        if bus not in buses:
-            known = ", ".join(str(b) for b in buses)
-            raise click.BadParameter(
-                f"no generator at bus {bus} in {text} (generator buses: {known})",
-                param_hint="'--event'",
-            )
-        name = buses[bus]
-        if state == "off":
-            if name in off_since:
-                raise click.BadParameter(f"{name} is already off in {text}", param_hint="'--event'")
-            off_since[name] = minute
-        else:
-            if name not in off_since:
-                raise click.BadParameter(f"{name} is not off before {text}", param_hint="'--event'")
-            problem = problem.with_outage(name, off_since.pop(name), minute)
-    for name, minute in off_since.items():
-        problem = problem.with_outage(name, minute)
-    return problem
-
-
-def day_text(s: dict) -> str:
-    energy = ", ".join(
-        f"bus {b}: {e:.2f} (DC-OPF {s['opf_energy_kwh'][b]:.2f})"
-        for b, e in s["energy_kwh"].items()
-    )
-    return (
-        f"online day, minutes {s['first_minute']}-{s['last_minute']}: {s['dynamics']} dynamics, "
-        f"{s['mode']} mode\nprofiles: {s['profile_source']}\nstatus: {s['status']} "
-        f"({s['converged_minutes']} of {s['minutes']} minutes converged; engine "
-        f"{s['wall_seconds']:.3f} s, whole command {s['command_seconds']:.1f} s)\n"
-        f"{s['minutes_within_0_1_kw']} minutes within 0.1 kW of the "
-        f"DC-OPF; max |error| {_fmt(s['max_abs_error_kw'], ' kW')}, mean "
-        f"{_fmt(s['mean_abs_error_kw'], ' kW')}\ncost {s['cost']:.5f} EUR (DC-OPF "
-        f"{s['opf_cost']:.5f} EUR); max overflow {s['max_overflow_kw']:.3f} kW\n"
-        f"energy, kWh: {energy}"
-    )
 
 
 def write_day(out: Path, summary: dict, table, result, problem, progress: Progress) -> None:
@@ -697,6 +613,10 @@ def _main(argv: Sequence[str] | None) -> int:
     signal.signal(signal.SIGINT, interrupt)
     try:
         code = cli.main(args=argv, prog_name="popdispatch", standalone_mode=False)
+    except OptionError as exc:
+        where = f" {exc.option}" if exc.option else ""
+        click.echo(f"popdispatch: error: invalid value for{where}: {_one_line(str(exc))}", err=True)
+        return EXIT_USAGE
     except click.UsageError as exc:
         where = exc.ctx.command_path if exc.ctx else "popdispatch"
         click.echo(f"{where}: error: {_one_line(exc.format_message())}", err=True)

@@ -19,3 +19,12 @@ class ProfileError(PopdispatchError, ValueError):
 
 class InfeasibleError(PopdispatchError):
     """The dispatch problem has no feasible solution (demand, limits or capacity)."""
+
+
+class OptionError(PopdispatchError, ValueError):
+    """A run option is malformed or names something the problem lacks (bad usage: the CLI exits
+    with code 2). ``option`` names the option, e.g. ``"--event"``."""
+
+    def __init__(self, message: str, option: str | None = None):
+        super().__init__(message)
+        self.option = option

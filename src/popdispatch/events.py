@@ -1,0 +1,48 @@
+"""Generator availability events: ``BUS:off@MIN`` trips the generator at BUS at minute MIN,
+``BUS:on@MIN`` brings it back. The CLI's ``--event`` and Python users share this validation."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from popdispatch.errors import OptionError
+from popdispatch.game.problem import DispatchProblem
+
+#: One event: (generator bus as the feeder numbers it, ``"off"`` or ``"on"``, 1-based minute).
+Event = tuple[int, str, int]
+
+
+def event_label(event: Event) -> str:
+    """``BUS:state@MIN``, the form the CLI accepts."""
+    bus, state, minute = event
+    return f"{bus}:{state}@{minute}"
+
+
+def apply_events(problem: DispatchProblem, events: Sequence[Event]) -> DispatchProblem:
+    """The problem with each event's generator outage applied.
+
+    Raises :class:`OptionError` (option ``--event``) for a bus without a generator, a
+    generator switched off twice, or one switched on that was not off.
+    """
+    buses = dict(zip(problem.feeder.generators.bus.astype(int), problem.generators, strict=True))
+    off_since: dict[str, int] = {}
+    for event in sorted(events, key=lambda e: e[2]):
+        bus, state, minute = event
+        text = event_label(event)
+        if bus not in buses:
+            known = ", ".join(str(b) for b in buses)
+            raise OptionError(
+                f"no generator at bus {bus} in {text} (generator buses: {known})", "--event"
+            )
+        name = buses[bus]
+        if state == "off":
+            if name in off_since:
+                raise OptionError(f"{name} is already off in {text}", "--event")
+            off_since[name] = minute
+        elif name not in off_since:
+            raise OptionError(f"{name} is not off before {text}", "--event")
+        else:
+            problem = problem.with_outage(name, off_since.pop(name), minute)
+    for name, minute in off_since.items():
+        problem = problem.with_outage(name, minute)
+    return problem
