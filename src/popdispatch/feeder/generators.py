@@ -3,8 +3,9 @@
 A fleet is a DataFrame indexed by generator name with columns
 
 - ``bus``: original bus id,
-- ``a`` (EUR), ``b`` (EUR/MW), ``c`` (EUR/MW^2): cost ``C(p) = a + b p + c p^2``, p in MW
-  (eq. 2),
+- ``a`` (EUR/h), ``b`` (EUR/MWh), ``c`` (EUR/(MW^2 h)): cost rate ``C(p) = a + b p + c p^2``
+  in EUR/h with p in MW (eq. 2; the paper's Table I units, so the marginal cost ``b + 2 c p``
+  is in EUR/MWh),
 - ``pmin_kw``, ``pmax_kw``: output limits in kW.
 """
 
@@ -21,7 +22,7 @@ from popdispatch.errors import FleetError
 
 FLEET_COLUMNS = ["bus", "a", "b", "c", "pmin_kw", "pmax_kw"]
 
-#: The paper's Table I (bus, a EUR, b EUR/MW, c EUR/MW^2, Pmin kW, Pmax kW).
+#: The paper's Table I (bus, a EUR/h, b EUR/MWh, c EUR/(MW^2 h), Pmin kW, Pmax kW).
 TABLE_I = [
     (1, 0.0, 5.0, 0.02, 0.0, 10.0),
     (114, 0.0, 1.0, 0.01, 0.0, 10.0),
@@ -33,7 +34,15 @@ TABLE_I = [
 
 
 def make_fleet(rows: Iterable[tuple], names: Iterable[str] | None = None) -> pd.DataFrame:
-    """A fleet table from ``(bus, a, b, c, pmin_kw, pmax_kw)`` rows; names default to ``G<bus>``."""
+    """A fleet table from ``(bus, a, b, c, pmin_kw, pmax_kw)`` rows.
+
+    Parameters
+    ----------
+    rows : one tuple per generator: ``bus`` (bus id of the feeder), ``a`` (EUR/h), ``b``
+        (EUR/MWh), ``c`` (EUR/(MW^2 h)) of the cost rate ``a + b p + c p^2`` with p in MW
+        (paper eq. 2), ``pmin_kw`` and ``pmax_kw`` (output limits, kW).
+    names : generator names; default ``G<bus>``.
+    """
     table = pd.DataFrame(list(rows), columns=FLEET_COLUMNS)
     table["bus"] = table["bus"].astype(int)
     table.index = pd.Index(
