@@ -2,14 +2,17 @@
 
 Every file is first written under a temporary name in its final folder and then renamed (an
 atomic operation on one file system). A whole output folder is staged the same way: files go
-into a hidden temporary folder next to it, and only when everything is written are they moved
-into place. An error or Ctrl-C removes the staging folder, so ``--out`` never holds partial
-files.
+into a hidden temporary folder on the same file system as their destination (next to a new
+folder, inside an existing one, so a mount point works), and only when everything is written
+are they moved into place. An error or Ctrl-C removes the staging folder, so ``--out`` never
+holds partial files. A folder that cannot be written gives a one-line :class:`OutputError`
+("read-only file system", "permission denied").
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import shutil
@@ -29,9 +32,10 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     or interruption. Returns ``path``.
     """
     path = Path(path)
-    fd, tmp_name = tempfile.mkstemp(
-        prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent
-    )
+    with _output_errors(path):
+        fd, tmp_name = tempfile.mkstemp(
+            prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent
+        )
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -104,31 +108,114 @@ class StagedFolder:
 def staged_folder(out: str | Path) -> Iterator[StagedFolder]:
     """Stage an output folder; on success move every file into ``out`` (created if needed).
 
-    Files are written into a hidden sibling folder of ``out``; each is renamed into ``out`` only
-    after all were written. On an error or Ctrl-C the staging folder is removed and ``out`` is
-    left as it was.
+    Where the files are staged decides whether the final renames stay on one file system:
+
+    - ``out`` does not exist: a hidden sibling ``.NAME.tmp-XXXX`` in ``out``'s parent (where
+      ``out`` will be), renamed to ``out`` in one step when everything is written.
+    - ``out`` is an existing folder (possibly a mount point: a tmpfs, a Docker volume, a network
+      share, whose parent is on another device): a hidden ``.popdispatch-tmp-XXXX`` folder
+      *inside* ``out``. Each file is then renamed over its namesake in ``out``; files of
+      ``out`` that this run does not write are left untouched (the folder is updated, not
+      emptied).
+
+    On an error or Ctrl-C before the moves the staging folder is removed and ``out`` is left as
+    it was. A folder that cannot be written raises :class:`OutputError` with a one-line message
+    naming the path and the reason ("read-only file system", "permission denied").
     """
     out = Path(out)
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise OSError(f"cannot write to {out}: folder {parent} does not exist")
-    if out.exists() and not out.is_dir():
-        raise OSError(f"cannot write to {out}: it exists and is not a folder")
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=parent))
+    check_target(out)
+    inside = out.is_dir()
+    staging = _make_staging(out)
     try:
-        yield StagedFolder(staging)
-        _move_into(staging, out)
+        with _output_errors(out):
+            yield StagedFolder(staging)
+            _move_into(staging, out, inside)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def _move_into(staging: Path, out: Path) -> None:
-    """Move the staged files into ``out``: one rename of the folder if ``out`` is new."""
-    if not out.exists():
+class OutputError(OSError):
+    """An output folder that cannot be written; ``str()`` is a one-line message."""
+
+    def __str__(self) -> str:
+        return self.strerror or super().__str__()
+
+
+#: errno values that mean "this place cannot be written", with the words we report them in.
+NOT_WRITABLE = {
+    errno.EROFS: "read-only file system",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied",
+}
+
+
+def check_target(out: Path) -> None:
+    """Raise :class:`OutputError` unless ``out`` is, or can become, a folder."""
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise OutputError(f"cannot write to {out}: folder {parent} does not exist")
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"cannot write to {out}: it exists and is not a folder")
+
+
+def check_writable(out: str | Path) -> None:
+    """Fail early (before any long computation) if ``out`` could not be written.
+
+    Creates and removes the staging folder :func:`staged_folder` would use; raises
+    :class:`OutputError` (one line, "read-only file system" / "permission denied").
+    """
+    out = Path(out)
+    check_target(out)
+    shutil.rmtree(_make_staging(out), ignore_errors=True)
+
+
+def _make_staging(out: Path) -> Path:
+    """The staging folder for ``out`` (see :func:`staged_folder`), created empty."""
+    if out.is_dir():
+        where, prefix = out, ".popdispatch-tmp-"
+    else:
+        where, prefix = (out.parent if str(out.parent) else Path(".")), f".{out.name}.tmp-"
+    with _output_errors(out):
+        return Path(tempfile.mkdtemp(prefix=prefix, dir=where))
+
+
+@contextlib.contextmanager
+def _output_errors(out: Path) -> Iterator[None]:
+    """Turn "cannot write here" errors into one-line :class:`OutputError` naming ``out``."""
+    try:
+        yield
+    except OutputError:
+        raise
+    except OSError as exc:
+        reason = NOT_WRITABLE.get(exc.errno)
+        if reason is None:
+            raise
+        raise OutputError(exc.errno, f"cannot write to {out}: {reason}") from exc
+
+
+def _move_into(staging: Path, out: Path, inside: bool) -> None:
+    """Move the staged files into ``out``: one rename of the folder if ``out`` is new
+    (``inside``: the staging folder is inside an existing ``out``)."""
+    if not inside:
         os.chmod(staging, 0o777 & ~_umask())  # mkdtemp makes 0700
-        os.replace(staging, out)
-        return
+        try:
+            os.rename(staging, out)  # fails if ``out`` appeared meanwhile: then merge
+            return
+        except OSError:
+            if not out.is_dir():
+                raise
     for source in sorted(p for p in staging.rglob("*") if p.is_file()):
         target = out / source.relative_to(staging)
         target.parent.mkdir(parents=True, exist_ok=True)
+        _replace(source, target)
+
+
+def _replace(source: Path, target: Path) -> None:
+    """``os.replace``; if ``target``'s folder is another file system (a mount point inside
+    ``out``), copy next to ``target`` first so the final step is still one rename."""
+    try:
         os.replace(source, target)
+    except OSError as exc:
+        if exc.errno != errno.EXDEV:
+            raise
+        atomic_write(target, lambda tmp: shutil.copyfile(source, tmp))
