@@ -58,7 +58,7 @@ def weights(field: int, x, lo, hi, active):
         width = hi - lo
         part = active & (width > 0.0)
         room = np.where(part, np.maximum(hi - x, 0.0), 0.0)
-        w = np.where(part, room / np.where(part, width, 1.0), 0.0)
+        w = np.where(room > 0.0, 1.0, 0.0)
         return w, np.where(part, np.maximum(x - lo, 0.0), 0.0), room
     share = np.where(active, np.maximum(x, 0.0), 0.0)
     return share, share, np.full(len(x), np.inf)
@@ -98,7 +98,7 @@ class ReferenceMinute:
 
     def limited_stage(self, h, x, z, point):
         f, w, v, room, inflow, outflow, z_rate = point
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             alpha = np.where(h * outflow > v, v / (h * outflow), 1.0)
             beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
         if (alpha < 1.0).any() or (beta < 1.0).any():
@@ -109,7 +109,7 @@ class ReferenceMinute:
         (f1, w1, v1, room1, in1, out1, zr1), (f2, w2, v2, _, in2, out2, zr2) = one, two
         half = 0.5 * h
         out, into = half * (out1 + out2), half * (in1 + in2)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             alpha = np.where(out > v1, v1 / out, 1.0)
             beta = np.where(into > room1, room1 / into, 1.0)
         if (alpha < 1.0).any() or (beta < 1.0).any():

@@ -1,15 +1,28 @@
 """Capacity-constrained Smith dynamics (exact mode): generator limits without a barrier.
 
 Mass moves from strategy ``j`` to a better strategy ``i`` at the rate
-``kappa * (x_j - lo_j) * [f_i - f_j]_+ * (hi_i - x_i) / (hi_i - lo_i)`` on every edge of the
-communication graph, so no mass flows into a strategy at its upper limit ``hi`` and none out of
-one at its lower limit ``lo`` (shares ``x = p / P_d``; ``lo = Pmin / P_d``, ``hi = Pmax / P_d``).
+``kappa * (x_j - lo_j) * [f_i - f_j]_+ * 1[x_i < hi_i]`` on every edge of the communication
+graph, so no mass flows into a strategy at its upper limit ``hi`` and none out of one at its
+lower limit ``lo`` (shares ``x = p / P_d``; ``lo = Pmin / P_d``, ``hi = Pmax / P_d``).
 Its rest points are exactly the box-constrained equilibria: interior strategies have equal
 fitness, a strategy at ``hi`` may be better and one at ``lo`` worse. That is the KKT condition
 of the economic dispatch with generator limits. ``kappa`` = 1 here; the exact mode scales the
 fitness instead (see :mod:`popdispatch.modes`). As a pairwise flow
-(:mod:`popdispatch.dynamics.pairwise`): receiver weight ``(hi_i - x_i) / (hi_i - lo_i)``, sender
-weight ``x_j - lo_j``.
+(:mod:`popdispatch.dynamics.pairwise`): receiver weight ``1[x_i < hi_i]``, sender weight
+``x_j - lo_j``; the integrator's flux limiter stops a receiver exactly at ``hi``.
+
+Why an indicator and not the room fraction ``(hi_i - x_i) / (hi_i - lo_i)`` (the rule until
+issue 10): with the fraction, the inflow into a generator vanishes with the room it has left.
+At a degenerate optimum (demand equal to the capacity of the cheap generators, so the dear
+one's movable mass ``x_j - lo_j`` equals the room left, or a generator optimal exactly at
+``Pmax`` with zero reduced cost, so the fitness gap vanishes with the room) both factors of the
+rate vanish together, the distance to the optimum obeys ``d' = -k d^2`` and decays like
+``1 / t``: a 5-bus feeder with 20 kW of demand on 10 + 10 kW of cheap generators ran 6000
+iterations unconverged. With the indicator the rate is linear in the distance, ``d' = -k d``,
+and the limit is reached (the flux limiter lands on it exactly): that case converges at
+iteration 10. Sender side: Smith's mass-proportional weight ``x_j - lo_j`` is kept, so a
+generator optimal exactly at ``Pmin`` with *zero* reduced cost (gap vanishing with its mass)
+is still approached like ``1 / t``.
 
 Cf. the capacity-constrained pairwise-comparison protocols of the popgames library and
 Martinez-Piazuelo, Quijano and Ocampo-Martinez (primal-dual evolutionary dynamics).
@@ -23,8 +36,8 @@ import numpy as np
 
 @nb.njit(cache=True, inline="always")
 def capacity_smith_weights(x, lo, hi, active, w, v, room):
-    """Receiver weight ``(hi - x) / (hi - lo)``, movable mass ``x - lo``, room ``hi - x``
-    (dimensionless shares); a strategy with no width (offline, ``hi = lo``) takes no part."""
+    """Receiver weight ``1[x < hi]``, movable mass ``x - lo``, room ``hi - x`` (dimensionless
+    shares); a strategy with no width (offline, ``hi = lo``) takes no part."""
     for i in range(x.shape[0]):
         width = hi[i] - lo[i]
         if width <= 0.0 or not active[i]:
@@ -33,7 +46,7 @@ def capacity_smith_weights(x, lo, hi, active, w, v, room):
             room[i] = 0.0
             continue
         room[i] = max(hi[i] - x[i], 0.0)
-        w[i] = room[i] / width
+        w[i] = 1.0 if room[i] > 0.0 else 0.0
         v[i] = max(x[i] - lo[i], 0.0)
 
 
