@@ -67,10 +67,16 @@ def test_extinction_replicator_never_uses_zero_start_generator():
     assert result.smith.setpoints_kw[k] > 9.9
 
 
+def graph_for(dynamics: str, sparse: str = "ring") -> str:
+    """``sparse`` for dynamics that use a communication graph, else complete (RunSettings
+    rejects a graph that would be ignored)."""
+    return sparse if DYNAMICS[dynamics].uses_graph else "complete"
+
+
 def test_every_dynamics_conserves_mass_and_stays_nonnegative(peak_problem):
     for name in DYNAMICS:
         run = run_snapshot(
-            peak_problem, 566, RunSettings(dynamics=name, graph="ring", x0="capacity")
+            peak_problem, 566, RunSettings(dynamics=name, graph=graph_for(name), x0="capacity")
         )
         assert np.all(run.trajectory_kw >= 0.0), name
         np.testing.assert_allclose(run.trajectory_kw.sum(axis=1), 57.358, atol=1e-9)
@@ -93,7 +99,8 @@ def test_invariants_on_random_feeders(seed, n_buses, n_gens, dynamics):
     problem = build_problem(reduced, single_minute_profiles(1, load, "random"))
     integrator = Integrator(substeps=20, max_iterations=300)
     run = run_snapshot(
-        problem, 1, RunSettings(dynamics=dynamics, graph="path", integrator=integrator)
+        problem, 1, RunSettings(dynamics=dynamics, graph=graph_for(dynamics, "path"),
+                                integrator=integrator)
     )
     assert np.all(run.trajectory_kw >= 0.0)
     np.testing.assert_allclose(run.trajectory_kw.sum(axis=1), load.sum(), rtol=1e-10)

@@ -8,6 +8,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from popdispatch.errors import OptionError
 from popdispatch.feeder.profiles import single_minute_profiles
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.game.problem import build_problem
@@ -61,21 +62,29 @@ def test_distributed_smith_reaches_the_opf(graph):
     assert np.abs(run.setpoints_kw - solve_opf(problem, 566).p_kw).max() <= 1e-3
 
 
-def test_saturated_generators_do_not_relay_on_a_sparse_graph():
-    """Documented limitation (docs/exact-mode.md): on the path in fleet order, G1 and G739 are
-    separated by generators at Pmax, which cannot take mass to pass it on; distributed Smith
-    rests 0.78 kW from the DC-OPF although every generator is at rest with its neighbours."""
+@pytest.mark.parametrize("graph", ["ring", "path"])
+def test_a_sparse_graph_rest_point_off_the_dc_opf_is_reported_stalled(graph):
+    """Documented limitation (docs/exact-mode.md): on the ring or path in fleet order, G1 and
+    G739 are separated by generators at Pmax, which cannot take mass to pass it on;
+    distributed Smith rests 0.78 kW from the DC-OPF although every generator is at rest with
+    its neighbours. Issue 10, item 9: that is reported ``stalled`` with the failed KKT
+    condition, never ``converged``."""
     problem = elv_problem(limits=[(505, 666, 28.0)])
-    settings_ = RunSettings(mode="exact", dynamics="distributed-smith", graph="path")
+    settings_ = RunSettings(mode="exact", dynamics="distributed-smith", graph=graph)
     run = run_snapshot(problem, 566, settings_)
-    assert run.status == "converged"
+    assert run.status == "stalled"
+    assert run.converged_at is None and run.rest_at is not None
+    assert "G1 at Pmax" in run.stall_reason and "G739 interior" in run.stall_reason
     assert np.abs(run.setpoints_kw - solve_opf(problem, 566).p_kw).max() > 0.5
 
 
 @pytest.mark.parametrize("dynamics", ["replicator", "local-replicator"])
 def test_exact_mode_refuses_imitative_dynamics(dynamics):
-    with pytest.raises(ValueError, match="extinction"):
-        run_snapshot(elv_problem(), 566, RunSettings(mode="exact", dynamics=dynamics))
+    """Refused when the settings are made (no data loaded), as a usage error naming --mode."""
+    with pytest.raises(OptionError, match="extinction") as error:
+        RunSettings(mode="exact", dynamics=dynamics)
+    assert error.value.option == "--mode"
+    assert dynamics in str(error.value) and "\n" not in str(error.value)
 
 
 def test_infeasible_limit_is_reported_quickly():

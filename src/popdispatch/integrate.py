@@ -418,12 +418,13 @@ def integrate_day(x, z, rules, day, ws, settings, h_try, first, last, out):
     ``day = (base game parameters, demand (MW), load_flow (MW), online, pmin, pmax (MW),
     bounded?, warm-start policy, previous demand (MW))``: per minute the demand and online set
     change, the state warm-starts (:mod:`popdispatch.warm_start`) and the dynamics run until
-    converged. ``out = (setpoints (MW), iterations, converged_at)`` receive one row per minute.
+    converged. ``out = (setpoints (MW), iterations, converged_at, controller states)`` receive
+    one row per minute (the states for the KKT check at each minute's end).
     Returns ``(h_try, demand of the last minute)``.
     """
     base, demand, load_flow, online, pmin, pmax, bounded, policy, old_demand = day
     b, c, gmin, gmax, B, m, C, gain, rate, limit, gen_line, line_up, order, _ = base
-    setpoints, iterations, converged_at = out
+    setpoints, iterations, converged_at, states = out
     n = x.shape[0]
     lo = np.empty(n)
     hi = np.empty(n)
@@ -442,6 +443,8 @@ def integrate_day(x, z, rules, day, ws, settings, h_try, first, last, out):
         )
         for i in range(n):
             setpoints[row, i] = x[i] * demand[row]
+        for k in range(z.shape[0]):
+            states[row, k] = z[k]
         iterations[row] = steps
         converged_at[row] = done_at
         old_demand = demand[row]

@@ -41,7 +41,11 @@ class Mode:
     ``code``: its branch in :func:`popdispatch.game.payoffs.game`. ``bounded``: generator
     limits are kept by a capacity-constrained revision rule (the dynamics' ``bounded_field``)
     and warm starts respect the limits, instead of a barrier. ``warm_start``: the default
-    policy between minutes (:mod:`popdispatch.warm_start`).
+    policy between minutes (:mod:`popdispatch.warm_start`). ``claims_dc_opf``: whether a run
+    that comes to rest claims the DC-OPF optimum, so that its end state is checked against the
+    DC-OPF's KKT conditions (:func:`popdispatch.online.kkt_violations`) and reported
+    ``stalled`` where they fail. Paper mode claims only that its dynamics came to rest: its
+    rules are known not to land on the DC-OPF (docs/paper-mode.md).
     """
 
     name: str
@@ -50,6 +54,7 @@ class Mode:
     bounded: bool
     integrator: Integrator
     warm_start: str = "shares"
+    claims_dc_opf: bool = False
 
     def price_cap(self, problem: DispatchProblem) -> float:
         """Price (EUR/MW) beyond which congestion is deemed impossible to relieve: ten times
@@ -67,6 +72,7 @@ MODES = {
         True,
         Integrator(method="heun", tol_kw=1e-5, window=5, extrapolate=True),
         "setpoints",
+        claims_dc_opf=True,
     ),
 }
 

@@ -22,7 +22,8 @@ import numpy as np
 import pandas as pd
 from scipy import sparse
 
-from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.dynamics import DYNAMICS, GRAPHS, communication_graph, get_dynamics
+from popdispatch.errors import OptionError
 from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.flows import limited_line_flows
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
@@ -31,6 +32,8 @@ from popdispatch.modes import game_parameters, get_mode
 from popdispatch.opf import generation_cost
 from popdispatch.warm_start import SHARES, WARM_STARTS, warm_start
 
+SHARES_NAME = "shares"  # the paper's warm start, the only one for modes without limits
+
 X0_CHOICES = ("uniform", "capacity")
 
 
@@ -38,6 +41,11 @@ X0_CHOICES = ("uniform", "capacity")
 class RunSettings:
     """What to run: dynamics, mode, communication graph, initial state, constants, integrator,
     warm start between minutes (``None``: the mode's default; see :mod:`popdispatch.warm_start`).
+
+    Construction validates the combination without touching any data, so a command line can
+    check its options before loading a feeder: bad values or combinations raise
+    :class:`~popdispatch.errors.OptionError` with a one-line message naming them and the option
+    to change (see :meth:`validate`).
     """
 
     dynamics: str = "smith"
@@ -49,9 +57,63 @@ class RunSettings:
     warm_start: str | None = None
 
     def __post_init__(self) -> None:
-        if self.warm_start is not None and self.warm_start not in WARM_STARTS:
-            raise ValueError(
-                f"unknown warm start {self.warm_start!r} (known: {', '.join(WARM_STARTS)})"
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise :class:`OptionError` for an unknown name or a combination that cannot run or
+        would silently be ignored:
+
+        - unknown ``dynamics`` (``--dynamics``), ``mode`` (``--mode``), ``graph``
+          (``--graph``), ``x0`` name (``--x0``) or ``warm_start`` (``--warm-start``);
+        - exact mode with imitative dynamics (replicator, local replicator): a generator at
+          zero share stays there (extinction), so the DC-OPF is out of reach (``--mode``);
+        - a graph other than ``complete`` with dynamics that ignore it (smith, replicator:
+          paper eqs. 9 and 13 compare every pair) (``--graph``);
+        - the ``setpoints`` warm start in a mode without generator limits in its revision rule
+          (paper mode continues the shares, eq. 10's ``x``; ``--warm-start``).
+        """
+        dynamics = _lookup(get_dynamics, self.dynamics, "--dynamics")
+        mode = _lookup(get_mode, self.mode, "--mode")
+        if mode.bounded and dynamics.bounded_field is None:
+            raise OptionError(
+                f"{mode.name} mode cannot run {dynamics.name} dynamics: they are imitative, so a "
+                "generator at zero share stays at zero (extinction) and the DC-OPF is out of "
+                "reach whenever it uses one; use smith or distributed-smith",
+                "--mode",
+            )
+        graph = self.graph if isinstance(self.graph, str) else "custom"
+        if isinstance(self.graph, str) and self.graph not in GRAPHS:
+            raise OptionError(
+                f"unknown communication graph {graph!r} (known: {', '.join(GRAPHS)})", "--graph"
+            )
+        if graph != "complete" and not dynamics.uses_graph:
+            users = " or ".join(d.name for d in DYNAMICS.values() if d.uses_graph)
+            raise OptionError(
+                f"graph {graph!r} has no effect on {dynamics.name} dynamics, which compare every "
+                f"pair of generators; use it with {users}, or leave the graph complete",
+                "--graph",
+            )
+        if isinstance(self.x0, str) and self.x0 not in X0_CHOICES:
+            raise OptionError(
+                f"unknown initial state {self.x0!r} (known: {', '.join(X0_CHOICES)}, or "
+                "shares per generator)",
+                "--x0",
+            )
+        self._validate_warm_start(mode)
+
+    def _validate_warm_start(self, mode) -> None:
+        if self.warm_start is None:
+            return
+        if self.warm_start not in WARM_STARTS:
+            raise OptionError(
+                f"unknown warm start {self.warm_start!r} (known: {', '.join(WARM_STARTS)})",
+                "--warm-start",
+            )
+        if self.warm_start != SHARES_NAME and not mode.bounded:
+            raise OptionError(
+                f"warm start {self.warm_start!r} needs a mode with generator limits in its "
+                f"revision rule (exact); {mode.name} mode continues the shares",
+                "--warm-start",
             )
 
     @property
@@ -77,6 +139,14 @@ class SnapshotResult:
     ``trajectory_kw``: set points per iteration (rows 0..last, columns generators);
     ``converged_at`` / ``first_congestion``: iterations (None if never);
     ``overflow_kw``: final overflow per limited line (max(|flow| - U, 0)).
+
+    Status semantics: ``converged`` means the dynamics came to rest (the stopping rule of
+    :mod:`popdispatch.integrate`) and, in a mode that claims the DC-OPF (exact), that the end
+    state passes the DC-OPF's KKT check (:func:`kkt_violations`). A run of such a mode that
+    came to rest at a state failing the check is ``stalled``: ``converged_at`` is then None,
+    ``rest_at`` the iteration it came to rest and ``stall_reason`` says which condition failed.
+    Paper mode claims only a rest point of the paper's dynamics (its rules do not land on the
+    DC-OPF, docs/paper-mode.md), so its ``converged`` is never checked against the KKT system.
     """
 
     minute: int
@@ -91,6 +161,8 @@ class SnapshotResult:
     wall_seconds: float
     profile_source: str
     infeasible: bool = False
+    stall_reason: str | None = None
+    rest_at: int | None = None
 
     @property
     def setpoints_kw(self) -> np.ndarray:
@@ -98,14 +170,25 @@ class SnapshotResult:
 
     @property
     def status(self) -> str:
-        """``"converged"``, ``"not_converged"`` or ``"infeasible"`` (prices ran away)."""
+        """``"converged"``, ``"stalled"`` (at rest, not the DC-OPF: see ``stall_reason``),
+        ``"not_converged"`` or ``"infeasible"`` (prices ran away)."""
         if self.infeasible:
             return "infeasible"
+        if self.stall_reason is not None:
+            return "stalled"
         return "converged" if self.converged_at is not None else "not_converged"
 
     @property
     def iterations(self) -> int:
         return len(self.trajectory_kw) - 1
+
+
+def _lookup(get: Callable, name: str, option: str):
+    """``get(name)``, its ``ValueError`` (unknown name) re-raised as :class:`OptionError`."""
+    try:
+        return get(name)
+    except ValueError as error:
+        raise OptionError(str(error), option) from None
 
 
 def initial_shares(problem: DispatchProblem, x0: str | dict[str, float], minute: int) -> np.ndarray:
@@ -159,6 +242,26 @@ class Engine:
         )
         self.h_try = integrator.dt
 
+    @property
+    def kkt_tolerances(self) -> KktTolerances:
+        """Tolerances of the KKT check, from the integrator in force and the revision gain."""
+        return KktTolerances.of(self.settings.stepping, self.settings.fitness.gain)
+
+    def stall_reasons(
+        self, minutes: np.ndarray, p_mw: np.ndarray, z: np.ndarray, rested: np.ndarray
+    ) -> list[str | None]:
+        """Per minute: why a run that came to rest (``rested``) is not at the DC-OPF, in a
+        mode that claims it (else None everywhere)."""
+        reasons: list[str | None] = [None] * len(minutes)
+        if not self.mode.claims_dc_opf or not np.any(rested):
+            return reasons
+        rows = np.flatnonzero(rested)
+        checked = kkt_violations(self.problem, minutes[rows], p_mw[rows], z[rows],
+                                 self.kkt_tolerances)  # fmt: skip
+        for r, reason in zip(rows, checked, strict=True):
+            reasons[r] = reason
+        return reasons
+
     def _kernel_settings(self, integrator: Integrator) -> tuple:
         return integrator.settings(integrator.tol_kw / KW_PER_MW, self.z_cap)
 
@@ -185,7 +288,7 @@ class Engine:
         """Compile (or load from the disk cache) the kernels outside any timed region."""
         z, h_try = self.z.copy(), self.h_try
         self.run_minute(x.copy(), minute, max_iterations=1)
-        self.run_day_chunk(x.copy(), np.array([minute]), _DayArrays.empty(1, len(x)))
+        self.run_day_chunk(x.copy(), np.array([minute]), _DayArrays.empty(1, len(x), len(z)))
         self.z, self.h_try = z, h_try
 
     def run_minute(
@@ -240,16 +343,18 @@ class _DayArrays:
     setpoints: np.ndarray
     iterations: np.ndarray
     converged_at: np.ndarray
+    states: np.ndarray  # controller states at each minute's end (exact mode's prices)
     last_demand: float = 0.0
 
     @classmethod
-    def empty(cls, minutes: int, n: int) -> _DayArrays:
+    def empty(cls, minutes: int, n: int, n_states: int) -> _DayArrays:
         return cls(
-            np.zeros((minutes, n)), np.zeros(minutes, np.int64), np.zeros(minutes, np.int64)
-        )
+            np.zeros((minutes, n)), np.zeros(minutes, np.int64), np.zeros(minutes, np.int64),
+            np.zeros((minutes, n_states)),
+        )  # fmt: skip
 
-    def chunk_views(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return self.setpoints, self.iterations, self.converged_at
+    def chunk_views(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return self.setpoints, self.iterations, self.converged_at, self.states
 
 
 def limited_flows_mw(problem: DispatchProblem, p_mw: np.ndarray, minute: int) -> np.ndarray:
@@ -268,6 +373,132 @@ def overflow_kw(problem: DispatchProblem, p_mw: np.ndarray, minute: int) -> np.n
     return np.maximum(np.abs(flows) - problem.limit, 0.0) * KW_PER_MW
 
 
+@dataclass(frozen=True)
+class KktTolerances:
+    """Tolerances of the DC-OPF KKT check, derived from the integrator that ran (see
+    :func:`kkt_violations`). ``power_mw``: on bounds, overflow and slack, MW; ``flow_gap``:
+    on marginal-cost gap times movable power, EUR/MW * MW (= EUR/h)."""
+
+    power_mw: float
+    flow_gap: float
+
+    @classmethod
+    def of(cls, integrator: Integrator, gain: float) -> KktTolerances:
+        """``power_mw = tol_kw``; ``flow_gap = tol_kw / (gain * window * dt)`` (see
+        :func:`kkt_violations`)."""
+        tol_mw = integrator.tol_kw / KW_PER_MW
+        return cls(tol_mw, tol_mw / (max(gain, 1e-300) * integrator.window * integrator.dt))
+
+
+def kkt_violations(
+    problem: DispatchProblem,
+    minutes: np.ndarray,
+    p_mw: np.ndarray,
+    z: np.ndarray,
+    tol: KktTolerances,
+) -> list[str | None]:
+    """Per minute, why set points ``p_mw`` (minutes x generators, MW) and controller prices
+    ``z`` (minutes x 2 limited lines, EUR/MW: upward then downward) are *not* a KKT point of the
+    DC-OPF (paper eq. 1), or ``None`` where they are, within ``tol``.
+
+    With ``nu = z_up - z_down`` and ``D_ki = 1`` for generator ``i`` below line ``k``, the
+    locational marginal cost is ``lmc_i = b_i + 2 c_i p_i - (D^T nu)_i`` (EUR/MW; the exact
+    mode's fitness is ``gain * (B - lmc_i)`` up to a constant, docs/exact-mode.md). KKT of
+    eq. 1 (flows ``load_flow - D p``):
+
+    1. primal feasibility: ``Pmin <= p <= Pmax`` and ``|flow_k| <= U_k``, within ``power_mw``;
+    2. dual feasibility and complementarity: ``z >= 0`` (the controllers project), and a
+       positive price only on a line-direction at its limit (slack at most ``power_mw``);
+    3. stationarity: one value ``lambda`` with ``lmc_i = lambda`` for generators strictly
+       inside their limits, ``lmc_i <= lambda`` at Pmax and ``>= lambda`` at Pmin. Equivalently
+       no *giver* ``j`` (above Pmin by more than ``power_mw``) has a higher ``lmc`` than a
+       *taker* ``i`` (below Pmax by more than ``power_mw``).
+
+    Tolerance of 3: on the complete graph the capacity-constrained Smith dynamics move power
+    from giver ``j`` to the cheapest taker ``i`` at ``gain * (lmc_j - lmc_i) * (p_j - Pmin_j)``
+    MW/s (receiver weight 1, sender weight its movable power), and ``i`` only receives. The
+    stopping rule accepts a state whose window means move at most ``tol_kw`` per window of
+    ``window * dt`` seconds; so every giver-taker pair of a state it may accept has
+    ``(lmc_j - lmc_i) (p_j - Pmin_j) <= tol_kw / (gain * window * dt)`` = ``flow_gap``. A gap
+    beyond that is a pair the complete graph would still trade: the state is a rest point of
+    the run's dynamics (e.g. distributed Smith on a sparse graph) but not the DC-OPF. The
+    powers' tolerance is the convergence criterion's residual, ``tol_kw``.
+    """
+    rows = np.asarray(minutes, dtype=np.int64) - 1
+    p_mw, z = np.atleast_2d(p_mw), np.atleast_2d(z)
+    n_lines = len(problem.limit)
+    down = problem.down
+    nu = z[:, :n_lines] - z[:, n_lines:]
+    lmc = problem.b + 2.0 * problem.c * p_mw - nu @ down
+    flow = problem.load_flow[rows] - p_mw @ down.T
+    online = problem.online[rows]
+    lo = np.where(online, problem.pmin, 0.0)
+    hi = np.where(online, problem.pmax, 0.0)
+    reasons: list[str | None] = []
+    for r in range(len(rows)):
+        reasons.append(
+            _bounds_violation(problem, p_mw[r], lo[r], hi[r], tol)
+            or _price_violation(problem, flow[r], z[r], tol)
+            or _stationarity_violation(problem, p_mw[r], lmc[r], lo[r], hi[r], online[r], tol)
+        )
+    return reasons
+
+
+def _bounds_violation(problem, p, lo, hi, tol: KktTolerances) -> str | None:
+    outside = (p < lo - tol.power_mw) | (p > hi + tol.power_mw)
+    if not outside.any():
+        return None
+    i = int(np.argmax(outside))
+    return (
+        f"{problem.generators[i]} at {p[i] * KW_PER_MW:.6g} kW is outside its limits "
+        f"[{lo[i] * KW_PER_MW:g}, {hi[i] * KW_PER_MW:g}] kW"
+    )
+
+
+def _line_name(problem: DispatchProblem, k: int) -> str:
+    row = problem.feeder.lines.iloc[int(problem.lines[k])]
+    return f"line {int(row.from_bus)}-{int(row.to_bus)}"
+
+
+def _price_violation(problem, flow, z, tol: KktTolerances) -> str | None:
+    n_lines = len(problem.limit)
+    for k in range(n_lines):
+        for sign, price, direction in ((1.0, z[k], "+"), (-1.0, z[n_lines + k], "-")):
+            excess = sign * flow[k] - problem.limit[k]
+            if excess > tol.power_mw:
+                return f"{_line_name(problem, k)} is {excess * KW_PER_MW:.3g} kW over its limit"
+            if price > 0.0 and excess < -tol.power_mw:
+                return (
+                    f"{_line_name(problem, k)} has price {price:.4g} EUR/MWh ({direction}) but "
+                    f"is {-excess * KW_PER_MW:.3g} kW below its limit"
+                )
+    return None
+
+
+def _where(p, lo, hi, i, tol: KktTolerances) -> str:
+    if p[i] >= hi[i] - tol.power_mw:
+        return "at Pmax"
+    return "at Pmin" if p[i] <= lo[i] + tol.power_mw else "interior"
+
+
+def _stationarity_violation(problem, p, lmc, lo, hi, online, tol: KktTolerances) -> str | None:
+    givers = online & (p > lo + tol.power_mw)
+    takers = online & (p < hi - tol.power_mw)
+    if not givers.any() or not takers.any():
+        return None
+    i = int(np.flatnonzero(takers)[np.argmin(lmc[takers])])
+    score = np.where(givers, (lmc - lmc[i]) * (p - lo), -np.inf)
+    j = int(np.argmax(score))
+    if score[j] <= tol.flow_gap:
+        return None
+    names = problem.generators
+    return (
+        f"rest point is not a KKT point of the DC-OPF: {names[j]} {_where(p, lo, hi, j, tol)} "
+        f"has marginal cost {lmc[j]:.6f} EUR/MWh (with line prices) above the "
+        f"{lmc[i]:.6f} of {names[i]} {_where(p, lo, hi, i, tol)}, which could take more"
+    )
+
+
 def run_snapshot(
     problem: DispatchProblem, minute: int, settings: RunSettings | None = None
 ) -> SnapshotResult:
@@ -281,19 +512,24 @@ def run_snapshot(
     wall = time.perf_counter() - start
     final = setpoints[-1]
     flows = limited_flows_mw(problem, final, minute)
+    rested = converged_at >= 0
+    reason = engine.stall_reasons(np.array([minute]), final[None], engine.z[None],
+                                  np.array([rested]))[0]  # fmt: skip
     return SnapshotResult(
         minute=minute,
         demand_kw=float(problem.demand[minute - 1] * KW_PER_MW),
         settings=settings,
         generators=problem.generators,
         trajectory_kw=setpoints * KW_PER_MW,
-        converged_at=None if converged_at < 0 else int(converged_at),
+        converged_at=int(converged_at) if rested and reason is None else None,
         first_congestion=None if first_congestion < 0 else int(first_congestion),
         overflow_kw=overflow_kw(problem, final, minute),
         flows_kw=flows * KW_PER_MW,
         wall_seconds=wall,
         profile_source=problem.profile_source,
         infeasible=converged_at == INFEASIBLE,
+        stall_reason=reason,
+        rest_at=int(converged_at) if rested else None,
     )
 
 
@@ -304,6 +540,11 @@ class DayResult:
     ``setpoints_kw`` (minutes, generators); ``iterations`` and ``converged`` per minute;
     ``overflow_kw`` (minutes, limited lines); ``cost`` per minute (EUR/h, Table I's units).
     ``wall_seconds`` is the engine's own time (no imports, data loading or DC-OPF).
+
+    Per minute, as for a snapshot (:class:`SnapshotResult`): ``converged`` means at rest and,
+    in a mode that claims the DC-OPF, passing its KKT check; ``stalled`` means at rest but
+    failing it (``stall_reasons`` maps such 1-based minutes to the reason). A stalled minute
+    is never counted as converged.
     """
 
     minutes: np.ndarray
@@ -319,13 +560,21 @@ class DayResult:
     wall_seconds: float
     profile_source: str
     infeasible: np.ndarray | None = None
+    stalled: np.ndarray | None = None
+    stall_reasons: dict[int, str] = field(default_factory=dict)
 
     @property
     def status(self) -> str:
-        """``"infeasible"`` if any minute was, ``"converged"`` if every minute converged."""
+        """``"infeasible"`` if any minute was, else ``"converged"`` if every minute converged,
+        else ``"stalled"`` if some minute came to rest away from the DC-OPF, else
+        ``"not_converged"``."""
         if self.infeasible is not None and self.infeasible.any():
             return "infeasible"
-        return "converged" if self.converged.all() else "not_converged"
+        if self.converged.all():
+            return "converged"
+        if self.stalled is not None and self.stalled.any():
+            return "stalled"
+        return "not_converged"
 
 
 #: Minutes per call of the compiled day loop when progress is reported.
@@ -351,14 +600,15 @@ def run_day(
     engine = Engine(problem, settings)
     x = initial_shares(problem, settings.x0, int(minutes[0]))
     engine.warm_up(x, int(minutes[0]))
-    out = _DayArrays.empty(len(minutes), problem.n_generators)
+    out = _DayArrays.empty(len(minutes), problem.n_generators, len(engine.z))
     chunk = PROGRESS_CHUNK if progress is not None else len(minutes)
     start = time.perf_counter()
     for first in range(0, len(minutes), chunk):
         part = slice(first, first + chunk)
         view = _DayArrays(
-            out.setpoints[part], out.iterations[part], out.converged_at[part], out.last_demand
-        )
+            out.setpoints[part], out.iterations[part], out.converged_at[part], out.states[part],
+            out.last_demand,
+        )  # fmt: skip
         engine.run_day_chunk(x, minutes[part], view)
         out.last_demand = view.last_demand
         if progress is not None:
@@ -368,6 +618,9 @@ def run_day(
     setpoints = out.setpoints
     overflow = np.stack([overflow_kw(problem, setpoints[r], m) for r, m in enumerate(minutes)])
     online = problem.online[minutes - 1]
+    rested = out.converged_at >= 0
+    reasons = engine.stall_reasons(minutes, setpoints, out.states, rested)
+    stalled = np.array([r is not None for r in reasons], dtype=bool)
     return DayResult(
         minutes=minutes,
         settings=settings,
@@ -375,11 +628,13 @@ def run_day(
         demand_kw=problem.demand[minutes - 1] * KW_PER_MW,
         setpoints_kw=setpoints * KW_PER_MW,
         iterations=out.iterations,
-        converged=out.converged_at >= 0,
+        converged=rested & ~stalled,
         overflow_kw=overflow,
         cost=generation_cost(problem, setpoints, online),
         online=online,
         wall_seconds=wall,
         profile_source=problem.profile_source,
         infeasible=out.converged_at == INFEASIBLE,
+        stalled=stalled,
+        stall_reasons={int(m): r for m, r in zip(minutes, reasons, strict=True) if r},
     )
