@@ -81,10 +81,12 @@ def opf_summary(
 
 
 def snapshot_status(result: SnapshotComparison) -> str:
-    """``infeasible`` (no DC-OPF exists), ``converged`` or ``not_converged``."""
+    """``infeasible`` (no DC-OPF exists), ``converged``, ``stalled`` (at rest at a state that
+    fails the DC-OPF's KKT check, exact mode; see ``SnapshotResult``) or ``not_converged``."""
     if result.opf.status != "optimal":
         return "infeasible"
-    return "converged" if result.run.converged_at is not None else "not_converged"
+    status = result.run.status
+    return status if status in ("converged", "stalled") else "not_converged"
 
 
 def snapshot_summary(
@@ -131,10 +133,13 @@ def _cost(problem: DispatchProblem, p_kw: np.ndarray) -> float:
 
 
 def day_status(result: DayComparison) -> str:
-    """``infeasible`` if some minute has no DC-OPF, ``converged`` if every minute converged."""
+    """``infeasible`` if some minute has no DC-OPF, ``converged`` if every minute converged
+    (a stalled minute never counts), ``stalled`` if some minute came to rest away from the
+    DC-OPF (see ``DayResult``), else ``not_converged``."""
     if any(o.status != "optimal" for o in result.opf):
         return "infeasible"
-    return "converged" if bool(result.run.converged.all()) else "not_converged"
+    status = result.run.status
+    return status if status in ("converged", "stalled") else "not_converged"
 
 
 def day_summary(
