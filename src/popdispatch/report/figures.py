@@ -8,10 +8,13 @@ in kW, fitness in EUR/MW (the engine's units: Table I's coefficients apply to MW
 from __future__ import annotations
 
 import functools
+import textwrap
 
 import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
 from popdispatch.feeder.reduction import ReducedFeeder
 from popdispatch.game.controllers import broadcast_signals, overflow_signal
@@ -91,7 +94,7 @@ def fitness_figure(
     base = -(problem.b[k] + 2 * problem.c[k] * p)
     bar = barrier(p, np.full_like(p, pmin), np.full_like(p, pmax), float(params.m))
     fitness = base + bar
-    fig, axes = new_figure(SINGLE, 2.5)
+    fig, axes = new_figure(SINGLE, 2.7)
     ax = axes[0, 0]
     p_kw = p * KW_PER_MW
     ax.plot(p_kw, fitness, color="black", label="fitness $f_i - B$")
@@ -110,7 +113,7 @@ def fitness_figure(
     ax.set_xlabel(f"output of {generator} (bus {problem.feeder.generators.bus[generator]}), kW")
     ax.set_ylabel("fitness $-$ B, EUR/MW")
     ax.set_title(f"Fitness of generator node {generator}")
-    ax.legend(loc="center")
+    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=2)
     return fig
 
 
@@ -144,7 +147,10 @@ def _draw_network(ax, reduced: ReducedFeeder, widths: np.ndarray, colors) -> Non
     ax.set_yticks([])
 
 
-def _draw_loads_and_generators(ax, reduced: ReducedFeeder, labels: dict[str, str]) -> None:
+def _draw_loads_and_generators(
+    ax, reduced: ReducedFeeder, labels: dict[str, str], offset: tuple[float, float] = (5, 4)
+) -> None:
+    """Loads, the source and the generators (labelled at ``offset`` points from the marker)."""
     original = reduced.original
     load_xy = original.buses.loc[original.loads.bus, ["x", "y"]].to_numpy()
     ax.scatter(
@@ -168,8 +174,10 @@ def _draw_loads_and_generators(ax, reduced: ReducedFeeder, labels: dict[str, str
         ax.annotate(
             labels.get(name, name),
             (x, y),
-            xytext=(5, 4),
+            xytext=offset,
             textcoords="offset points",
+            ha="left" if offset[0] >= 0 else "right",
+            va="bottom" if offset[1] >= 0 else "top",
             fontsize=7,
             zorder=6,
             bbox=LABEL_BOX,
@@ -218,7 +226,7 @@ def congestion_detection_figure(
     ``setpoints_kw`` is the dispatch whose flows are measured (``situation`` says which).
     Lines are coloured by their side of the most overloaded limited line; the controllers at its
     two ends are marked with their eq.-8 values, and every generator with the sum of the signals
-    it receives (EUR/MW).
+    it receives (EUR/MW). A caption under the panels says what the numbers are.
     """
     reduced = problem.feeder
     flows = all_flows_kw(problem, setpoints_kw, minute, load_kw)
@@ -231,24 +239,55 @@ def congestion_detection_figure(
     is_limited = np.isin(np.arange(reduced.n_lines), problem.lines)
     colors = np.where(_subtree_lines(reduced, line) == child_sends, PENALTY, INCENTIVE)
     colors = np.where(is_limited, "black", colors)
-    fig, axes = new_figure(DOUBLE, 4.6, ncols=2)
+    fig = Figure(figsize=(DOUBLE, 5.8), layout="constrained")
+    grid = fig.add_gridspec(2, 2, height_ratios=[4.0, 1.4])
+    overview, zoom, foot = (fig.add_subplot(g) for g in (grid[0, 0], grid[0, 1], grid[1, :]))
     labels = {n: f"{n} {s:+.1f}" for n, s in zip(problem.generators, signal, strict=True)}
-    for ax in axes[0]:
+    for ax, offset in ((overview, (5, 4)), (zoom, (-7, -7))):
         _draw_network(ax, reduced, np.where(is_limited, 3.0, 0.9), colors)
-        _draw_loads_and_generators(ax, reduced, labels)
-    zoom = axes[0, 1]
+        _draw_loads_and_generators(ax, reduced, labels, offset)
     _zoom_to(zoom, problem.feeder.original.buses, _path_buses(problem))
-    _draw_controllers(zoom, problem, line, limited[k], C)
+    controllers = _draw_controllers(zoom, problem, line, limited[k], C)
+    limit_kw = problem.limit[k] * KW_PER_MW
+    overview.plot([], [], color="black", lw=3, label=f"limited path (U = {limit_kw:g} kW)")
+    overview.plot([], [], color=PENALTY, lw=1.5, label="penalty side (sends the overflow)")
+    overview.plot([], [], color=INCENTIVE, lw=1.5, label="incentive side")
+    handles = overview.get_legend_handles_labels()[0] + controllers
+    foot.axis("off")
+    foot.legend(handles=handles, loc="upper center", ncols=3)
+    foot.text(
+        0.5,
+        0.0,
+        signal_caption(abs(limited[k]), limit_kw, C),
+        transform=foot.transAxes,
+        ha="center",
+        va="bottom",
+        fontsize=7,
+    )
     row = reduced.lines.loc[line]
-    ax = axes[0, 0]
-    ax.plot([], [], color="black", lw=3, label=f"limited path (U = {problem.limit[k] * 1e3:g} kW)")
-    ax.plot([], [], color=PENALTY, lw=1.5, label="penalty side (sends the overflow)")
-    ax.plot([], [], color=INCENTIVE, lw=1.5, label="incentive side")
-    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=3)
-    ax.set_title("Signals received, EUR/MW")
-    zoom.set_title(f"Line {int(row.from_bus)}-{int(row.to_bus)}: {abs(limited[k]):.1f} kW")
+    overview.set_title("Signal each generator receives, EUR/MW")
+    zoom.set_title(
+        f"Most overloaded line {int(row.from_bus)}-{int(row.to_bus)}: "
+        f"{abs(limited[k]):.1f} kW, limit {limit_kw:g} kW"
+    )
     fig.suptitle(f"Congestion detection ({situation})", fontsize=9)
     return fig
+
+
+def signal_caption(flow_kw: float, limit_kw: float, C: float) -> str:
+    """What the numbers of the congestion-detection figure are: quantity, unit and sign."""
+    mw = (flow_kw - limit_kw) / KW_PER_MW
+    value = mw * C
+    text = (
+        "Numbers: congestion signals s (eq. 8) in EUR/MW, added to a generator's fitness. "
+        "Negative = penalty (the generator is pushed to produce less), positive = incentive "
+        "(pushed to produce more).\nThe two ends of an overloaded line send \u2212(|flow| \u2212 U)"
+        "\u00b7C to the side the flow comes from (penalty) and +(|flow| \u2212 U)\u00b7C to the "
+        f"other side (incentive): ({flow_kw:.1f} \u2212 {limit_kw:g}) kW = {mw:.4f} MW, times "
+        f"C = {C:g} EUR/MW\u00b2, gives \u2213{value:.1f} EUR/MW. A generator receives the "
+        "sum over all overloaded limited lines of the path."
+    )
+    return "\n".join(textwrap.fill(part, 125) for part in text.split("\n"))
 
 
 def _path_buses(problem: DispatchProblem) -> list[int]:
@@ -266,36 +305,31 @@ def _zoom_to(ax, buses, around: list[int], margin_m: float = 20.0) -> None:
     ax.set_ylim(cy - half, cy + half)
 
 
-def _draw_controllers(ax, problem: DispatchProblem, line: int, flow_kw: float, C: float) -> None:
-    """Mark the node controllers at both ends of ``line`` with their eq.-8 values (EUR/MW)."""
+def _draw_controllers(ax, problem: DispatchProblem, line: int, flow_kw: float, C: float) -> list:
+    """Mark the node controllers at both ends of ``line`` (squares coloured by their eq.-8
+    signal); returns legend handles naming each with its value (EUR/MW)."""
     row = problem.feeder.lines.loc[line]
     limit = problem.limit[list(problem.lines).index(line)] * KW_PER_MW
     buses = problem.feeder.original.buses
-    ends = ((int(row.from_bus), flow_kw, (-8, 10)), (int(row.to_bus), -flow_kw, (8, -14)))
-    for bus, measured, offset in ends:
+    handles = []
+    for bus, measured in ((int(row.from_bus), flow_kw), (int(row.to_bus), -flow_kw)):
         value = overflow_signal(measured / KW_PER_MW, limit / KW_PER_MW, float(C))
         kind = "penalty" if value < 0 else "incentive"
         x, y = buses.loc[bus, ["x", "y"]]
-        ax.scatter(
-            x,
-            y,
-            marker="s",
-            s=90,
-            facecolors="none",
-            lw=1.8,
-            zorder=7,
-            edgecolors=PENALTY if value < 0 else INCENTIVE,
+        handles.append(
+            ax.scatter(
+                x,
+                y,
+                marker="s",
+                s=90,
+                facecolors="none",
+                lw=1.8,
+                zorder=7,
+                edgecolors=PENALTY if value < 0 else INCENTIVE,
+                label=f"controller at bus {bus}: sends {value:+.1f} EUR/MW ({kind})",
+            )
         )
-        ax.annotate(
-            f"controller at bus {bus}: {kind} {value:+.1f}",
-            (x, y),
-            xytext=offset,
-            textcoords="offset points",
-            ha="right" if offset[0] < 0 else "left",
-            fontsize=6.5,
-            zorder=8,
-            bbox=LABEL_BOX,
-        )
+    return handles
 
 
 def _subtree_lines(reduced: ReducedFeeder, line: int) -> np.ndarray:
@@ -311,68 +345,170 @@ def _subtree_lines(reduced: ReducedFeeder, line: int) -> np.ndarray:
 
 
 @styled
-def base_day_figure(result: DayComparison, buses: list[int]) -> Figure:
+def base_day_figure(
+    result: DayComparison, buses: list[int], profile_source: str | None = None
+) -> Figure:
     """Generator outputs over the day: dynamics solid, DC-OPF dashed, one panel per generator.
 
-    ``buses``: the original bus of each generator (for the panel titles).
+    ``buses``: the original bus of each generator (for the panel titles). Minutes a generator
+    is offline (``result.run.online``, e.g. ``--event``) are shaded. ``profile_source`` (default
+    the run's) is named in the title: official or synthetic loads.
     """
     run = result.run
     hours = run.minutes / 60.0
     colors = generator_colors(run.generators)
-    fig, axes = new_figure(DOUBLE, 4.2, nrows=2, ncols=3, sharex=True)
+    fig, axes = new_figure(DOUBLE, 4.4, nrows=2, ncols=3, sharex=True)
     opf = result.opf_kw
+    online = np.asarray(run.online, dtype=bool).reshape(len(hours), -1)
     for k, (ax, name) in enumerate(zip(axes.flat, run.generators, strict=False)):
+        _shade_offline(ax, run.minutes, online[:, k])
         ax.plot(hours, run.setpoints_kw[:, k], color=colors[name], label="dynamics")
         ax.plot(hours, opf[:, k], color="black", ls="--", lw=0.7, alpha=0.8, label="DC-OPF")
         ax.set_xticks(range(0, 25, 6))
-        ax.set_title(f"{name} (bus {buses[k]})")
+        ax.set_title(f"{name} (bus {buses[k]})" + ("" if online[:, k].all() else ", outage"))
         ax.set_ylabel("output, kW")
     for ax in axes[-1]:
         ax.set_xlabel("time of day, h")
-    axes[0, 0].legend(loc="upper left")
+    handles = [
+        Line2D([], [], color="grey", label="dynamics (colour per generator)"),
+        Line2D([], [], color="black", ls="--", lw=0.7, label="DC-OPF"),
+    ]
+    if not online.all():
+        handles.append(Patch(**OFFLINE, label="generator offline (event)"))
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles))
+    source = profile_source or run.profile_source
     fig.suptitle(
-        f"Generator output over the day: {run.settings.dynamics} dynamics (solid), DC-OPF (dashed)",
+        f"Generator output over the day: {run.settings.dynamics} dynamics (solid), "
+        f"DC-OPF (dashed)\nloads: {source}",
         fontsize=9,
     )
     return fig
 
 
+OFFLINE = {"facecolor": "#bbbbbb", "alpha": 0.5, "hatch": "///", "edgecolor": "#777777", "lw": 0}
+
+
+def _shade_offline(ax, minutes: np.ndarray, online: np.ndarray) -> None:
+    """Shade the spans of consecutive simulated minutes where the generator is offline."""
+    off = np.concatenate([[False], ~online, [False]]).astype(int)
+    starts, stops = np.flatnonzero(np.diff(off) == 1), np.flatnonzero(np.diff(off) == -1)
+    for a, b in zip(starts, stops, strict=True):
+        ax.axvspan((minutes[a] - 1) / 60.0, minutes[b - 1] / 60.0, zorder=0, **OFFLINE)
+
+
 def _iteration_axes(ax, run, opf_kw, colors) -> None:
+    """Set points per iteration (solid, one marker shape per generator, markers staggered so
+    lines on top of each other stay visible), the DC-OPF (dashed; coinciding values get
+    interleaved dashes) and the generator names at the right end, spread apart."""
     iterations = np.arange(run.iterations + 1)
+    n = len(run.generators)
+    every = max(run.iterations // 8, 1)
     for k, name in enumerate(run.generators):
-        ax.plot(iterations, run.trajectory_kw[:, k], color=colors[name], label=name)
-        if np.isfinite(opf_kw[k]):
-            ax.axhline(opf_kw[k], color=colors[name], ls="--", lw=0.9)
+        ax.plot(
+            iterations,
+            run.trajectory_kw[:, k],
+            color=colors[name],
+            marker=MARKERS[k % len(MARKERS)],
+            markersize=3.5,
+            markevery=(k * every // n, every),
+            label=name,
+        )
+    for k, dashes in _interleaved_dashes(opf_kw).items():
+        ax.axhline(opf_kw[k], color=colors[run.generators[k]], ls=dashes, lw=0.9)
+    _end_labels(ax, run.trajectory_kw[-1], run.generators, colors)
     ax.set_xlabel("iteration (0.01 s each)")
     ax.set_ylabel("set point, kW")
     ax.set_xlim(0, run.iterations)
 
 
+MARKERS = ["o", "s", "^", "D", "v", "P", "X", "*"]
+
+
+def _interleaved_dashes(values_kw: np.ndarray, tol_kw: float = 0.05) -> dict[int, tuple]:
+    """A dash pattern per finite value; values within ``tol_kw`` of each other take turns
+    (dash 4 pt, gap 2 pt, each member offset by 6 pt), so every colour shows."""
+    finite = [k for k in range(len(values_kw)) if np.isfinite(values_kw[k])]
+    dashes: dict[int, tuple] = {}
+    for k in sorted(finite, key=lambda i: values_kw[i]):
+        group = [j for j in finite if abs(values_kw[j] - values_kw[k]) <= tol_kw]
+        member = group.index(k)
+        dashes[k] = (6.0 * member, (4.0, 6.0 * len(group) - 4.0))
+    return dashes
+
+
+def _end_labels(ax, values_kw: np.ndarray, names, colors, gap: float = 0.075) -> None:
+    """Names at the right end of the lines, at their final values, pushed apart vertically
+    (at least ``gap`` of the axes height) so that equal values do not overprint."""
+    lo, hi = ax.get_ylim()
+    span = max(hi - lo, 1e-9)
+    order = np.argsort(values_kw, kind="stable")
+    positions = (np.asarray(values_kw, dtype=float)[order] - lo) / span
+    for i in range(1, len(positions)):
+        positions[i] = max(positions[i], positions[i - 1] + gap)
+    positions -= max(positions[-1] - 1.0, 0.0) if len(positions) else 0.0
+    for slot, k in zip(positions, order, strict=True):
+        ax.annotate(
+            names[k],
+            (1.0, values_kw[k]),
+            xycoords=("axes fraction", "data"),
+            xytext=(8.0, slot),
+            textcoords=("offset points", "axes fraction"),
+            fontsize=6.5,
+            color=colors[names[k]],
+            va="center",
+            annotation_clip=False,
+            arrowprops={
+                "arrowstyle": "-",
+                "color": colors[names[k]],
+                "lw": 0.5,
+                "relpos": (0.0, 0.5),
+                "shrinkA": 1,
+                "shrinkB": 0,
+            },
+        )
+
+
 @styled
 def congestion_figure(result: SnapshotComparison, title: str | None = None) -> Figure:
-    """Set points per iteration (solid) and the DC-OPF (dashed); detection and convergence."""
+    """Set points per iteration (solid) and the DC-OPF (dashed); detection and convergence
+    marked by vertical lines labelled in a band above the curves."""
     run = result.run
-    fig, axes = new_figure(SINGLE, 3.0)
+    fig, axes = new_figure(SINGLE, 3.2)
     ax = axes[0, 0]
+    _headroom(ax, run.trajectory_kw, result.opf.p_kw)
     _iteration_axes(ax, run, result.opf.p_kw, generator_colors(run.generators))
-    for it, label, style in (
-        (run.first_congestion, "congestion detected", ":"),
-        (run.converged_at, "converged", "-."),
+    for row, (it, label, style) in enumerate(
+        (
+            (run.first_congestion, "congestion detected", ":"),
+            (run.converged_at, "converged", "-."),
+        )
     ):
         if it is not None:
+            right = it > 0.6 * run.iterations  # label on the side with room
             ax.axvline(it, color="grey", ls=style, lw=1.0)
             ax.annotate(
-                f"{label}\n(iteration {it})",
-                (it, 0.55),
+                f"{label} (iteration {it})",
+                (it, 0.985 - 0.075 * row),
                 xycoords=("data", "axes fraction"),
-                xytext=(3, 0),
+                xytext=(-3 if right else 3, 0),
                 textcoords="offset points",
+                ha="right" if right else "left",
+                va="top",
                 fontsize=6.5,
-                bbox=LABEL_BOX,
             )
     fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=3)
     ax.set_title(title or f"Minute {run.minute}: set points (solid), DC-OPF (dashed)")
     return fig
+
+
+def _headroom(ax, trajectory_kw: np.ndarray, opf_kw: np.ndarray, band: float = 0.17) -> None:
+    """y limits with a free band of ``band`` (axes fraction) above every curve, for labels."""
+    values = np.concatenate([np.ravel(trajectory_kw), np.ravel(opf_kw)])
+    values = values[np.isfinite(values)]
+    lo, hi = float(values.min()), float(values.max())
+    pad = 0.05 * max(hi - lo, 1.0)
+    lo, hi = lo - pad, hi + pad
+    ax.set_ylim(lo, hi + band / (1 - band) * (hi - lo))
 
 
 @styled
@@ -380,6 +516,8 @@ def extinction_figure(result: ExtinctionResult) -> Figure:
     """Replicator against Smith dynamics from the same state with one generator at zero share."""
     colors = generator_colors(result.smith.generators)
     fig, axes = new_figure(DOUBLE, 2.8, ncols=2, sharey=True)
+    runs = [result.replicator.trajectory_kw, result.smith.trajectory_kw]
+    _headroom(axes[0, 0], np.concatenate(runs), result.opf.p_kw, band=0.0)
     for ax, run, title in (
         (axes[0, 0], result.replicator, "replicator"),
         (axes[0, 1], result.smith, "Smith"),
