@@ -153,10 +153,20 @@ def test_random_feeders_exact_equilibrium_is_the_qp_solution(seed, n_buses, n_ge
         return
     # several generators interior at once (one per binding line) converge on the time scale of
     # their tiny cost curvature: judged at the end of the 10-minute horizon if not converged
-    assert run.status != "infeasible"
+    assert run.status in ("converged", "not_converged")  # complete graph: never stalled
     assert run.overflow_kw.max(initial=0.0) <= 1e-3
     run_cost = generation_cost(problem, run.setpoints_kw / 1000.0)
-    assert run_cost - opf.cost <= 1e-6 * opf.cost + 1e-9  # never costlier than the optimum
+    # Cost tolerance from the set-point tolerance (issue 10, item 1; 1e-6 relative was a
+    # magic number and failed at 1.16e-6). With p = p* + d, sum d = 0 (the shares keep the
+    # demand): C(p) - C(p*) = sum_i C_i'(p*_i) d_i + sum_i c_i d_i^2
+    #                      <= sum_i |b_i + 2 c_i p*_i| |d_i| + sum_i c_i d_i^2.
+    # A converged run stops with every set point within tol_kw (window means and projected
+    # tail); one judged at the horizon is held to the 1e-3 kW of the set-point check below.
+    # Clarabel's own relative gap (1e-10) covers the yardstick's error.
+    d_mw = (integrator.tol_kw if run.status == "converged" else 1e-3) / 1000.0
+    marginal = np.abs(problem.b + 2.0 * problem.c * opf.p_kw / 1000.0)
+    allowed = float(marginal.sum() * d_mw + problem.c.sum() * d_mw**2) + 1e-10 * abs(opf.cost)
+    assert run_cost - opf.cost <= allowed  # never costlier than the optimum beyond that
     if strict_complementarity_margin(problem, opf) >= 0.02:
         assert np.abs(run.setpoints_kw - opf.p_kw).max() <= 1e-3
     # else a near-tie (a generator at a limit whose reduced cost is almost zero): the dynamics
@@ -217,3 +227,62 @@ def test_projection_to_box_is_feasible_and_idempotent(seed, n):
     assert abs(y.sum() - 1.0) < 1e-9
     assert np.all(y >= lo - 1e-12) and np.all(y <= hi + 1e-12)
     np.testing.assert_allclose(project_to_box(y, lo, hi), y, atol=1e-9)
+
+
+# -- degenerate optima (issue 10, item 8) --------------------------------------------------------
+
+
+def line_feeder(generators: list[tuple], demand_kw: float):
+    """A 5-bus line feeder, one load at the far end, no line limits; ``generators`` as rows of
+    :func:`popdispatch.feeder.generators.make_fleet` on buses 1-3."""
+    from popdispatch.feeder.generators import make_fleet
+    from popdispatch.feeder.model import Feeder
+
+    index = pd.Index(np.arange(1, 6), name="bus")
+    buses = pd.DataFrame({"x": np.arange(5.0), "y": 0.0}, index=index)
+    lines = pd.DataFrame(
+        {"from_bus": np.arange(1, 5), "to_bus": np.arange(2, 6), "length_km": 0.01,
+         "r_ohm": 0.01, "x_ohm": 0.001, "limit_kw": np.inf},
+        index=pd.Index([f"L{i}" for i in range(1, 5)], name="line"),
+    )  # fmt: skip
+    loads = pd.DataFrame({"bus": [5]}, index=pd.Index(["LD"], name="load"))
+    feeder = Feeder("line", buses, lines, loads, 1, make_fleet(generators))
+    profiles = single_minute_profiles(1, pd.Series([demand_kw], index=loads.index), "degenerate")
+    return build_problem(reduce_feeder(feeder), profiles)
+
+
+#: G1 dear, G2 and G3 cheap, 10 kW each (bus, a, b EUR/MW, c EUR/MW^2, Pmin kW, Pmax kW).
+CHEAP_PAIR = [(1, 0, 5.0, 0.02, 0, 10), (2, 0, 1.0, 0.01, 0, 10), (3, 0, 2.0, 0.02, 0, 10)]
+#: G2 is optimal exactly at Pmax with zero reduced cost at 15 kW: b + 2 c p = 1.4 EUR/MW for
+#: G2 at 10 kW and G3 at 5 kW (curvatures large enough that the split is not the slow mode).
+TIE_AT_PMAX = [(1, 0, 5.0, 0.02, 0, 10), (2, 0, 1.0, 20.0, 0, 10), (3, 0, 1.0, 40.0, 0, 10)]
+
+DEGENERATE = {
+    # demand = capacity of the cheap pair: every generator at a limit (primal degenerate);
+    # the room fraction of the old receiver weight made G1 decay like 1/t (6000 iterations)
+    "20kW-on-10+10kW": (CHEAP_PAIR, 20.0, [0.0, 10.0, 10.0]),
+    "20kW-on-10+10kW-x0-capacity": (CHEAP_PAIR, 20.0, [0.0, 10.0, 10.0]),
+    "zero-reduced-cost-at-Pmax": (TIE_AT_PMAX, 15.0, [0.0, 10.0, 5.0]),
+}
+
+
+@pytest.mark.parametrize("case", DEGENERATE, ids=list(DEGENERATE))
+def test_degenerate_optima_converge_in_bounded_iterations(case):
+    generators, demand_kw, optimum_kw = DEGENERATE[case]
+    problem = line_feeder(generators, demand_kw)
+    x0 = "capacity" if case.endswith("capacity") else "uniform"
+    run = run_snapshot(problem, 1, RunSettings(mode="exact", x0=x0))
+    tol_kw = run.settings.stepping.tol_kw
+    assert run.status == "converged", run.stall_reason
+    assert run.converged_at <= 100  # measured: 10 (cheap pair), 24 (tie at Pmax)
+    # the optimum is known by construction: within the run's set-point tolerance
+    assert np.abs(run.setpoints_kw - optimum_kw).max() <= tol_kw
+    # Clarabel (interior point) resolves a degenerate vertex only to about the square root of
+    # its 1e-10 tolerance, in kW (measured 5e-5 kW at the tie): compare costs instead, with the
+    # bound of test_random_feeders_exact_equilibrium_is_the_qp_solution for d = tol_kw
+    opf = solve_opf(problem, 1)
+    d_mw = tol_kw / 1000.0
+    marginal = np.abs(problem.b + 2.0 * problem.c * opf.p_kw / 1000.0)
+    allowed = float(marginal.sum() * d_mw + problem.c.sum() * d_mw**2)
+    assert abs(generation_cost(problem, run.setpoints_kw / 1000.0) - opf.cost) <= allowed
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= 1e-3
