@@ -141,3 +141,58 @@ def test_every_figure_is_written_as_png_and_pdf(reproduction, tmp_path):
         png = (tmp_path / "out" / "figures" / f"{stem}.png").read_bytes()
         pdf = (tmp_path / "out" / "figures" / f"{stem}.pdf").read_bytes()
         assert png.startswith(b"\x89PNG") and pdf.startswith(b"%PDF")
+
+
+# -- differences from the paper (issue 10) ------------------------------------------------------
+
+
+def test_report_explains_every_difference_with_this_runs_numbers(reproduction):
+    from popdispatch.game.problem import KW_PER_MW
+    from popdispatch.scenarios import PEAK_MINUTE
+
+    summary = rp.reproduction_summary(reproduction)
+    report = reproduction_report(summary, ["fig1_fitness"], reproduction)
+    section = report.split("## Differences from the paper")[1].split("## Figures")[0]
+    cong = summary["congestion"]
+    run = reproduction.congestion.run
+    first = run.trajectory_kw[0]
+    problem = reproduction.congestion_problem
+    start_overflow = (np.abs(problem.flows(first / KW_PER_MW, PEAK_MINUTE)) - problem.limit).max()
+    g1 = next(g for g in cong["generators"] if g["name"] == "G1")
+    # detection at iteration 1, not 53, because of the initial state
+    assert f"Congestion detected at iteration {cong['first_congestion_iteration']}" in section
+    assert "not at iteration 53" in section and "initial state" in section
+    assert f"every generator at {first[0]:.2f} kW" in section
+    assert f"overloads the 505-666 path by {start_overflow * KW_PER_MW:.2f} kW" in section
+    # G1 ends below its DC-OPF where the paper's rises
+    assert f"G1 ends at {g1['setpoint_kw']:.2f} kW** (DC-OPF {g1['opf_kw']:.2f} kW)" in section
+    assert "G1 *rises*" in section
+    assert f"G1 starts at {first[0]:.2f} kW" in section
+    # the proportional signal's residual overflow
+    overflow = cong["max_overflow_kw"]
+    assert f"Residual overflow of {overflow:.2f} kW" in section
+    assert f"gives {overflow * reproduction.settings.fitness.C / 1000:.2f} EUR/MW" in section
+    day = summary["base_day"]
+    if day["minutes_within_0_1_kw"] < day["minutes"]:
+        assert f"{day['minutes_within_0_1_kw']} of {day['minutes']} minutes" in section
+
+
+def test_differences_follow_the_numbers_not_the_paper_mode_story(reproduction):
+    """A run that detects at 53, ends on the DC-OPF without overflow gets no such notes."""
+    import copy
+
+    from popdispatch.report.markdown import differences
+
+    summary = copy.deepcopy(rp.reproduction_summary(reproduction))
+    cong = summary["congestion"]
+    cong["first_congestion_iteration"], cong["converged_iteration"] = 53, 201
+    cong["max_overflow_kw"] = 0.0
+    for g in cong["generators"]:
+        g["setpoint_kw"] = g["opf_kw"]
+    day = summary["base_day"]
+    day["minutes_within_0_1_kw"] = day["minutes"]
+    text = differences(summary)
+    assert "Congestion detected" not in text
+    assert "Residual overflow" not in text and "stays" not in text
+    assert "Base day" not in text
+    assert "Agreeing with the paper" in text

@@ -5,6 +5,12 @@ Built from the ``summary.json`` object only, so the table and the JSON can never
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the report is written without importing the engine
+    from popdispatch.report.reproduce import Reproduction
+
 PAPER = {
     "minute_566": "Smith dynamics converge to the DC-OPF",
     "congestion": "detected at iteration 53, converged at iteration 201; G739 penalised, G1 up",
@@ -12,9 +18,8 @@ PAPER = {
     "base_day": "Smith set points converge to the DC-OPF solution (fig. 4)",
 }
 
-PAPER_MODE_NOTE = """ In paper mode the base day does not land on the DC-OPF at
-most minutes: with the paper's discontinuous barrier (eq. 7), generators sliding on their limits
-create rest points of the dynamics away from the economic dispatch (see `docs/paper-mode.md`)."""
+#: What the paper reports for its congestion scenario (section III), compared with ours.
+PAPER_DETECTION, PAPER_CONVERGENCE = 53, 201
 
 FIGURES = {
     "fig1_fitness": "Fitness of a generator node (paper fig. 1)",
@@ -103,8 +108,12 @@ def _table(rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
-def reproduction_report(summary: dict, stems: list[str]) -> str:
-    """The Markdown report of a reproduction (``summary``: the ``summary.json`` object)."""
+def reproduction_report(summary: dict, stems: list[str], rep: Reproduction | None = None) -> str:
+    """The Markdown report of a reproduction (``summary``: the ``summary.json`` object).
+
+    ``rep`` (the run itself) adds what the summary does not hold to the explanations: the
+    initial state of the congestion scenario and the overflow it starts with.
+    """
     rows = [
         minute_566_row(summary["minute_566"]),
         congestion_row(summary["congestion"]),
@@ -125,7 +134,11 @@ Table I's coefficients on MW) divided by 60. "Error" is |set point - DC-OPF| ove
 
 {_table(rows)}
 
-These are the numbers this run produced.{PAPER_MODE_NOTE if summary["mode"] == "paper" else ""}
+These are the numbers this run produced.
+
+## Differences from the paper
+
+{differences(summary, rep)}
 
 ## Figures
 
@@ -134,3 +147,172 @@ These are the numbers this run produced.{PAPER_MODE_NOTE if summary["mode"] == "
 Time series: `base_day.csv` (per minute), `congestion.csv` and `extinction.csv` (per iteration
 of 0.01 s); all numbers: `summary.json`.
 """
+
+
+# -- differences from the paper, explained with this run's numbers -------------------------------
+
+
+@dataclass(frozen=True)
+class CongestionStart:
+    """The congestion scenario's initial state: set points (kW) and the path's overflow (kW)."""
+
+    x0: str
+    setpoints_kw: dict[str, float]
+    overflow_kw: float
+    C: float
+
+
+def congestion_start(rep: Reproduction) -> CongestionStart:
+    """The initial state of ``rep``'s congestion run (iteration 0) and its overflow."""
+    from popdispatch.game.problem import KW_PER_MW
+    from popdispatch.scenarios import PEAK_MINUTE
+
+    run, problem = rep.congestion.run, rep.congestion_problem
+    first = run.trajectory_kw[0]
+    flows = problem.flows(first / KW_PER_MW, PEAK_MINUTE)
+    overflow = max(float((abs(flows) - problem.limit).max()) * KW_PER_MW, 0.0)
+    setpoints = {str(name): float(p) for name, p in zip(run.generators, first, strict=True)}
+    return CongestionStart(rep.settings.x0_label(), setpoints, overflow, rep.settings.fitness.C)
+
+
+def _gen(snapshot: dict, name: str) -> dict:
+    return next(g for g in snapshot["generators"] if g["name"] == name)
+
+
+def detection_note(cong: dict, start: CongestionStart | None) -> str | None:
+    """Why congestion is detected at another iteration than the paper's 53."""
+    detected = cong["first_congestion_iteration"]
+    if detected == PAPER_DETECTION:
+        return None
+    where = "never" if detected is None else f"at iteration {detected}"
+    text = (
+        f"- **Congestion detected {where}, not at iteration {PAPER_DETECTION}.** The iteration "
+        "of detection depends on the initial state, which the paper does not give: its set "
+        f"points evolve for {PAPER_DETECTION} iterations before the overflow appears, so it "
+        "starts from a state within the 28 kW limit."
+    )
+    if start is not None:
+        text += (
+            f" This run starts from `{start.x0}` shares ({_state(start.setpoints_kw)} of the "
+            f"{cong['demand_kw']:.2f} kW demand), which already overloads the 505-666 path by "
+            f"{start.overflow_kw:.2f} kW, so the first iteration sees the overflow."
+        )
+    converged = cong["converged_iteration"]
+    if converged is not None and converged != PAPER_CONVERGENCE:
+        text += (
+            f" Convergence at iteration {converged} (paper: {PAPER_CONVERGENCE}) is counted "
+            "from that same different start."
+        )
+    return text
+
+
+def g1_note(cong: dict, free_g1_kw: float | None, start: CongestionStart | None) -> str | None:
+    """Why G1 ends where it does while the paper's G1 rises after detection."""
+    g1 = _gen(cong, "G1")
+    final, opf = g1["setpoint_kw"], g1["opf_kw"]
+    if final is None or opf is None:
+        return None
+    text = f"- **G1 ends at {final:.2f} kW** (DC-OPF {opf:.2f} kW)."
+    initial = None if start is None else start.setpoints_kw.get("G1")
+    if initial is not None and final < initial:
+        text += (
+            " In the paper G1 *rises* after detection, to make up for the penalised G739, so "
+            "its G1 was below the constrained optimum when the overflow appeared"
+        )
+        if free_g1_kw is not None:
+            text += f" (without the limit the DC-OPF puts G1 at {free_g1_kw:.2f} kW)"
+        text += (
+            f". This run's G1 starts at {initial:.2f} kW, above the constrained optimum, so it "
+            "falls instead; both move towards the same dispatch."
+        )
+    gap = opf - final
+    if abs(gap) > 0.01:
+        side = "below" if gap > 0 else "above"
+        text += (
+            f" It stays {abs(gap):.2f} kW {side} the DC-OPF because of the residual overflow "
+            "(next point): the line carries that much more from the penalised side, so the "
+            "generators on the incentive side produce that much less."
+        )
+    return text
+
+
+def overflow_note(cong: dict, C: float) -> str | None:
+    """Why the paper's proportional signal leaves a residual overflow at rest."""
+    overflow = cong["max_overflow_kw"]
+    if overflow is None or overflow <= 1e-3:
+        return None
+    g739 = _gen(cong, "G739")
+    signal = overflow / 1000.0 * C
+    return (
+        f"- **Residual overflow of {overflow:.2f} kW.** The paper's signal (eq. 8) is "
+        "proportional to the overflow, -(|p| - U) C, and zero when the line is within its limit. "
+        "At rest it must still hold G739 below the output its cost alone would give, so the "
+        f"line stays overloaded by the amount that makes that signal: {overflow:.2f} kW "
+        f"({overflow / 1000.0:.5f} MW) x C = {C:g} EUR/MW^2 gives {signal:.2f} EUR/MW per "
+        f"overloaded line. G739 ends at "
+        f"{g739['setpoint_kw']:.2f} kW (DC-OPF {g739['opf_kw']:.2f} kW). The paper does not "
+        "report the final flow. `--mode exact` adds an integral price at each controller and "
+        "ends without overflow at the DC-OPF (`docs/paper-mode.md`, `docs/exact-mode.md`)."
+    )
+
+
+def base_day_note(day: dict, mode: str) -> str | None:
+    """Why the base day misses the DC-OPF at many minutes (paper mode)."""
+    if day["minutes_within_0_1_kw"] == day["minutes"]:
+        return None
+    text = (
+        f"- **Base day: {day['minutes_within_0_1_kw']} of {day['minutes']} minutes within "
+        f"0.1 kW of the DC-OPF** (median max |error| {_kw(day['median_max_abs_error_kw'])}, "
+        f"max {_kw(day['max_abs_error_kw'])}), where the paper says the set points converge "
+        "to the DC-OPF solution."
+    )
+    if mode == "paper":
+        text += (
+            " With the paper's discontinuous barrier (eq. 7) generators sliding on their limits "
+            "create rest points of the dynamics away from the economic dispatch: "
+            f"{day['converged_minutes']} of {day['minutes']} minutes came to rest, while only "
+            f"{day['minutes_within_0_1_kw']} are within 0.1 kW of it (`docs/paper-mode.md`)."
+        )
+    return text
+
+
+def agreement_note(summary: dict) -> str:
+    """The experiments that agree with the paper, with their numbers."""
+    peak, ext = summary["minute_566"], summary["extinction"]
+    name = ext["generator"]
+    kept = _gen(ext["replicator"], name)["setpoint_kw"]
+    return (
+        f"- Agreeing with the paper: minute 566 without limits ends within "
+        f"{_kw(peak['max_abs_error_kw'])} of the DC-OPF ({peak['status']}); replicator "
+        f"dynamics keep {name} at {kept:.3f} kW when it starts at zero, Smith dynamics use it."
+    )
+
+
+def _state(setpoints_kw: dict[str, float]) -> str:
+    values = list(setpoints_kw.values())
+    if max(values) - min(values) < 5e-3:
+        return f"every generator at {values[0]:.2f} kW"
+    return ", ".join(f"{name} {p:.2f}" for name, p in setpoints_kw.items()) + " kW"
+
+
+def _default_C() -> float:
+    from popdispatch.game.fitness import FitnessParameters
+
+    return float(FitnessParameters().C)
+
+
+def differences(summary: dict, rep: Reproduction | None = None) -> str:
+    """Every difference between this run and the paper, each explained with the run's numbers."""
+    cong = summary["congestion"]
+    start = congestion_start(rep) if rep is not None else None
+    free = summary["minute_566"]  # the same minute without limits: the unconstrained DC-OPF
+    free_g1 = _gen(free, "G1")["opf_kw"]
+    C = start.C if start is not None else _default_C()
+    notes = [
+        detection_note(cong, start),
+        g1_note(cong, free_g1, start),
+        overflow_note(cong, C),
+        base_day_note(summary["base_day"], summary["mode"]),
+        agreement_note(summary),
+    ]
+    return "\n".join(note for note in notes if note)
