@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import errno
 import os
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -167,3 +169,55 @@ def test_atomic_write_names_a_read_only_folder(tmp_path, monkeypatch):
     monkeypatch.setattr(tempfile, "mkstemp", _refuse(errno.EROFS))
     with pytest.raises(OutputError, match="read-only file system"):
         output.atomic_write_text(tmp_path / "f.txt", "x")
+
+
+# -- the command line, in subprocesses --------------------------------------------------------
+
+#: Runs ``popdispatch`` with the renames or staging of this process patched as described.
+CLI = """
+import errno, os, sys, tempfile
+from pathlib import Path
+mode, out = sys.argv[1], Path(sys.argv[2]).absolute()
+if mode == "read-only":
+    def refuse(*args, **kwargs):
+        raise OSError(errno.EROFS, "Read-only file system", kwargs.get("dir"))
+    tempfile.mkdtemp = refuse
+else:  # ``out`` behaves like a mount point: renames into it from outside fail
+    for name in ("rename", "replace"):
+        def cross(src, dst, *a, _real=getattr(os, name), **k):
+            inside = lambda p: Path(os.path.abspath(p)).is_relative_to(out)
+            if inside(src) != inside(dst):
+                raise OSError(errno.EXDEV, "Invalid cross-device link", str(src))
+            return _real(src, dst, *a, **k)
+        setattr(os, name, cross)
+from popdispatch.cli import main
+sys.exit(main(["snapshot", "--minute", "566", "--out", str(out), "--quiet"]))
+"""
+
+
+def _cli(mode: str, out: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", CLI, mode, str(out)], capture_output=True, text=True, timeout=600
+    )
+
+
+def test_cli_writes_into_a_mount_point(tmp_path):
+    out = tmp_path / "mnt"
+    out.mkdir()
+    result = _cli("mount-point", out)
+    assert result.returncode == 0, result.stderr
+    assert sorted(p.name for p in out.iterdir()) == [
+        "setpoints.pdf",
+        "setpoints.png",
+        "summary.json",
+        "trajectory.csv",
+    ]
+
+
+def test_cli_says_read_only_in_one_line(tmp_path):
+    out = tmp_path / "out"
+    result = _cli("read-only", out)
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert lines[-1] == f"popdispatch: error: cannot write to {out}: read-only file system"
+    assert "Errno" not in result.stderr and "cross-device" not in result.stderr
