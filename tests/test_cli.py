@@ -82,6 +82,14 @@ def test_minutes_per_day_is_the_profiles_constant():
     assert MINUTES_PER_DAY == PROFILE_MINUTES
 
 
+def test_top_level_help_lists_every_command_in_full():
+    text = run("--help").stdout
+    lines = {line.split()[0]: line for line in text.splitlines()[-len(COMMANDS) :]}
+    assert sorted(lines) == sorted(COMMANDS)
+    assert all("..." not in line for line in lines.values()), text
+    assert "paper eq. 1" in lines["opf"]
+
+
 HEAVY = ("numpy", "pandas", "numba", "scipy", "networkx", "pandapower", "matplotlib", "tqdm")
 
 
@@ -144,6 +152,24 @@ def test_opf_infeasible_limits_exit_1_and_still_report():
     assert json.loads(result.stdout)["status"] == "infeasible"
 
 
+def test_opf_text_echoes_the_limits():
+    result = run("opf", "--minute", "566", "--limit", "505:666=28", "-q")
+    assert result.returncode == 0, result.stderr
+    assert "limits: 505:666=28 kW (21 lines)" in result.stdout
+    assert "feeder: ieee-elv" in result.stdout
+
+
+def test_opf_on_the_opendss_feeder_equals_the_built_in_case():
+    folder = official_folder()
+    runs = [
+        json.loads(run("opf", "--minute", "566", "--limit", "505:666=28", "--json", "-q",
+                       *extra).stdout)
+        for extra in ([], ["--opendss", str(folder)])
+    ]  # fmt: skip
+    for a, b in zip(runs[0]["generators"], runs[1]["generators"], strict=True):
+        assert a["p_kw"] == pytest.approx(b["p_kw"], abs=1e-6)
+
+
 # -- bad input ----------------------------------------------------------------------------------
 
 
@@ -166,6 +192,11 @@ def test_opf_infeasible_limits_exit_1_and_still_report():
         (["export", "--minute", "566", "--format", "csv", "--out", "x.m"], ["--format"]),
         (["feeder", "--case", "ieee-elv", "--opendss", "."], ["--case", "--opendss"]),
         (["reproduce", "--out", "no/such/results"], ["--out", "does not exist"]),
+        (["reproduce", "--out", "r", "--opendss", "."], ["--opendss", "feeder, opf, snapshot"]),
+        (["snapshot", "--minute", "566", "--mode", "exact", "--dynamics", "replicator"],
+         ["--mode", "replicator"]),
+        (["day", "--dynamics", "smith", "--graph", "ring"], ["--graph", "ring"]),
+        (["snapshot", "--minute", "566", "--x0", "=1"], ["--x0", "=1"]),
     ],
 )
 def test_usage_errors_exit_2_with_one_line(args, words, tmp_path):
@@ -173,6 +204,28 @@ def test_usage_errors_exit_2_with_one_line(args, words, tmp_path):
     assert_one_line_error(result, 2, *words)
     assert result.stdout == ""
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (["--mode", "exact", "--dynamics", "replicator"], ["--mode", "replicator"]),
+        (["--graph", "ring"], ["--graph", "ring"]),
+        (["--x0", "G999=1"], ["--x0", "G999"]),
+    ],
+)
+def test_options_are_checked_before_any_data_is_read(args, words, tmp_path):
+    # profiles that would fail to load (exit 1) if they were read before the options
+    (tmp_path / "Loads.txt").write_text("New Load.LOAD1 Phases=1 Bus1=34.1 kW=1 Yearly=Shape_x\n")
+    result = run("snapshot", "--minute", "100", "--profiles", str(tmp_path), *args)
+    assert_one_line_error(result, 2, *words)
+
+
+def test_x0_naming_some_generators_says_which_start_at_zero():
+    result = run("snapshot", "--minute", "566", "--x0", "G1=1", "--json")
+    assert result.returncode == 0, result.stderr
+    assert "--x0 gives no share to G114, G578, G739, G817, G835" in result.stderr
+    assert json.loads(result.stdout)["x0"] == "G1=1"
 
 
 def test_unreadable_profile_folder_is_a_problem(tmp_path):
@@ -240,13 +293,14 @@ def test_snapshot_replicator_keeps_a_zero_start_generator_extinct():
     assert summary["max_abs_error_kw"] > 9.9  # the DC-OPF puts G114 at 10 kW
 
 
-def test_snapshot_infeasible_limits_write_nothing(tmp_path):
-    out = tmp_path / "never"
+def test_snapshot_infeasible_limits_write_the_complete_run_and_exit_1(tmp_path):
+    out = tmp_path / "snap"
     result = run("snapshot", "--minute", "566", "--limit", "505:666=0", "--out", str(out),
                  "--json", "-q")  # fmt: skip
     assert_one_line_error(result, 1, "infeasible")
     assert json.loads(result.stdout)["status"] == "infeasible"
-    assert list(tmp_path.iterdir()) == []
+    assert json.loads((out / "summary.json").read_text()) == json.loads(result.stdout)
+    assert not [p for p in tmp_path.rglob("*") if p.name.startswith(".")]  # no staging left
 
 
 # -- day ----------------------------------------------------------------------------------------

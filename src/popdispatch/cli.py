@@ -132,28 +132,26 @@ class EventType(click.ParamType):
 
 
 class X0Type(click.ParamType):
-    """``uniform``, ``capacity`` or ``NAME=SHARE,...`` (names ``G114`` or buses ``114``)."""
+    """``uniform``, ``capacity`` or ``NAME=SHARE,...`` (names ``G114`` or buses ``114``).
+
+    Only the form is checked here; the names are checked against the problem's own fleet once
+    it is built (:func:`check_x0`), still a usage error.
+    """
 
     name = "uniform|capacity|G=SHARE,..."
 
     def convert(self, value, param, ctx) -> str | dict[str, float]:
         if isinstance(value, dict) or value in ("uniform", "capacity"):
             return value
-        from popdispatch.feeder.generators import paper_fleet
-
-        fleet = paper_fleet()
         shares: dict[str, float] = {}
         for item in str(value).split(","):
             key, sep, share = item.partition("=")
             key, number = key.strip(), _float(share)
             name = f"G{key}" if key.isdigit() else key
-            if not sep or number is None or number < 0:
+            if not sep or not key or number is None or number < 0:
                 self.fail(
                     f"{item!r} is not NAME=SHARE with a share >= 0 (in {value!r})", param, ctx
                 )
-            if name not in fleet.index:
-                known = ", ".join(fleet.index)
-                self.fail(f"unknown generator {key!r} in {value!r} (known: {known})", param, ctx)
             shares[name] = number
         if sum(shares.values()) <= 0:
             self.fail(f"{value!r}: the shares sum to zero", param, ctx)
@@ -290,9 +288,49 @@ def check_limits(limits: Sequence[Limit], feeder=None) -> None:
         for bus in (a, b):
             if bus not in buses:
                 raise click.BadParameter(
-                    f"unknown bus {bus} in {a}:{b}={kw:g} (ieee-elv buses are 1..906)",
+                    f"unknown bus {bus} in {a}:{b}={kw:g} (feeder {feeder.name} has buses "
+                    f"{buses.min()}..{buses.max()})",
                     param_hint="'--limit'",
                 )
+
+
+def fleet_names() -> list[str]:
+    """Names of the generators of the feeders the CLI loads (the paper's fleet, Table I, on
+    the built-in case and on a feeder read with ``--opendss``)."""
+    from popdispatch.feeder.generators import paper_fleet
+
+    return list(paper_fleet().index)
+
+
+def check_x0(x0, names: Sequence[str], progress: Progress) -> None:
+    """Usage error (exit 2) for ``--x0`` shares naming a generator not in ``names``; a note
+    naming the generators ``--x0`` leaves out (they start at zero share)."""
+    if not isinstance(x0, dict):
+        return
+    unknown = [name for name in x0 if name not in names]
+    if unknown:
+        raise OptionError(
+            f"unknown generator {unknown[0]!r} in {x0_text(x0)} (known: {', '.join(names)})",
+            "--x0",
+        )
+    zeroed = [name for name in names if not x0.get(name)]
+    if zeroed:
+        progress.note(
+            f"--x0 gives no share to {', '.join(zeroed)}: they start at 0 kW (imitative "
+            "dynamics such as replicator then keep them there)"
+        )
+
+
+def x0_text(x0: dict[str, float]) -> str:
+    return ",".join(f"{name}={share:g}" for name, share in x0.items())
+
+
+def announce_compile(progress: Progress) -> None:
+    """Say on stderr (unless quiet) that the engine's kernels compile now, when they must."""
+    from popdispatch.compile_notice import COMPILE_NOTICE, kernels_cached
+
+    if kernels_cached() is False:
+        progress.note(COMPILE_NOTICE)
 
 
 def load_profiles(folder: Path | None, minute: int | None, progress: Progress):
@@ -311,15 +349,29 @@ def load_profiles(folder: Path | None, minute: int | None, progress: Progress):
     return profiles
 
 
-def build(profiles, limits: Sequence[Limit], progress: Progress):
-    """The ieee-elv dispatch problem with path limits (seconds if the feeder is not cached)."""
+def load_feeder(opendss: Path | None):
+    """The built-in ieee-elv feeder, or the one in the OpenDSS files of folder ``opendss``."""
+    if opendss is not None:
+        from popdispatch.readers import read_opendss_feeder
+
+        return read_opendss_feeder(opendss)
     from popdispatch.feeder.cases import ieee_elv
+
+    return ieee_elv()
+
+
+def build(profiles, limits: Sequence[Limit], progress: Progress, opendss: Path | None = None):
+    """The dispatch problem with path limits (seconds if the feeder is not cached).
+
+    Nothing is checked about minutes here: the commands check only the minutes they run.
+    """
     from popdispatch.scenarios import elv_problem
 
-    with progress.step("loading the ieee-elv feeder"):
-        feeder = ieee_elv()
+    what = f"the feeder in {opendss}" if opendss else "the ieee-elv feeder"
+    with progress.step(f"loading {what}"):
+        feeder = load_feeder(opendss)
         check_limits(limits, feeder)
-        return elv_problem(profiles, limits, feeder)
+        return elv_problem(profiles, limits, feeder, check=False)
 
 
 def check_out(out: Path | None) -> None:
@@ -350,7 +402,7 @@ def cli(ctx: click.Context) -> None:
         ctx.call_on_close(lambda: setattr(_Clock, "start", None))
 
 
-@cli.command()
+@cli.command(short_help="The feeder: buses, key nodes, lines, loads, generators.")
 @click.option("--case", type=click.Choice(["ieee-elv"]), help="Built-in case (default).")
 @click.option("--opendss", type=FOLDER, help="Read the feeder from its OpenDSS files instead.")
 @json_option
@@ -369,52 +421,82 @@ def feeder(case: str | None, opendss: Path | None, as_json: bool, quiet: bool) -
     emit(summary, as_json, feeder_text(summary))
 
 
-@cli.command()
+opendss_option = option(
+    "--opendss",
+    type=FOLDER,
+    help="Read the feeder from its OpenDSS files in this folder instead of the built-in "
+    "ieee-elv case (the paper's six generators on the same buses).",
+)
+
+
+@cli.command(short_help="The exact DC-OPF of one minute (paper eq. 1).")
 @minute_option
 @limit_option
 @profiles_option
+@opendss_option
 @json_option
 @quiet_option
-def opf(minute: int, limits, profiles: Path | None, as_json: bool, quiet: bool) -> int:
-    """The exact DC-OPF of one minute, paper eq. 1."""
+def opf(minute: int, limits, profiles: Path | None, opendss, as_json: bool, quiet: bool) -> int:
+    """The exact DC-OPF of one minute (paper eq. 1): the cheapest dispatch meeting the
+    demand within the generator limits and the line limits. Exit code 1 (after the output)
+    when no such dispatch exists."""
     from popdispatch.opf import solve_opf
     from popdispatch.report.summaries import opf_summary
 
     progress = Progress(quiet)
-    problem = build(load_profiles(profiles, minute, progress), limits, progress)
+    problem = build(load_profiles(profiles, minute, progress), limits, progress, opendss)
     summary = opf_summary(problem, solve_opf(problem, minute), limits)
     emit(summary, as_json, opf_text(summary))
     if summary["status"] != "optimal":
-        raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given line limits")
+        raise Failure(infeasible_minute_message(summary))
     return 0
 
 
-@cli.command()
+def infeasible_minute_message(summary: dict) -> str:
+    """One line: the DC-OPF of a minute is infeasible, with its demand and online capacity."""
+    return (
+        f"the DC-OPF of minute {summary['minute']} is infeasible: no dispatch meets the demand "
+        f"{summary['demand_kw']:.3f} kW within the generator limits (online capacity "
+        f"{summary['capacity_kw']:.3f} kW) and the given line limits"
+    )
+
+
+@cli.command(short_help="One minute of dynamics against the DC-OPF.")
 @minute_option
 @limit_option
 @run_options
 @profiles_option
+@opendss_option
 @out_option
 @json_option
 @quiet_option
-def snapshot(minute, limits, dynamics, mode, x0, graph, profiles, out, as_json, quiet) -> int:
-    """One minute of dynamics: trajectory, convergence, comparison with the DC-OPF."""
+def snapshot(
+    minute, limits, dynamics, mode, x0, graph, profiles, opendss, out, as_json, quiet
+) -> int:
+    """One minute of dynamics: trajectory, convergence, comparison with the DC-OPF.
+
+    A minute whose DC-OPF is infeasible is still run and reported (set points, overflow,
+    set points outside their limits flagged; DC-OPF values null), then exit code 1.
+    """
+    from popdispatch.game.problem import check_online
     from popdispatch.report.summaries import snapshot_summary, trajectory_table
     from popdispatch.scenarios import snapshot_vs_opf
 
     progress = Progress(quiet)
     check_out(out)
     settings = settings_from(dynamics, mode, x0, graph)
-    problem = build(load_profiles(profiles, minute, progress), limits, progress)
+    check_x0(x0, fleet_names(), progress)
+    announce_compile(progress)
+    problem = build(load_profiles(profiles, minute, progress), limits, progress, opendss)
+    check_online(problem, [minute])
     with progress.step(f"minute {minute}: {dynamics} dynamics and DC-OPF"):
         result = snapshot_vs_opf(problem, minute, settings)
     summary = snapshot_summary(problem, result, limits)
-    if summary["status"] == "infeasible":
-        emit(stamp(summary), as_json, snapshot_text(summary))
-        raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given line limits")
     if out is not None:
         write_snapshot(out, summary, trajectory_table(result), result, progress)
     emit(stamp(summary), as_json, snapshot_text(summary))
+    if summary["status"] == "infeasible":
+        raise Failure(infeasible_minute_message(summary))
     return 0
 
 
@@ -427,7 +509,7 @@ def write_snapshot(out: Path, summary: dict, table, result, progress: Progress) 
         folder.write_json("summary.json", stamp(summary))
 
 
-@cli.command()
+@cli.command(short_help="The online day, minute by minute, against the DC-OPF.")
 @limit_option
 @run_options
 @option(
@@ -447,13 +529,23 @@ def write_snapshot(out: Path, summary: dict, table, result, progress: Progress) 
     "generators inside their limits; exact mode's default).",
 )
 @profiles_option
+@opendss_option
 @out_option
 @json_option
 @quiet_option
 def day(
-    limits, dynamics, mode, x0, graph, events, minutes, warm_start, profiles, out, as_json, quiet
-) -> int:
+    limits, dynamics, mode, x0, graph, events, minutes, warm_start, profiles, opendss, out,
+    as_json, quiet,
+) -> int:  # fmt: skip
     """The online day: every minute continues from the last (warm start), against the DC-OPF.
+
+    Every minute asked for is run, also where the DC-OPF is infeasible (the line limits or
+    the generators online cannot meet the demand): those minutes are listed in
+    infeasible_minutes, their DC-OPF values are null, the dynamics' set points and overflow
+    are still reported, and the comparisons (errors, energy, cost) use the other minutes
+    only. Such a day is printed and written in full and then exits with code 1, naming the
+    infeasible minutes on stderr. Minutes with no generator online at all are an error
+    (exit 1, nothing run).
 
     Times: wall_seconds is the engine's own (no start-up, imports, data loading or DC-OPF),
     command_seconds the whole command's, from the process start.
@@ -467,19 +559,34 @@ def day(
     progress = Progress(quiet)
     check_out(out)
     settings = settings_from(dynamics, mode, x0, graph, warm_start)
-    problem = build(load_profiles(profiles, None, progress), limits, progress)
-    problem = apply_events(problem, events)
+    check_x0(x0, fleet_names(), progress)
+    announce_compile(progress)
     span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
+    problem = build(load_profiles(profiles, None, progress), limits, progress, opendss)
+    problem = apply_events(problem, events, span)
     result = run_day_with_opf(problem, settings, span, progress)
     labels = [event_label(event) for event in events]
     summary = day_summary(problem, result, limits, labels)
-    if summary["status"] == "infeasible":
-        emit(stamp(summary), as_json, day_text(summary))
-        raise Failure("the DC-OPF is infeasible at some minute with the given limits and events")
     if out is not None:
-        write_day(out, summary, day_table(result), result, problem, progress)
+        write_day(out, summary, day_table(result, problem), result, problem, progress)
     emit(stamp(summary), as_json, day_text(summary))
+    if summary["infeasible_minutes"]:
+        raise Failure(infeasible_day_message(summary))
     return 0
+
+
+def infeasible_day_message(summary: dict, shown: int = 5) -> str:
+    """One line naming how many minutes, and which first, have no feasible DC-OPF."""
+    from popdispatch.report.text import minute_ranges
+
+    bad = summary["infeasible_minutes"]
+    ranges = minute_ranges(bad).split(", ")
+    listed = ", ".join(ranges[:shown]) + (", ..." if len(ranges) > shown else "")
+    return (
+        f"the DC-OPF is infeasible at {len(bad)} of {summary['minutes']} minutes ({listed}) "
+        "with the given limits and events; every minute was run and reported "
+        "(infeasible_minutes)"
+    )
 
 
 def write_day(out: Path, summary: dict, table, result, problem, progress: Progress) -> None:
@@ -493,7 +600,18 @@ def write_day(out: Path, summary: dict, table, result, problem, progress: Progre
         folder.write_json("summary.json", stamp(summary))
 
 
-@cli.command()
+def refuse_opendss(ctx: click.Context, param: click.Parameter, value) -> None:
+    """``reproduce --opendss``: a usage error saying which commands read OpenDSS files."""
+    if value is not None:
+        raise click.BadParameter(
+            "reproduce runs the paper's experiments on the built-in ieee-elv case; --opendss "
+            "is accepted by feeder, opf, snapshot, day and export",
+            ctx,
+            param,
+        )
+
+
+@cli.command(short_help="The paper's three experiments: figures and report.md.")
 @profiles_option
 @option(
     "--out",
@@ -501,6 +619,7 @@ def write_day(out: Path, summary: dict, table, result, problem, progress: Progre
     required=True,
     help="Folder for figures, time series, summary.json and report.md.",
 )
+@option("--opendss", hidden=True, callback=refuse_opendss, expose_value=False, is_eager=True)
 @option(
     "--mode",
     type=MODE_CHOICE,
@@ -519,11 +638,11 @@ def reproduce(profiles, out, mode, minutes, as_json, quiet) -> None:
 
     progress = Progress(quiet)
     check_out(out)
+    settings = settings_from("smith", mode, "uniform", "complete")
+    announce_compile(progress)
     day_profiles = load_profiles(profiles, None, progress)
     span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
-    rep = run_reproduction(
-        day_profiles, settings_from("smith", mode, "uniform", "complete"), span, progress
-    )
+    rep = run_reproduction(day_profiles, settings, span, progress)
     with staged_folder(out) as folder:
         summary = write_reproduction(rep, folder, progress)
     progress.note(f"wrote {out}/report.md, summary.json and figures/")
@@ -531,7 +650,7 @@ def reproduce(profiles, out, mode, minutes, as_json, quiet) -> None:
         click.echo(json_text(summary), nl=False)
 
 
-@cli.command()
+@cli.command(short_help="One minute as a MATPOWER or pandapower case.")
 @minute_option
 @option(
     "--format",
@@ -545,15 +664,16 @@ def reproduce(profiles, out, mode, minutes, as_json, quiet) -> None:
 )
 @limit_option
 @profiles_option
+@opendss_option
 @quiet_option
-def export(minute, fmt, out, limits, profiles, quiet) -> None:
+def export(minute, fmt, out, limits, profiles, opendss, quiet) -> None:
     """The reduced feeder at one minute as a MATPOWER or pandapower case (DC-OPF cross-check)."""
     from popdispatch.export import write_case
 
     progress = Progress(quiet)
     check_out(out)
     day_profiles = load_profiles(profiles, minute, progress)
-    problem = build(day_profiles, limits, progress)
+    problem = build(day_profiles, limits, progress, opendss)
     loads = minute_loads(problem, day_profiles, minute)
     write_case(out, fmt, problem, minute, loads)
     progress.note(f"wrote {out} ({fmt}, minute {minute})")

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
+
 from popdispatch.errors import OptionError
-from popdispatch.game.problem import DispatchProblem
+from popdispatch.game.problem import DispatchProblem, check_online
 
 #: One event: (generator bus as the feeder numbers it, ``"off"`` or ``"on"``, 1-based minute).
 Event = tuple[int, str, int]
@@ -18,11 +20,17 @@ def event_label(event: Event) -> str:
     return f"{bus}:{state}@{minute}"
 
 
-def apply_events(problem: DispatchProblem, events: Sequence[Event]) -> DispatchProblem:
+def apply_events(
+    problem: DispatchProblem, events: Sequence[Event], minutes: np.ndarray | None = None
+) -> DispatchProblem:
     """The problem with each event's generator outage applied.
 
     Raises :class:`OptionError` (option ``--event``) for a bus without a generator, a
-    generator switched off twice, or one switched on that was not off.
+    generator switched off twice, or one switched on that was not off. Once every outage is
+    applied, raises :class:`~popdispatch.errors.InfeasibleError` if no generator is online at
+    one of ``minutes`` (1-based, default every minute; the message names the first). Minutes
+    whose demand exceeds the capacity left online are kept: a day runs them and their DC-OPF
+    is infeasible (:func:`popdispatch.game.problem.check_capacity` is the strict check).
     """
     buses = dict(zip(problem.feeder.generators.bus.astype(int), problem.generators, strict=True))
     off_since: dict[str, int] = {}
@@ -42,7 +50,8 @@ def apply_events(problem: DispatchProblem, events: Sequence[Event]) -> DispatchP
         elif name not in off_since:
             raise OptionError(f"{name} is not off before {text}", "--event")
         else:
-            problem = problem.with_outage(name, off_since.pop(name), minute)
+            problem = problem.with_outage(name, off_since.pop(name), minute, check=False)
     for name, minute in off_since.items():
-        problem = problem.with_outage(name, minute)
+        problem = problem.with_outage(name, minute, check=False)
+    check_online(problem, minutes)
     return problem

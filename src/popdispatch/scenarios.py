@@ -49,13 +49,16 @@ def elv_problem(
     profiles: LoadProfiles | None = None,
     limits: Sequence[tuple[int, int, float]] = (),
     feeder: Feeder | None = None,
+    check: bool = True,
 ) -> DispatchProblem:
     """The ieee-elv dispatch problem (or ``feeder``'s) with optional path limits.
 
     Without ``profiles`` the loads are the official ones of minute 566 (pandapower snapshot).
+    ``check``: as in :func:`popdispatch.game.problem.build_problem` (every minute's demand
+    within the fleet's range); the CLI checks only the minutes it runs.
     """
     feeder = apply_path_limits(feeder or ieee_elv(), limits)
-    return build_problem(reduce_feeder(feeder), profiles or peak_profiles())
+    return build_problem(reduce_feeder(feeder), profiles or peak_profiles(), check)
 
 
 @dataclass(frozen=True)
@@ -73,10 +76,24 @@ class SnapshotComparison:
 
 @dataclass(frozen=True)
 class DayComparison:
-    """An online day and the DC-OPF of every simulated minute (``opf_kw``: minutes x generators)."""
+    """An online day and the DC-OPF of every simulated minute (``opf_kw``: minutes x generators).
+
+    Minutes whose DC-OPF is infeasible keep the dynamics' results; their DC-OPF values are NaN
+    and comparisons (errors, energies, costs) use the :attr:`feasible` minutes only.
+    """
 
     run: DayResult
     opf: list[OpfResult]
+
+    @property
+    def feasible(self) -> np.ndarray:
+        """Per simulated minute: whether its DC-OPF exists."""
+        return np.array([o.status == "optimal" for o in self.opf], dtype=bool)
+
+    @property
+    def infeasible_minutes(self) -> list[int]:
+        """1-based minutes whose DC-OPF is infeasible (the DC-OPF's verdict, not the dynamics')."""
+        return [int(m) for m in self.run.minutes[~self.feasible]]
 
     @property
     def opf_kw(self) -> np.ndarray:

@@ -82,8 +82,15 @@ class DispatchProblem:
         np.add.at(injection, self.feeder.generators["node"].to_numpy(), p)
         return line_flows(self.feeder.tree, injection)
 
-    def with_outage(self, generator: str, off_minute: int, on_minute: int | None = None):
-        """The same problem with ``generator`` offline from ``off_minute`` until ``on_minute``."""
+    def with_outage(
+        self, generator: str, off_minute: int, on_minute: int | None = None, check: bool = True
+    ):
+        """The same problem with ``generator`` offline from ``off_minute`` until ``on_minute``.
+
+        ``check``: raise :class:`InfeasibleError` if the demand of some minute of the day then
+        exceeds the online capacity (:func:`check_capacity`); without it the problem is kept
+        as it is (a day with such minutes runs them; their DC-OPF is infeasible).
+        """
         if generator not in self.generators:
             raise ValueError(f"unknown generator {generator!r}")
         check_minute(off_minute)
@@ -91,21 +98,29 @@ class DispatchProblem:
         stop = on_minute - 1 if on_minute is not None else len(online)
         online[off_minute - 1 : stop, self.generators.get_loc(generator)] = False
         problem = replace(self, online=online)
-        check_capacity(problem)
+        if check:
+            check_capacity(problem)
         return problem
 
 
-def build_problem(feeder: ReducedFeeder, profiles: LoadProfiles) -> DispatchProblem:
-    """Assemble the engine arrays for a reduced feeder and a day of load profiles."""
+def build_problem(
+    feeder: ReducedFeeder, profiles: LoadProfiles, check: bool = True
+) -> DispatchProblem:
+    """Assemble the engine arrays for a reduced feeder and a day of load profiles.
+
+    ``check``: raise :class:`InfeasibleError` if some minute's demand is outside the fleet's
+    range (:func:`check_capacity`); the CLI checks only the minutes it runs instead.
+    """
     profiles = profiles.for_loads(feeder.original.loads.index)
-    return build_problem_from_loads(feeder, profiles.kw.to_numpy(float), profiles.source)
+    return build_problem_from_loads(feeder, profiles.kw.to_numpy(float), profiles.source, check)
 
 
 def build_problem_from_loads(
-    feeder: ReducedFeeder, load_kw: np.ndarray, source: str
+    feeder: ReducedFeeder, load_kw: np.ndarray, source: str, check: bool = True
 ) -> DispatchProblem:
     """Engine arrays from per-load demand ``load_kw`` (kW, shape (minutes, loads) in the order
-    of ``feeder.original.loads``); any number of minutes (1440 for a day, 1 for a snapshot)."""
+    of ``feeder.original.loads``); any number of minutes (1440 for a day, 1 for a snapshot).
+    ``check`` as in :func:`build_problem`."""
     gens = feeder.generators
     load_kw = np.atleast_2d(np.asarray(load_kw, dtype=float))
     flows_kw = line_flows(feeder.tree, -feeder.load_injection_kw(load_kw))
@@ -129,7 +144,8 @@ def build_problem_from_loads(
         online=np.ones((len(load_kw), len(gens)), dtype=bool),
         profile_source=source,
     )
-    check_capacity(problem)
+    if check:
+        check_capacity(problem)
     return problem
 
 
@@ -147,24 +163,62 @@ def limited_line_tree(
     return line_up, line_preorder.astype(np.int64), generator_line
 
 
-def check_capacity(problem: DispatchProblem) -> None:
-    """Raise :class:`InfeasibleError` at the first minute whose demand exceeds online capacity."""
-    capacity = problem.online @ problem.pmax
-    short = problem.demand > capacity * (1 + 1e-12)
-    if short.any():
-        minute = int(np.argmax(short)) + 1
+def _minute_rows(problem: DispatchProblem, minutes) -> np.ndarray:
+    """0-based rows of the given 1-based minutes (default: every minute of the problem)."""
+    if minutes is None:
+        return np.arange(len(problem.demand))
+    return np.asarray(minutes, dtype=np.int64).reshape(-1) - 1
+
+
+def _offline_note(problem: DispatchProblem, row: int) -> str:
+    offline = problem.generators[~problem.online[row]]
+    return f" (offline: {', '.join(offline)})" if len(offline) else ""
+
+
+def check_capacity(problem: DispatchProblem, minutes=None) -> None:
+    """Raise :class:`InfeasibleError` at the first of ``minutes`` (1-based; default every
+    minute) whose demand exceeds the online capacity or is below the online minimum outputs.
+
+    The message names that minute, its demand, its capacity (or floor) and the generators
+    offline then, and how many other minutes of those checked fail the same way.
+    """
+    rows = _minute_rows(problem, minutes)
+    online, demand = problem.online[rows], problem.demand[rows]
+    for bound, limits, words in (
+        (online @ problem.pmax, 1, "exceeds the available generation capacity"),
+        (online @ problem.pmin, -1, "is below the sum of minimum outputs"),
+    ):
+        bad = np.flatnonzero(limits * (demand - bound) > np.abs(bound) * 1e-12)
+        if len(bad):
+            row = int(rows[bad[0]])
+            more = f"; {len(bad) - 1} more of the minutes checked" if len(bad) > 1 else ""
+            raise InfeasibleError(
+                f"demand {problem.demand[row] * KW_PER_MW:.3f} kW at minute {row + 1} {words} "
+                f"{bound[bad[0]] * KW_PER_MW:.3f} kW at that minute"
+                f"{_offline_note(problem, row)}{more}"
+            )
+
+
+def check_online(problem: DispatchProblem, minutes=None) -> None:
+    """Raise :class:`InfeasibleError` at the first of ``minutes`` (1-based; default every
+    minute) at which no generator is online: the dynamics have nothing to dispatch then.
+
+    Minutes whose demand merely exceeds the online capacity are left to run (their DC-OPF is
+    infeasible; see :func:`check_capacity` for the strict check).
+    """
+    rows = _minute_rows(problem, minutes)
+    none = np.flatnonzero(~problem.online[rows].any(axis=1))
+    if len(none):
+        row = int(rows[none[0]])
+        more = f"; {len(none) - 1} more of the minutes asked for" if len(none) > 1 else ""
         raise InfeasibleError(
-            f"demand {problem.demand[minute - 1] * KW_PER_MW:.3f} kW at minute {minute} exceeds "
-            f"the available generation capacity {capacity[minute - 1] * KW_PER_MW:.3f} kW"
-        )
-    floor = problem.online @ problem.pmin
-    low = problem.demand < floor * (1 - 1e-12)
-    if low.any():
-        minute = int(np.argmax(low)) + 1
-        raise InfeasibleError(
-            f"demand {problem.demand[minute - 1] * KW_PER_MW:.3f} kW at minute {minute} is below "
-            f"the sum of minimum outputs {floor[minute - 1] * KW_PER_MW:.3f} kW"
+            f"no generator is online at minute {row + 1} (capacity 0.000 kW, demand "
+            f"{problem.demand[row] * KW_PER_MW:.3f} kW; offline: "
+            f"{', '.join(problem.generators)}){more}"
         )
 
 
-__all__ = ["DispatchProblem", "InfeasibleError", "ProfileError", "build_problem", "check_capacity"]
+__all__ = [
+    "DispatchProblem", "InfeasibleError", "ProfileError", "build_problem", "check_capacity",
+    "check_online",
+]  # fmt: skip

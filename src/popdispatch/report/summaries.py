@@ -13,7 +13,7 @@ import pandas as pd
 
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.reduction import ReducedFeeder
-from popdispatch.game.problem import DispatchProblem
+from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.opf import OpfResult
 from popdispatch.scenarios import DayComparison, SnapshotComparison
 
@@ -21,8 +21,39 @@ from popdispatch.scenarios import DayComparison, SnapshotComparison
 MATCH_KW = 0.1
 
 
-def _limits(limits: Sequence[tuple[int, int, float]]) -> list[dict]:
-    return [{"from_bus": a, "to_bus": b, "limit_kw": kw} for a, b, kw in limits]
+#: A set point further than this outside its limits is flagged (``outside_limits``), kW.
+LIMIT_TOLERANCE_KW = 1e-3
+
+
+def _limits(
+    limits: Sequence[tuple[int, int, float]], problem: DispatchProblem | None = None
+) -> list[dict]:
+    """The ``--limit`` options as given, with the number of original lines each one limits."""
+    rows = []
+    for a, b, kw in limits:
+        row = {"from_bus": a, "to_bus": b, "limit_kw": kw}
+        if problem is not None:
+            row["lines_on_path"] = len(problem.feeder.original.path_lines(a, b))
+        rows.append(row)
+    return rows
+
+
+def setpoint_bounds_kw(problem: DispatchProblem, online: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``(lower, upper)`` limits (kW) of the set points given the online flags (offline: 0)."""
+    lower = np.where(online, problem.pmin, 0.0) * KW_PER_MW
+    return lower, np.where(online, problem.pmax, 0.0) * KW_PER_MW
+
+
+def outside_limits(problem: DispatchProblem, p_kw: np.ndarray, online: np.ndarray) -> np.ndarray:
+    """Where set points ``p_kw`` (kW, (..., generators)) lie more than
+    :data:`LIMIT_TOLERANCE_KW` outside their limits (the paper's barrier can be overpowered)."""
+    lower, upper = setpoint_bounds_kw(problem, online)
+    return (p_kw < lower - LIMIT_TOLERANCE_KW) | (p_kw > upper + LIMIT_TOLERANCE_KW)
+
+
+def _finite(value) -> float | None:
+    """A float, or None where it is NaN or infinite (JSON's null: unknown)."""
+    return float(value) if value is not None and np.isfinite(value) else None
 
 
 def feeder_summary(feeder: Feeder, reduced: ReducedFeeder) -> dict:
@@ -64,19 +95,22 @@ def opf_summary(
 ) -> dict:
     """The DC-OPF of one minute."""
     buses = generator_buses(problem)
+    online = problem.online[opf.minute - 1]
     return {
         "status": opf.status,
         "minute": opf.minute,
         "demand_kw": opf.demand_kw,
+        "capacity_kw": float(np.where(online, problem.pmax, 0.0).sum() * KW_PER_MW),
+        "case": problem.feeder.original.name,
         "profile_source": problem.profile_source,
-        "limits": _limits(limits),
+        "limits": _limits(limits, problem),
         "generators": [
-            {"name": name, "bus": bus, "p_kw": p}
+            {"name": name, "bus": bus, "p_kw": _finite(p)}
             for name, bus, p in zip(problem.generators, buses, opf.p_kw, strict=True)
         ],
-        "cost": opf.cost,
+        "cost": _finite(opf.cost),
         "cost_unit": "EUR/h",
-        "marginal_price_eur_per_mwh": opf.marginal_price,
+        "marginal_price_eur_per_mwh": _finite(opf.marginal_price),
     }
 
 
@@ -94,37 +128,69 @@ def snapshot_summary(
     result: SnapshotComparison,
     limits: Sequence[tuple[int, int, float]] = (),
 ) -> dict:
-    """One minute of dynamics compared with the DC-OPF."""
+    """One minute of dynamics compared with the DC-OPF (null where the DC-OPF is infeasible).
+
+    ``status`` is the comparison's (``infeasible``: no DC-OPF exists); ``dynamics_status``
+    the run's own (``infeasible`` there: exact mode's line prices ran away). A generator's
+    ``outside_limits`` flags a set point more than :data:`LIMIT_TOLERANCE_KW` outside
+    ``[pmin_kw, pmax_kw]`` (the limits in force at that minute; 0 when offline).
+    """
     run, opf = result.run, result.opf
     settings = run.settings
-    buses = generator_buses(problem)
+    online = problem.online[run.minute - 1]
+    outside = outside_limits(problem, run.setpoints_kw, online)
     error = result.max_abs_error_kw if opf.status == "optimal" else None
     return {
         "status": snapshot_status(result),
+        "dynamics_status": run.status,
         "minute": run.minute,
         "demand_kw": run.demand_kw,
+        "capacity_kw": float(setpoint_bounds_kw(problem, online)[1].sum()),
+        "case": problem.feeder.original.name,
         "mode": settings.mode,
         "dynamics": settings.dynamics,
         "x0": settings.x0_label(),
         "graph": settings.graph if isinstance(settings.graph, str) else "custom",
         "profile_source": run.profile_source,
-        "limits": _limits(limits),
-        "generators": [
-            {"name": name, "bus": bus, "setpoint_kw": sp, "opf_kw": p}
-            for name, bus, sp, p in zip(
-                problem.generators, buses, run.setpoints_kw, opf.p_kw, strict=True
-            )
-        ],
+        "limits": _limits(limits, problem),
+        "generators": _snapshot_generators(problem, run.setpoints_kw, opf.p_kw, online),
+        "generators_outside_limits": list(problem.generators[outside]),
         "iterations": run.iterations,
         "converged_iteration": run.converged_at,
+        "rest_iteration": getattr(run, "rest_at", None),
+        "stall_reason": getattr(run, "stall_reason", None),
         "first_congestion_iteration": run.first_congestion,
         "max_overflow_kw": float(run.overflow_kw.max()) if run.overflow_kw.size else 0.0,
-        "max_abs_error_kw": error,
+        "max_abs_error_kw": _finite(error),
         "cost": float(_cost(problem, run.setpoints_kw)),
-        "opf_cost": opf.cost,
+        "opf_cost": _finite(opf.cost),
         "cost_unit": "EUR/h",
         "wall_seconds": run.wall_seconds,
     }
+
+
+def _snapshot_generators(
+    problem: DispatchProblem, setpoints_kw: np.ndarray, opf_kw: np.ndarray, online: np.ndarray
+) -> list[dict]:
+    """Per generator: set point, DC-OPF (null if none), limits in force, outside-limits flag."""
+    lower, upper = setpoint_bounds_kw(problem, online)
+    outside = outside_limits(problem, setpoints_kw, online)
+    columns = zip(
+        problem.generators, generator_buses(problem), setpoints_kw, opf_kw, lower, upper, outside,
+        strict=True,
+    )  # fmt: skip
+    return [
+        {
+            "name": name,
+            "bus": bus,
+            "setpoint_kw": float(sp),
+            "opf_kw": _finite(p),
+            "pmin_kw": float(lo),
+            "pmax_kw": float(hi),
+            "outside_limits": bool(out),
+        }
+        for name, bus, sp, p, lo, hi, out in columns
+    ]
 
 
 def _cost(problem: DispatchProblem, p_kw: np.ndarray) -> float:
@@ -148,39 +214,78 @@ def day_summary(
     limits: Sequence[tuple[int, int, float]] = (),
     events: Sequence[str] = (),
 ) -> dict:
-    """An online day compared minute by minute with the DC-OPF (energies kWh, costs EUR)."""
+    """An online day compared minute by minute with the DC-OPF (energies kWh, costs EUR).
+
+    Every simulated minute is reported. ``infeasible_minutes`` (1-based) are those whose DC-OPF
+    is infeasible; errors, ``energy_kwh``/``opf_energy_kwh`` and ``cost``/``opf_cost`` compare
+    the dynamics with the DC-OPF over the other ``compared_minutes`` only (null when there
+    are none); ``energy_all_minutes_kwh`` and ``cost_all_minutes`` are the dynamics' own over
+    every simulated minute. ``price_runaway_minutes``: where exact mode's own infeasibility
+    signal fired (line prices past their cap); the DC-OPF's verdict is the one that counts.
+    """
     run = result.run
     settings = run.settings
-    buses = [str(b) for b in generator_buses(problem)]
-    error = result.abs_error_kw
-    worst = error.max(axis=1)
-    opf_cost = np.array([o.cost for o in result.opf])
     return {
         "status": day_status(result),
         "minutes": len(run.minutes),
         "first_minute": int(run.minutes[0]),
         "last_minute": int(run.minutes[-1]),
+        "case": problem.feeder.original.name,
         "profile_source": run.profile_source,
         "mode": settings.mode,
         "dynamics": settings.dynamics,
         "x0": settings.x0_label(),
         "warm_start": settings.warm_start_policy,
         "graph": settings.graph if isinstance(settings.graph, str) else "custom",
-        "limits": _limits(limits),
+        "limits": _limits(limits, problem),
         "events": list(events),
+        "infeasible_minutes": result.infeasible_minutes,
+        "price_runaway_minutes": _runaway_minutes(run),
+        "stalled_minutes": sorted(int(m) for m in getattr(run, "stall_reasons", {})),
         "converged_minutes": int(run.converged.sum()),
-        "minutes_within_0_1_kw": int((worst <= MATCH_KW).sum()),
-        "max_abs_error_kw": float(np.nanmax(error)) if np.isfinite(error).any() else None,
-        "mean_abs_error_kw": float(np.nanmean(error)) if np.isfinite(error).any() else None,
-        "median_max_abs_error_kw": float(np.nanmedian(worst)) if np.isfinite(worst).any() else None,
-        "energy_kwh": dict(zip(buses, run.setpoints_kw.sum(axis=0) / 60.0, strict=True)),
-        "opf_energy_kwh": dict(zip(buses, np.nansum(result.opf_kw, axis=0) / 60.0, strict=True)),
-        "cost": float(run.cost.sum() / 60.0),
-        "opf_cost": float(opf_cost.sum() / 60.0),
-        "cost_unit": "EUR",
+        **_day_comparison(problem, result),
         "max_overflow_kw": float(run.overflow_kw.max()) if run.overflow_kw.size else 0.0,
         "wall_seconds": run.wall_seconds,
     }
+
+
+def _runaway_minutes(run) -> list[int]:
+    flags = run.infeasible if run.infeasible is not None else np.zeros(len(run.minutes), bool)
+    return [int(m) for m in run.minutes[flags]]
+
+
+def _day_comparison(problem: DispatchProblem, result: DayComparison) -> dict:
+    """Errors, energies and costs of the dynamics and the DC-OPF over the same minutes."""
+    run, feasible = result.run, result.feasible
+    buses = [str(b) for b in generator_buses(problem)]
+    error = result.abs_error_kw[feasible]
+    worst = error.max(axis=1) if len(error) else error
+    some = bool(feasible.any())
+    opf_cost = np.array([o.cost for o in result.opf])[feasible]
+    outside = outside_limits(problem, run.setpoints_kw, run.online)
+    counts = outside.sum(axis=0)
+    return {
+        "compared_minutes": int(feasible.sum()),
+        "minutes_within_0_1_kw": int((worst <= MATCH_KW).sum()),
+        "max_abs_error_kw": float(error.max()) if some else None,
+        "mean_abs_error_kw": float(error.mean()) if some else None,
+        "median_max_abs_error_kw": float(np.median(worst)) if some else None,
+        "energy_kwh": _by_bus(buses, run.setpoints_kw[feasible].sum(axis=0) / 60.0),
+        "opf_energy_kwh": _by_bus(buses, result.opf_kw[feasible].sum(axis=0) / 60.0, some),
+        "cost": float(run.cost[feasible].sum() / 60.0),
+        "opf_cost": float(opf_cost.sum() / 60.0) if some else None,
+        "cost_unit": "EUR",
+        "energy_all_minutes_kwh": _by_bus(buses, run.setpoints_kw.sum(axis=0) / 60.0),
+        "cost_all_minutes": float(run.cost.sum() / 60.0),
+        "minutes_outside_limits": int(outside.any(axis=1).sum()),
+        "minutes_outside_limits_by_generator": {
+            name: int(n) for name, n in zip(problem.generators, counts, strict=True) if n
+        },
+    }
+
+
+def _by_bus(buses: list[str], values: np.ndarray, known: bool = True) -> dict:
+    return {bus: (float(v) if known else None) for bus, v in zip(buses, values, strict=True)}
 
 
 def iteration_seconds(settings) -> float:
@@ -202,8 +307,10 @@ def trajectory_table(result: SnapshotComparison) -> pd.DataFrame:
     return table
 
 
-def day_table(result: DayComparison) -> pd.DataFrame:
-    """One row per simulated minute: demand, set points, DC-OPF, iterations, costs, overflow."""
+def day_table(result: DayComparison, problem: DispatchProblem | None = None) -> pd.DataFrame:
+    """One row per simulated minute: demand, set points, DC-OPF (empty where infeasible:
+    ``opf_feasible`` false), iterations, costs, overflow; with ``problem``, ``outside_limits``
+    (some set point more than :data:`LIMIT_TOLERANCE_KW` outside its limits)."""
     run = result.run
     table = pd.DataFrame({"minute": run.minutes, "demand_kw": run.demand_kw})
     for k, name in enumerate(run.generators):
@@ -211,6 +318,9 @@ def day_table(result: DayComparison) -> pd.DataFrame:
     for k, name in enumerate(run.generators):
         table[f"{name}_opf_kw"] = result.opf_kw[:, k]
     table["max_abs_error_kw"] = result.abs_error_kw.max(axis=1)
+    table["opf_feasible"] = result.feasible
+    if problem is not None:
+        table["outside_limits"] = outside_limits(problem, run.setpoints_kw, run.online).any(1)
     table["iterations"] = run.iterations
     table["converged"] = run.converged
     table["cost_eur_per_h"] = run.cost

@@ -1,23 +1,82 @@
-"""Human-readable text of the CLI's summaries (the ``--json`` objects rendered for people)."""
+"""Human-readable text of the CLI's summaries (the ``--json`` objects rendered for people).
+
+Every text says which limits and events were applied, prints what is known and says what is
+not: no table of ``nan`` where the DC-OPF is infeasible, the minutes it is infeasible named,
+comparisons over the minutes where both sides exist, and set points outside their limits
+marked with ``*`` and explained.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+
+NO_DISPATCH = "infeasible (no dispatch meets the demand within the generator and line limits)"
+OUTSIDE_MARK = "*"
 
 
 def _fmt(value, unit: str = "", digits: int = 3) -> str:
     return "-" if value is None else f"{value:.{digits}f}{unit}"
 
 
-def generator_lines(rows: list[dict], columns: Sequence[str]) -> str:
-    """A table of generators (name, bus) with the given kW columns; ``-`` where unknown."""
+def minute_ranges(minutes: Sequence[int]) -> str:
+    """Sorted 1-based minutes as compact ranges: ``[566, 600, 601, 602]`` -> ``566, 600-602``."""
+    parts: list[str] = []
+    ordered = sorted(minutes)
+    start = None
+    for k, minute in enumerate(ordered):
+        start = minute if start is None else start
+        if k + 1 == len(ordered) or ordered[k + 1] != minute + 1:
+            parts.append(str(minute) if start == minute else f"{start}-{minute}")
+            start = None
+    return ", ".join(parts)
+
+
+def limits_text(limits: Sequence[dict]) -> str:
+    """``limits: 505:666=28 kW (3 lines)`` for the ``--limit`` options applied, or ``none``."""
+    if not limits:
+        return "limits: none"
+    parts = []
+    for row in limits:
+        count = row.get("lines_on_path")
+        lines = "" if count is None else f" ({count} line{'s' if count != 1 else ''})"
+        parts.append(f"{row['from_bus']}:{row['to_bus']}={row['limit_kw']:g} kW{lines}")
+    return "limits: " + ", ".join(parts)
+
+
+def events_text(events: Sequence[str]) -> str:
+    """``events: 739:off@600, 739:on@720`` for the ``--event`` options applied, or ``none``."""
+    return "events: " + (", ".join(events) if events else "none")
+
+
+def generator_lines(rows: list[dict], columns: Sequence[str], mark: str = "outside_limits") -> str:
+    """A table of generators (name, bus) with the given kW columns; ``-`` where unknown and
+    :data:`OUTSIDE_MARK` after a row whose ``mark`` flag is set."""
     header = f"{'generator':<10}{'bus':>6}" + "".join(f"{c:>14}" for c in columns)
     body = [
         f"{r['name']:<10}{r['bus']:>6}"
         + "".join(f"{r[c]:>14.3f}" if r[c] is not None else f"{'-':>14}" for c in columns)
+        + (f" {OUTSIDE_MARK}" if r.get(mark) else "")
         for r in rows
     ]
     return "\n".join([header, *body])
+
+
+def _why_outside(mode: str | None) -> str:
+    if mode == "paper":
+        return "the paper's barrier penalises leaving the limits but does not forbid it"
+    return "not a dispatch the generators can follow"
+
+
+def outside_note(rows: list[dict], mode: str | None = None) -> str | None:
+    """The note under a table whose rows carry ``outside_limits`` flags (None if none is)."""
+    outside = [r for r in rows if r.get("outside_limits")]
+    if not outside:
+        return None
+    which = ", ".join(
+        f"{r['name']} {r['setpoint_kw']:.3f} kW (limits {r['pmin_kw']:g}-{r['pmax_kw']:g} kW)"
+        for r in outside
+    )
+    return f"{OUTSIDE_MARK} set point outside its limits: {which} ({_why_outside(mode)})"
 
 
 def feeder_text(summary: dict) -> str:
@@ -33,45 +92,144 @@ def feeder_text(summary: dict) -> str:
     )
 
 
+def _inputs(s: dict) -> str:
+    """Feeder, profiles and limits lines shared by every minute and day text."""
+    case = s.get("case")
+    return (f"feeder: {case}\n" if case else "") + (
+        f"profiles: {s['profile_source']}\n{limits_text(s.get('limits', []))}"
+    )
+
+
 def opf_text(summary: dict) -> str:
     """``popdispatch opf``."""
+    s = summary
+    head = f"DC-OPF, minute {s['minute']}: "
+    demand = f"demand {s['demand_kw']:.3f} kW"
+    if s.get("capacity_kw") is not None:
+        demand += f", online capacity {s['capacity_kw']:.3f} kW"
+    if s["status"] != "optimal":
+        return f"{head}{NO_DISPATCH}\n{demand}\n{_inputs(s)}"
+    price = s.get("marginal_price_eur_per_mwh")
     return (
-        f"DC-OPF, minute {summary['minute']}: {summary['status']}; "
-        f"demand {summary['demand_kw']:.3f} kW; "
-        f"cost {_fmt(summary['cost'], ' EUR/h', 6)}\nprofiles: {summary['profile_source']}\n"
-        + generator_lines(summary["generators"], ["p_kw"])
+        f"{head}{s['status']}; {demand}; cost {_fmt(s['cost'], ' EUR/h', 6)}"
+        + (f"; marginal price {price:.3f} EUR/MWh" if price is not None else "")
+        + f"\n{_inputs(s)}\n"
+        + generator_lines(s["generators"], ["p_kw"])
+    )
+
+
+def _run_line(s: dict) -> str:
+    """What the dynamics did: converged when, stopped why, and the times."""
+    total, done = s["iterations"], s["converged_iteration"]
+    if done is not None:
+        run = f"converged at iteration {done} of {total}"
+    elif s.get("dynamics_status") == "stalled":
+        run = (
+            f"at rest from iteration {_fmt(s.get('rest_iteration'), '', 0)} of {total}, "
+            f"away from the DC-OPF: {s.get('stall_reason')}"
+        )
+    elif s.get("dynamics_status") == "infeasible":
+        run = f"stopped at iteration {total}: line prices ran away (no feasible rest point)"
+    else:
+        run = f"not converged within {total} iterations"
+    first = s["first_congestion_iteration"]
+    congestion = "no congestion" if first is None else f"first congestion at iteration {first}"
+    return (
+        f"{run}; {congestion}; engine {s['wall_seconds']:.3f} s, "
+        f"whole command {s['command_seconds']:.1f} s"
     )
 
 
 def snapshot_text(s: dict) -> str:
     """``popdispatch snapshot``."""
-    return (
+    head = (
         f"minute {s['minute']}, demand {s['demand_kw']:.3f} kW: {s['dynamics']} dynamics, "
-        f"{s['mode']} mode, x0 {s['x0']}\nprofiles: {s['profile_source']}\n"
-        f"status: {s['status']} (converged at iteration {_fmt(s['converged_iteration'], '', 0)}"
-        f" of {s['iterations']}; first congestion at iteration "
-        f"{_fmt(s['first_congestion_iteration'], '', 0)}; engine {s['wall_seconds']:.3f} s, "
-        f"whole command {s['command_seconds']:.1f} s)\n"
-        + generator_lines(s["generators"], ["setpoint_kw", "opf_kw"])
-        + f"\nmax |set point - DC-OPF| = {_fmt(s['max_abs_error_kw'], ' kW')}; "
-        f"max overflow = {s['max_overflow_kw']:.3f} kW"
+        f"{s['mode']} mode, x0 {s['x0']}\n{_inputs(s)}\n"
     )
+    rows = s["generators"]
+    note = outside_note(rows, s.get("mode"))
+    tail = f"\n{note}" if note else ""
+    dynamics = f"status: {s['status']} ({_run_line(s)})\n"
+    if s["status"] == "infeasible":
+        return (
+            head + f"DC-OPF: {NO_DISPATCH}\n" + dynamics
+            + generator_lines(rows, ["setpoint_kw", "pmax_kw"]) + tail
+            + f"\nmax overflow = {s['max_overflow_kw']:.3f} kW; cost of the set points "
+            f"{s['cost']:.6f} EUR/h (no DC-OPF to compare with)"
+        )  # fmt: skip
+    return (
+        head + dynamics + generator_lines(rows, ["setpoint_kw", "opf_kw"]) + tail
+        + f"\nmax |set point - DC-OPF| = {_fmt(s['max_abs_error_kw'], ' kW')}; "
+        f"max overflow = {s['max_overflow_kw']:.3f} kW; cost {s['cost']:.6f} EUR/h "
+        f"(DC-OPF {_fmt(s['opf_cost'], ' EUR/h', 6)})"
+    )  # fmt: skip
+
+
+def _energy(s: dict) -> str:
+    return ", ".join(
+        f"bus {b}: {e:.2f} (DC-OPF {_fmt(s['opf_energy_kwh'][b], '', 2)})"
+        for b, e in s["energy_kwh"].items()
+    )
+
+
+def _day_comparison(s: dict) -> str:
+    """Errors, cost and energy against the DC-OPF, over the minutes where it exists."""
+    compared, infeasible = s["compared_minutes"], s["infeasible_minutes"]
+    if compared == 0:
+        return "no minute has a DC-OPF: nothing to compare with"
+    over = (
+        f"over the {compared} minutes with a DC-OPF (of {s['minutes']})"
+        if infeasible
+        else f"over the {compared} minutes"
+    )
+    return (
+        f"compared with the DC-OPF {over}:\n"
+        f"{s['minutes_within_0_1_kw']} minutes within 0.1 kW of the DC-OPF; max |error| "
+        f"{_fmt(s['max_abs_error_kw'], ' kW')}, mean {_fmt(s['mean_abs_error_kw'], ' kW')}\n"
+        f"cost {s['cost']:.5f} EUR (DC-OPF {_fmt(s['opf_cost'], ' EUR', 5)})\n"
+        f"energy, kWh: {_energy(s)}"
+    )
+
+
+def _day_notes(s: dict) -> list[str]:
+    """What happened outside the comparison: infeasible minutes, set points out of limits."""
+    notes = []
+    infeasible = s["infeasible_minutes"]
+    if infeasible:
+        count = len(infeasible)
+        notes.append(
+            f"DC-OPF infeasible at {count} minute{'s' if count != 1 else ''}: "
+            f"{minute_ranges(infeasible)} (no DC-OPF values there; the dynamics ran them: "
+            f"all {s['minutes']} minutes cost {s['cost_all_minutes']:.5f} EUR; --out writes "
+            "their set points and overflow to day.csv)"
+        )
+    stalled = s.get("stalled_minutes") or []
+    if stalled:
+        notes.append(
+            f"stalled (at rest away from the DC-OPF) at {len(stalled)} minute"
+            f"{'s' if len(stalled) != 1 else ''}: {minute_ranges(stalled)}"
+        )
+    outside = s.get("minutes_outside_limits_by_generator") or {}
+    if outside:
+        which = ", ".join(f"{name} in {n}" for name, n in outside.items())
+        notes.append(
+            f"{OUTSIDE_MARK} set points outside their limits in {s['minutes_outside_limits']} "
+            f"minutes ({which}; {_why_outside(s.get('mode'))})"
+        )
+    return notes
 
 
 def day_text(s: dict) -> str:
     """``popdispatch day``."""
-    energy = ", ".join(
-        f"bus {b}: {e:.2f} (DC-OPF {s['opf_energy_kwh'][b]:.2f})"
-        for b, e in s["energy_kwh"].items()
-    )
-    return (
-        f"online day, minutes {s['first_minute']}-{s['last_minute']}: {s['dynamics']} dynamics, "
-        f"{s['mode']} mode\nprofiles: {s['profile_source']}\nstatus: {s['status']} "
-        f"({s['converged_minutes']} of {s['minutes']} minutes converged; engine "
-        f"{s['wall_seconds']:.3f} s, whole command {s['command_seconds']:.1f} s)\n"
-        f"{s['minutes_within_0_1_kw']} minutes within 0.1 kW of the "
-        f"DC-OPF; max |error| {_fmt(s['max_abs_error_kw'], ' kW')}, mean "
-        f"{_fmt(s['mean_abs_error_kw'], ' kW')}\ncost {s['cost']:.5f} EUR (DC-OPF "
-        f"{s['opf_cost']:.5f} EUR); max overflow {s['max_overflow_kw']:.3f} kW\n"
-        f"energy, kWh: {energy}"
-    )
+    lines = [
+        f"online day, minutes {s['first_minute']}-{s['last_minute']}: {s['dynamics']} "
+        f"dynamics, {s['mode']} mode",
+        _inputs(s),
+        events_text(s.get("events", [])),
+        f"status: {s['status']} ({s['converged_minutes']} of {s['minutes']} minutes converged; "
+        f"engine {s['wall_seconds']:.3f} s, whole command {s['command_seconds']:.1f} s)",
+        *_day_notes(s),
+        _day_comparison(s),
+        f"max overflow {s['max_overflow_kw']:.3f} kW (over all {s['minutes']} minutes)",
+    ]
+    return "\n".join(lines)
