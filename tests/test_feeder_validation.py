@@ -140,6 +140,21 @@ def test_bad_line_data(column, value):
     assert "'L34'" in str(exc.value)
 
 
+@pytest.mark.parametrize(
+    ("table", "dropped"),
+    [("lines", ["limit_kw"]), ("lines", ["r_ohm", "x_ohm"]), ("loads", ["bus"]), ("buses", ["y"])],
+)
+def test_missing_table_columns_are_named_on_one_line(table, dropped):
+    name, buses, lines, loads, source, fleet = parts()
+    tables = {"buses": buses, "lines": lines, "loads": loads}
+    tables[table] = tables[table].drop(columns=dropped)
+    with pytest.raises(FeederError) as exc:
+        Feeder(name, tables["buses"], tables["lines"], tables["loads"], source, fleet)
+    message = str(exc.value)
+    assert f"{table} table" in message and "\n" not in message
+    assert all(column in message for column in dropped)
+
+
 def test_with_line_limits():
     feeder = Feeder(*parts())
     limited = feeder.with_line_limits(pd.Series({"L23": 50.0, "L25": 7.5}))

@@ -106,6 +106,7 @@ def validate_feeder(feeder: Feeder) -> None:
     Vectorised (pandas, numpy, :mod:`scipy.sparse.csgraph`): a 100,000-bus feeder validates in
     a fraction of a second. The first problem found is reported, naming its element.
     """
+    _check_columns(feeder)
     buses, lines = feeder.buses, feeder.lines
     if feeder.source_bus not in buses.index:
         raise FeederError(f"source bus {feeder.source_bus} is not a bus of feeder {feeder.name!r}")
@@ -133,6 +134,22 @@ def validate_feeder(feeder: Feeder) -> None:
     from popdispatch.feeder.generators import validate_fleet
 
     validate_fleet(feeder.generators, buses.index)
+
+
+def _check_columns(feeder: Feeder) -> None:
+    """One line naming every required column a table lacks (``limit_kw``: ``inf`` = no limit)."""
+    for table, required in (
+        ("buses", BUS_COLUMNS), ("lines", LINE_COLUMNS), ("loads", LOAD_COLUMNS),
+    ):  # fmt: skip
+        columns = getattr(feeder, table).columns
+        missing = [column for column in required if column not in columns]
+        if missing:
+            hint = "; limit_kw inf means no limit" if "limit_kw" in missing else ""
+            plural = "s" if len(missing) > 1 else ""
+            raise FeederError(
+                f"the {table} table of feeder {feeder.name!r} lacks column{plural} "
+                f"{', '.join(missing)} (required: {', '.join(required)}{hint})"
+            )
 
 
 def _check_radial(feeder: Feeder) -> None:
