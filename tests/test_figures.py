@@ -246,3 +246,16 @@ def test_day_figure_marks_outages():
     assert "offline" in legend
     quiet = figures.base_day_figure(_day(np.ones((1440, 6), bool), "synthetic"), list(range(6)))
     assert "offline" not in " ".join(t.get_text() for t in quiet.legends[0].get_texts())
+
+
+def test_day_figure_fits_a_short_span_and_keeps_plain_kw_ticks():
+    day = _day(np.ones((241, 6), bool), "synthetic")
+    day.run.minutes = np.arange(540, 781)
+    day.run.setpoints_kw[:, 1] = 10.0 + 0.005 * np.sin(np.arange(241))  # watts of chatter
+    fig = figures.base_day_figure(day, list(range(6)))
+    _render(fig)
+    assert fig.axes[0].get_xlim() == pytest.approx((539 / 60, 780 / 60))
+    g114 = fig.axes[1]
+    low, high = g114.get_ylim()
+    assert high - low >= 1.0 - 1e-9
+    assert g114.yaxis.get_offset_text().get_text() == ""  # no "+1e1" above the panel

@@ -364,9 +364,10 @@ def base_day_figure(
         _shade_offline(ax, run.minutes, online[:, k])
         ax.plot(hours, run.setpoints_kw[:, k], color=colors[name], label="dynamics")
         ax.plot(hours, opf[:, k], color="black", ls="--", lw=0.7, alpha=0.8, label="DC-OPF")
-        ax.set_xticks(range(0, 25, 6))
+        _readable_y(ax)
         ax.set_title(f"{name} (bus {buses[k]})" + ("" if online[:, k].all() else ", outage"))
         ax.set_ylabel("output, kW")
+    _hours_axis(axes[0, 0], hours)
     for ax in axes[-1]:
         ax.set_xlabel("time of day, h")
     handles = [
@@ -383,6 +384,26 @@ def base_day_figure(
         fontsize=9,
     )
     return fig
+
+
+def _hours_axis(ax, hours: np.ndarray) -> None:
+    """The whole day with ticks every 6 h; a shorter span fills the (shared) axis."""
+    first, last = (float(hours.min()) - 1 / 60, float(hours.max())) if len(hours) else (0, 24)
+    if last - first >= 12.0:
+        ax.set_xlim(0, 24)
+        ax.set_xticks(range(0, 25, 6))
+    else:
+        ax.set_xlim(first, last)
+
+
+def _readable_y(ax, min_span_kw: float = 1.0) -> None:
+    """No offset notation, and at least ``min_span_kw`` of y range so that a generator
+    chattering by watts around a limit does not fill the panel."""
+    ax.ticklabel_format(axis="y", useOffset=False)
+    lo, hi = ax.get_ylim()
+    if hi - lo < min_span_kw:
+        middle = (lo + hi) / 2
+        ax.set_ylim(middle - min_span_kw / 2, middle + min_span_kw / 2)
 
 
 OFFLINE = {"facecolor": "#bbbbbb", "alpha": 0.5, "hatch": "///", "edgecolor": "#777777", "lw": 0}
