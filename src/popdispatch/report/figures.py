@@ -498,28 +498,32 @@ def congestion_figure(result: SnapshotComparison, title: str | None = None) -> F
     ax = axes[0, 0]
     _headroom(ax, run.trajectory_kw, result.opf.p_kw)
     _iteration_axes(ax, run, result.opf.p_kw, generator_colors(run.generators))
-    for row, (it, label, style) in enumerate(
-        (
-            (run.first_congestion, "congestion detected", ":"),
-            (run.converged_at, "converged", "-."),
-        )
-    ):
-        if it is not None:
-            right = it > 0.6 * run.iterations  # label on the side with room
-            ax.axvline(it, color="grey", ls=style, lw=1.0)
-            ax.annotate(
-                f"{label} (iteration {it})",
-                (it, 0.985 - 0.075 * row),
-                xycoords=("data", "axes fraction"),
-                xytext=(-3 if right else 3, 0),
-                textcoords="offset points",
-                ha="right" if right else "left",
-                va="top",
-                fontsize=6.5,
-            )
+    marks = (
+        (run.first_congestion, "congestion detected", ":"),
+        (run.converged_at, "converged", "-."),
+    )
+    for row, (it, label, style) in enumerate(m for m in marks if m[0] is not None):
+        _mark_iteration(ax, it, f"{label} (iteration {it})", style, row, run.iterations)
     fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=3)
     ax.set_title(title or f"Minute {run.minute}: set points (solid), DC-OPF (dashed)")
     return fig
+
+
+def _mark_iteration(ax, it: int, text: str, style: str, row: int, last: int) -> None:
+    """A vertical line at iteration ``it``, labelled in row ``row`` of the band above the
+    curves, on the side of the line with room."""
+    right = it > 0.6 * last
+    ax.axvline(it, color="grey", ls=style, lw=1.0)
+    ax.annotate(
+        text,
+        (it, 0.985 - 0.075 * row),
+        xycoords=("data", "axes fraction"),
+        xytext=(-3 if right else 3, 0),
+        textcoords="offset points",
+        ha="right" if right else "left",
+        va="top",
+        fontsize=6.5,
+    )
 
 
 def _headroom(ax, trajectory_kw: np.ndarray, opf_kw: np.ndarray, band: float = 0.17) -> None:
