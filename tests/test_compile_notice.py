@@ -1,0 +1,35 @@
+"""The first run says that it compiles the kernels, once (issue 10, item 4)."""
+
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+from test_cli import clean_env, command
+
+from popdispatch.compile_notice import kernels_cached
+
+NOTICE = "compiling the engine's kernels"
+
+
+def test_the_cache_check_reads_numbas_index():
+    # None would mean numba's cache internals moved and the notice silently never shows
+    assert kernels_cached() in (True, False)
+
+
+@pytest.mark.slow
+def test_compile_notice_only_when_numbas_cache_is_cold(tmp_path):
+    """An empty NUMBA_CACHE_DIR compiles (about 60-90 s) and says so; the next run loads the
+    kernels from that cache and says nothing. ``-q`` is left out: the notice is a note."""
+    env = {**clean_env(), "NUMBA_CACHE_DIR": str(tmp_path)}
+    args = command("day", "--mode", "exact", "--minutes", "600-601", "--json")
+    runs = [
+        subprocess.run(args, capture_output=True, text=True, env=env, timeout=900) for _ in range(2)
+    ]
+    for result in runs:
+        assert result.returncode == 0, result.stderr
+    cold, warm = runs
+    assert cold.stderr.count(NOTICE) == 1, cold.stderr
+    assert "60-90 s" in cold.stderr
+    assert NOTICE not in warm.stderr, warm.stderr
+    assert any(tmp_path.rglob("*.nbi"))  # the kernels went where we looked
