@@ -196,3 +196,15 @@ def test_differences_follow_the_numbers_not_the_paper_mode_story(reproduction):
     assert "Residual overflow" not in text and "stays" not in text
     assert "Base day" not in text
     assert "Agreeing with the paper" in text
+
+
+def test_report_without_the_run_still_addresses_each_difference(reproduction):
+    """``reproduction_report(summary, stems)`` (no run object): the same three points, with
+    what the summary holds."""
+    summary = rp.reproduction_summary(reproduction)
+    section = reproduction_report(summary, []).split("## Differences from the paper")[1]
+    cong = summary["congestion"]
+    assert f"Congestion detected at iteration {cong['first_congestion_iteration']}" in section
+    assert f"`{cong['x0']}` shares" in section and "initial state" in section
+    assert "G1 *rises*" in section
+    assert f"Residual overflow of {cong['max_overflow_kw']:.2f} kW" in section

@@ -197,6 +197,11 @@ def detection_note(cong: dict, start: CongestionStart | None) -> str | None:
             f"{cong['demand_kw']:.2f} kW demand), which already overloads the 505-666 path by "
             f"{start.overflow_kw:.2f} kW, so the first iteration sees the overflow."
         )
+    elif detected is not None:
+        text += (
+            f" This run starts from `{cong.get('x0', 'uniform')}` shares, whose flows exceed "
+            f"the limit by iteration {detected} (set points per iteration: `congestion.csv`)."
+        )
     converged = cong["converged_iteration"]
     if converged is not None and converged != PAPER_CONVERGENCE:
         text += (
@@ -214,13 +219,19 @@ def g1_note(cong: dict, free_g1_kw: float | None, start: CongestionStart | None)
         return None
     text = f"- **G1 ends at {final:.2f} kW** (DC-OPF {opf:.2f} kW)."
     initial = None if start is None else start.setpoints_kw.get("G1")
-    if initial is not None and final < initial:
+    if initial is None or final < initial:
         text += (
             " In the paper G1 *rises* after detection, to make up for the penalised G739, so "
             "its G1 was below the constrained optimum when the overflow appeared"
         )
         if free_g1_kw is not None:
             text += f" (without the limit the DC-OPF puts G1 at {free_g1_kw:.2f} kW)"
+    if initial is None:
+        text += (
+            f". Where this run's G1 starts is set by its initial state (`{cong.get('x0')}` "
+            "shares; iteration 0 of `congestion.csv`)."
+        )
+    elif final < initial:
         text += (
             f". This run's G1 starts at {initial:.2f} kW, above the constrained optimum, so it "
             "falls instead; both move towards the same dispatch."
