@@ -62,6 +62,7 @@ def test_capacity_short_minute_is_run_named_and_flagged(tmp_path):
     # paper mode's barrier lets G578 (Pmax 5 kW) take part of the missing power: flagged
     assert summary["minutes_outside_limits_by_generator"]["G578"] >= 1
     assert summary["minutes_outside_limits"] >= 1
+    assert summary["max_outside_limits_kw"] > 0.5  # G578 at 5.82 kW at minute 1123
     table = pd.read_csv(out / "day.csv")  # the whole day is written
     assert list(table.minute) == list(range(1100, 1131))
     row = table.set_index("minute").loc[1123]
@@ -80,7 +81,7 @@ def test_day_text_names_the_infeasible_minutes_and_compares_like_with_like():
     assert "over the 30 minutes with a DC-OPF (of 31)" in text
     assert "events: 739:off@600" in text
     assert "limits: none" in text
-    assert "* set points outside their limits" in text
+    assert "* set points outside their limits in" in text and "by up to" in text
 
 
 def test_checks_apply_only_to_the_minutes_asked_for():

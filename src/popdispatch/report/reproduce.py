@@ -194,7 +194,7 @@ def write_reproduction(rep: Reproduction, folder: StagedFolder, progress: Progre
 
     stems = make_figures(rep, folder, progress)
     summary = reproduction_summary(rep)
-    folder.write_csv("base_day.csv", day_table(rep.day))
+    folder.write_csv("base_day.csv", day_table(rep.day, rep.day_problem))
     folder.write_csv("congestion.csv", trajectory_table(rep.congestion))
     folder.write_csv("extinction.csv", extinction_table(rep))
     folder.write_json("summary.json", summary)

@@ -44,11 +44,18 @@ def setpoint_bounds_kw(problem: DispatchProblem, online: np.ndarray) -> tuple[np
     return lower, np.where(online, problem.pmax, 0.0) * KW_PER_MW
 
 
+def distance_outside_limits_kw(
+    problem: DispatchProblem, p_kw: np.ndarray, online: np.ndarray
+) -> np.ndarray:
+    """How far (kW, >= 0) set points ``p_kw`` (kW, (..., generators)) lie outside their limits."""
+    lower, upper = setpoint_bounds_kw(problem, online)
+    return np.maximum(np.maximum(lower - p_kw, p_kw - upper), 0.0)
+
+
 def outside_limits(problem: DispatchProblem, p_kw: np.ndarray, online: np.ndarray) -> np.ndarray:
     """Where set points ``p_kw`` (kW, (..., generators)) lie more than
     :data:`LIMIT_TOLERANCE_KW` outside their limits (the paper's barrier can be overpowered)."""
-    lower, upper = setpoint_bounds_kw(problem, online)
-    return (p_kw < lower - LIMIT_TOLERANCE_KW) | (p_kw > upper + LIMIT_TOLERANCE_KW)
+    return distance_outside_limits_kw(problem, p_kw, online) > LIMIT_TOLERANCE_KW
 
 
 def _finite(value) -> float | None:
@@ -222,6 +229,8 @@ def day_summary(
     are none); ``energy_all_minutes_kwh`` and ``cost_all_minutes`` are the dynamics' own over
     every simulated minute. ``price_runaway_minutes``: where exact mode's own infeasibility
     signal fired (line prices past their cap); the DC-OPF's verdict is the one that counts.
+    ``minutes_outside_limits`` (and ``..._by_generator``) count minutes with a set point more
+    than :data:`LIMIT_TOLERANCE_KW` outside its limits, ``max_outside_limits_kw`` the worst.
     """
     run = result.run
     settings = run.settings
@@ -262,7 +271,8 @@ def _day_comparison(problem: DispatchProblem, result: DayComparison) -> dict:
     worst = error.max(axis=1) if len(error) else error
     some = bool(feasible.any())
     opf_cost = np.array([o.cost for o in result.opf])[feasible]
-    outside = outside_limits(problem, run.setpoints_kw, run.online)
+    distance = distance_outside_limits_kw(problem, run.setpoints_kw, run.online)
+    outside = distance > LIMIT_TOLERANCE_KW
     counts = outside.sum(axis=0)
     return {
         "compared_minutes": int(feasible.sum()),
@@ -278,6 +288,7 @@ def _day_comparison(problem: DispatchProblem, result: DayComparison) -> dict:
         "energy_all_minutes_kwh": _by_bus(buses, run.setpoints_kw.sum(axis=0) / 60.0),
         "cost_all_minutes": float(run.cost.sum() / 60.0),
         "minutes_outside_limits": int(outside.any(axis=1).sum()),
+        "max_outside_limits_kw": float(distance.max()) if distance.size else 0.0,
         "minutes_outside_limits_by_generator": {
             name: int(n) for name, n in zip(problem.generators, counts, strict=True) if n
         },

@@ -214,7 +214,8 @@ def _day_notes(s: dict) -> list[str]:
         which = ", ".join(f"{name} in {n}" for name, n in outside.items())
         notes.append(
             f"{OUTSIDE_MARK} set points outside their limits in {s['minutes_outside_limits']} "
-            f"minutes ({which}; {_why_outside(s.get('mode'))})"
+            f"minutes, by up to {s['max_outside_limits_kw']:.3f} kW ({which}; "
+            f"{_why_outside(s.get('mode'))})"
         )
     return notes
 
