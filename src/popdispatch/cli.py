@@ -3,8 +3,18 @@
 Commands: ``feeder``, ``opf``, ``snapshot``, ``day``, ``reproduce``, ``export``. With ``--json``
 a command prints exactly one JSON object on stdout (see README, "JSON output"); progress and
 notes go to stderr. Exit codes: 0 success, 1 a problem (bad data, infeasible dispatch, cannot
-write), 2 bad usage (malformed or unknown option values), 130 interrupted. Every error is one
-line on stderr, without traceback (set ``POPDISPATCH_DEBUG=1`` to see one).
+write), 2 bad usage (malformed or unknown option values, checked before any data is read),
+130 interrupted. Every error is one line on stderr, without traceback (set
+``POPDISPATCH_DEBUG=1`` to see one).
+
+Infeasible minutes: ``opf``, ``snapshot`` and ``day`` run and report everything they can also
+where the DC-OPF is infeasible (the line limits or the generators online cannot meet the
+demand). A day runs every minute asked for and lists those in ``infeasible_minutes`` (their
+DC-OPF values null, the dynamics' set points and overflow kept, comparisons over the other
+minutes). The output is printed (and written to ``--out``) in full; then the command exits
+with code 1 and one line on stderr naming how many minutes and the first of them. Code 1, not
+0, because a script must not take such a result for a complete comparison with the DC-OPF;
+the JSON on stdout is complete and parseable all the same.
 
 Importing this module imports only click and the standard library: numpy, pandas, numba,
 pandapower, scipy and matplotlib are imported by the commands that use them, so ``--help`` and
@@ -253,7 +263,8 @@ def run_options(func):
             type=X0Type(),
             default="uniform",
             show_default=True,
-            help="Initial shares: uniform, capacity or e.g. G114=0,G1=1,G578=1.",
+            help="Initial shares: uniform, capacity or e.g. G114=0,G1=1,G578=1 (generators "
+            "not named start at zero; a note on stderr names them).",
         ),
         option(
             "--graph",
