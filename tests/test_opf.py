@@ -366,6 +366,22 @@ def test_outage_at_peak_exceeds_capacity(peak):
         peak.with_outage("G114", 566, 567)
 
 
+def test_capacity_checks_name_the_minute_its_capacity_and_who_is_off(peak):
+    from popdispatch.game.problem import check_capacity, check_online
+
+    short = peak.with_outage("G114", 566, 567, check=False)  # kept; the DC-OPF says infeasible
+    assert solve_opf(short, 566).status == "infeasible"
+    with pytest.raises(InfeasibleError, match=r"minute 566 .* 55\.000 kW at that minute") as exc:
+        check_capacity(short, [566])
+    assert "offline: G114" in str(exc.value)
+    dark = short
+    for name in short.generators:
+        dark = dark.with_outage(name, 566, check=False)
+    with pytest.raises(InfeasibleError, match=r"no generator is online at minute 566"):
+        check_online(dark, [566])
+    check_online(short, [566])  # some generator is online: the minute can run
+
+
 def test_offline_generator_is_held_at_zero():
     load_kw = 0.8 * elv_snapshot_566_kw()
     demand = load_kw.sum()
