@@ -76,7 +76,7 @@ def outside_note(rows: list[dict], mode: str | None = None) -> str | None:
         f"{r['name']} {r['setpoint_kw']:.3f} kW (limits {r['pmin_kw']:g}-{r['pmax_kw']:g} kW)"
         for r in outside
     )
-    return f"{OUTSIDE_MARK} set point outside its limits: {which} ({_why_outside(mode)})"
+    return f"{OUTSIDE_MARK} set point outside its limits: {which}; {_why_outside(mode)}"
 
 
 def feeder_text(summary: dict) -> str:
