@@ -193,8 +193,10 @@ def test_opf_on_the_opendss_feeder_equals_the_built_in_case():
         (["feeder", "--case", "ieee-elv", "--opendss", "."], ["--case", "--opendss"]),
         (["reproduce", "--out", "no/such/results"], ["--out", "does not exist"]),
         (["reproduce", "--out", "r", "--opendss", "."], ["--opendss", "feeder, opf, snapshot"]),
-        (["snapshot", "--minute", "566", "--mode", "exact", "--dynamics", "replicator"],
-         ["--mode", "replicator"]),
+        (
+            ["snapshot", "--minute", "566", "--mode", "exact", "--dynamics", "replicator"],
+            ["--mode", "replicator"],
+        ),
         (["day", "--dynamics", "smith", "--graph", "ring"], ["--graph", "ring"]),
         (["snapshot", "--minute", "566", "--x0", "=1"], ["--x0", "=1"]),
     ],

@@ -198,5 +198,5 @@ def write_reproduction(rep: Reproduction, folder: StagedFolder, progress: Progre
     folder.write_csv("congestion.csv", trajectory_table(rep.congestion))
     folder.write_csv("extinction.csv", extinction_table(rep))
     folder.write_json("summary.json", summary)
-    folder.write_text("report.md", reproduction_report(summary, stems))
+    folder.write_text("report.md", reproduction_report(summary, stems, rep))
     return summary
