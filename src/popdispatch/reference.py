@@ -131,8 +131,9 @@ class ReferenceMinute:
         remaining, point = it.dt, None
         while remaining > 1e-12 * it.dt:
             if point is None:
-                point, congestion, residual = self.evaluate(x, z)
+                point, congestion, step_residual = self.evaluate(x, z)
                 congested = max(congested, congestion)
+                residual = max(residual, step_residual)
             h = min(h_try, remaining)
             x1, z1 = self.limited_stage(h, x, z, point)
             second, _, _ = self.evaluate(x1, z1)
@@ -173,12 +174,14 @@ class ReferenceMinute:
         need = (3 if it.extrapolate else 2) * it.window
         samples = [x * self.demand]
         h_try = it.dt
+        calm = 0  # iterations in a row with the residual within tol
         for k in range(1, horizon + 1):
             x, z, _, residual, h_try = self.advance(x, z, h_try)
             samples.append(x * self.demand)
             if len(z) and z.max() > self.z_cap:
                 return np.array(samples), x, z, INFEASIBLE
-            if k >= need and residual <= tol and self._windows_agree(samples, tol):
+            calm = calm + 1 if residual <= tol else 0
+            if k >= need and calm >= it.window and self._windows_agree(samples, tol):
                 return np.array(samples), x, z, k - it.window
         return np.array(samples), x, z, -1
 
