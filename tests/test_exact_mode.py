@@ -296,8 +296,16 @@ def test_degenerate_optima_converge_in_bounded_iterations(case):
     "cannot do better. The run reports not_converged, never converged.",
 )
 def test_zero_reduced_cost_at_pmin_converges_in_bounded_iterations():
-    # G1 optimal exactly at Pmin = 0 with b = 1.4 EUR/MW = the marginal cost of G2 at 10 kW
-    generators = [(1, 0, 1.4, 20.0, 0, 10), (2, 0, 1.0, 20.0, 0, 20), (3, 0, 5.0, 0.02, 0, 10)]
-    run = run_snapshot(line_feeder(generators, 10.0), 1, RunSettings(mode="exact"))
-    assert run.status != "stalled"  # honest either way: not at rest yet
+    run = run_snapshot(line_feeder(TIE_AT_PMIN, 10.0), 1, RunSettings(mode="exact"))
     assert run.status == "converged"
+
+
+def test_zero_reduced_cost_at_pmin_is_reported_not_converged():
+    """Until the case above converges, it must not claim convergence nor a stall."""
+    run = run_snapshot(line_feeder(TIE_AT_PMIN, 10.0), 1, RunSettings(mode="exact"))
+    assert run.status == "not_converged"
+    assert run.setpoints_kw[0] < 0.01  # G1 on its way down to 0 kW
+
+
+#: G1 optimal exactly at Pmin = 0 with b = 1.4 EUR/MW = the marginal cost of G2 at 10 kW.
+TIE_AT_PMIN = [(1, 0, 1.4, 20.0, 0, 10), (2, 0, 1.0, 20.0, 0, 20), (3, 0, 5.0, 0.02, 0, 10)]
