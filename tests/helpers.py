@@ -26,7 +26,11 @@ def official_folder() -> Path:
     """The official folder, or skip the test when it is absent."""
     folder = find_official_folder()
     if folder is None:
-        pytest.skip("official IEEE ELV data not found")
+        pytest.skip(
+            "official IEEE ELV data not found: set POPDISPATCH_PROFILES to the folder holding "
+            "its Loads.txt and Lines.txt (the OpenDSS form of the IEEE European LV Test "
+            "Feeder), or place it at ../shared/ieee-elv beside the checkout"
+        )
     return folder
 
 

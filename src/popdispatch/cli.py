@@ -42,7 +42,7 @@ from pathlib import Path
 import click
 
 from popdispatch.errors import OptionError, PopdispatchError
-from popdispatch.report.output import json_text, staged_folder
+from popdispatch.report.output import check_writable, json_text, staged_folder
 from popdispatch.report.progress import Progress
 from popdispatch.report.text import day_text, feeder_text, opf_text, snapshot_text
 
@@ -392,6 +392,8 @@ def check_out(out: Path | None) -> None:
             f"cannot write {out}: folder {out.absolute().parent} does not exist",
             param_hint="'--out'",
         )
+    if out is not None:
+        check_writable(out)  # read-only or forbidden: one line, exit 1, before any work
 
 
 def emit(summary: dict, as_json: bool, text: str) -> None:

@@ -157,7 +157,9 @@ def extinction(
     """
     problem = elv_problem(profiles)
     x0 = {g: (0.0 if g == generator else 1.0) for g in problem.generators}
-    base = replace(settings or RunSettings(), x0=x0)
+    # Smith and replicator on the complete graph (the comparison of the paper's fig. 6); a
+    # warm start does not apply to one minute, so none is carried over.
+    base = replace(settings or RunSettings(), x0=x0, graph="complete", warm_start=None)
     imitative = replace(base, dynamics="replicator", mode="paper", integrator=None)
     return ExtinctionResult(
         generator,

@@ -505,7 +505,8 @@ def congestion_figure(result: SnapshotComparison, title: str | None = None) -> F
     for row, (it, label, style) in enumerate(m for m in marks if m[0] is not None):
         _mark_iteration(ax, it, f"{label} (iteration {it})", style, row, run.iterations)
     fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=3)
-    ax.set_title(title or f"Minute {run.minute}: set points (solid), DC-OPF (dashed)")
+    reference = "DC-OPF (dashed)" if result.opf.status == "optimal" else "no DC-OPF (infeasible)"
+    ax.set_title(title or f"Minute {run.minute}: set points (solid), {reference}")
     return fig
 
 
