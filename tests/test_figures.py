@@ -64,7 +64,7 @@ def _snapshot(trajectory: np.ndarray, opf_kw: np.ndarray, first=1, converged=49)
         first_congestion=first,
         converged_at=converged,
     )
-    return SimpleNamespace(run=run, opf=SimpleNamespace(p_kw=opf_kw))
+    return SimpleNamespace(run=run, opf=SimpleNamespace(p_kw=opf_kw, status="optimal"))
 
 
 @pytest.fixture
@@ -79,6 +79,15 @@ def congested():
 
 
 # -- set points per iteration ----------------------------------------------------------------
+
+
+def test_infeasible_snapshot_title_claims_no_dc_opf(congested):
+    congested.opf.status = "infeasible"
+    assert figures.congestion_figure(congested).axes[0].get_title().endswith(
+        "no DC-OPF (infeasible)"
+    )
+    congested.opf.status = "optimal"
+    assert figures.congestion_figure(congested).axes[0].get_title().endswith("DC-OPF (dashed)")
 
 
 def test_overlapping_set_point_lines_stay_distinguishable(congested):
