@@ -12,6 +12,13 @@ import pytest
 from popdispatch.feeder.generators import make_fleet
 from popdispatch.feeder.model import Feeder
 
+#: Why a test that needs the official data is skipped, and what to set to run it.
+MISSING_OFFICIAL = (
+    "official IEEE ELV data not found: set POPDISPATCH_PROFILES to the folder holding its "
+    "Loads.txt and Lines.txt (the OpenDSS form of the IEEE European LV Test Feeder), or place "
+    "it at ../shared/ieee-elv beside the checkout"
+)
+
 
 def find_official_folder() -> Path | None:
     """The official IEEE ELV folder: ``$POPDISPATCH_PROFILES``, else ``../shared/ieee-elv``."""
@@ -26,11 +33,7 @@ def official_folder() -> Path:
     """The official folder, or skip the test when it is absent."""
     folder = find_official_folder()
     if folder is None:
-        pytest.skip(
-            "official IEEE ELV data not found: set POPDISPATCH_PROFILES to the folder holding "
-            "its Loads.txt and Lines.txt (the OpenDSS form of the IEEE European LV Test "
-            "Feeder), or place it at ../shared/ieee-elv beside the checkout"
-        )
+        pytest.skip(MISSING_OFFICIAL)
     return folder
 
 

@@ -17,10 +17,10 @@ from popdispatch.feeder.cases import elv_snapshot_566_kw
 from popdispatch.feeder.profiles import LoadProfiles
 from popdispatch.readers import PROFILES_ENV, default_profiles, read_profiles, resolve_profiles
 
-from helpers import find_official_folder
+from helpers import MISSING_OFFICIAL, find_official_folder
 
 OFFICIAL = find_official_folder()
-needs_official = pytest.mark.skipif(OFFICIAL is None, reason="official IEEE ELV data absent")
+needs_official = pytest.mark.skipif(OFFICIAL is None, reason=MISSING_OFFICIAL)
 
 
 @pytest.fixture(scope="module")

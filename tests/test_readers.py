@@ -15,10 +15,10 @@ from popdispatch.feeder.generators import paper_fleet
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.readers import read_opendss_feeder
 
-from helpers import find_official_folder
+from helpers import MISSING_OFFICIAL, find_official_folder
 
 OFFICIAL = find_official_folder()
-needs_official = pytest.mark.skipif(OFFICIAL is None, reason="official IEEE ELV data absent")
+needs_official = pytest.mark.skipif(OFFICIAL is None, reason=MISSING_OFFICIAL)
 
 
 @pytest.fixture(scope="module")
