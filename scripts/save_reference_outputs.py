@@ -163,7 +163,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"wrote {stem}.npz")
     metadata = {
         "git_commit": args.commit or _git_commit(),
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "command": " ".join(["python", *sys.argv]) if argv is None else " ".join(argv),
         "python": platform.python_version(),
         "numpy": np.__version__,
