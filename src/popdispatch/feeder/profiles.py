@@ -11,9 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from popdispatch.constants import MINUTES_PER_DAY
 from popdispatch.errors import ProfileError
-
-MINUTES_PER_DAY = 1440
 
 
 @dataclass(frozen=True)

@@ -15,13 +15,12 @@ from functools import cached_property
 import numpy as np
 import pandas as pd
 
+from popdispatch.constants import KW_PER_MW
 from popdispatch.errors import InfeasibleError, ProfileError
 from popdispatch.feeder.profiles import LoadProfiles, check_minute
 from popdispatch.feeder.reduction import ReducedFeeder
 from popdispatch.feeder.tree import downstream, line_flows
 from popdispatch.game.flows import limited_ancestors
-
-KW_PER_MW = 1000.0
 
 
 @dataclass(frozen=True)
