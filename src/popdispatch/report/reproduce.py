@@ -18,8 +18,7 @@ import pandas as pd
 
 from popdispatch.feeder.profiles import LoadProfiles
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
-from popdispatch.online import RunSettings, run_day
-from popdispatch.opf import OpfSolver
+from popdispatch.online import RunSettings
 from popdispatch.report.output import StagedFolder
 from popdispatch.report.progress import Progress
 from popdispatch.report.summaries import (
@@ -36,6 +35,7 @@ from popdispatch.scenarios import (
     ExtinctionResult,
     SnapshotComparison,
     congestion,
+    day_vs_opf,
     elv_problem,
     extinction,
     peak_profiles,
@@ -59,27 +59,6 @@ class Reproduction:
     day: DayComparison
 
 
-def run_day_with_opf(
-    problem: DispatchProblem, settings: RunSettings, minutes, progress: Progress
-) -> DayComparison:
-    """The online day and the DC-OPF of each minute, with progress bars.
-
-    One DC-OPF solver serves the whole day (only its bounds change from minute to minute), as
-    in :func:`popdispatch.opf.solve_opf_day`: building a solver per minute cost about 2 ms
-    each, i.e. seconds per day, for the same results.
-    """
-    label = f"online day ({settings.dynamics}, {settings.mode} mode)"
-    total = len(problem.demand) if minutes is None else len(minutes)
-    with progress.counter(label, total) as advance:
-        run = run_day(problem, settings, minutes, progress=advance)
-    solver = OpfSolver(problem)
-    opf = [
-        solver.solve(int(m))
-        for m in progress.iterate(run.minutes, "DC-OPF per minute", len(run.minutes))
-    ]
-    return DayComparison(run, opf)
-
-
 def run_reproduction(
     profiles: LoadProfiles, settings: RunSettings, minutes, progress: Progress
 ) -> Reproduction:
@@ -92,7 +71,7 @@ def run_reproduction(
         peak = snapshot_vs_opf(peak_problem, PEAK_MINUTE, settings)
         congested = congestion(settings=settings)
         extinct = extinction(settings=settings)  # sets its own x0
-    day = run_day_with_opf(day_problem, settings, minutes, progress)
+    day = day_vs_opf(day_problem, settings, minutes, progress)
     return Reproduction(
         settings, peak_problem, peak, congestion_problem, congested, extinct, day_problem, day
     )

@@ -1,0 +1,36 @@
+"""The ``popdispatch`` command line (click); see :mod:`popdispatch.cli.process` for exit codes,
+errors and times, :mod:`popdispatch.cli.commands` for the commands.
+
+Importing this package imports only click and the standard library (and popdispatch's light
+modules): numpy, pandas, numba, pandapower, scipy and matplotlib are imported by the commands
+that use them, so ``--help`` and usage errors are quick.
+"""
+
+from popdispatch.cli.commands import cli
+from popdispatch.cli.process import (
+    EXIT_INTERRUPTED,
+    EXIT_PROBLEM,
+    EXIT_USAGE,
+    Failure,
+    command_seconds,
+    main,
+    process_age_seconds,
+    stamp,
+)
+from popdispatch.cli.render import infeasible_day_message, infeasible_minute_message
+from popdispatch.constants import MINUTES_PER_DAY
+
+__all__ = [
+    "EXIT_INTERRUPTED",
+    "EXIT_PROBLEM",
+    "EXIT_USAGE",
+    "MINUTES_PER_DAY",
+    "Failure",
+    "cli",
+    "command_seconds",
+    "infeasible_day_message",
+    "infeasible_minute_message",
+    "main",
+    "process_age_seconds",
+    "stamp",
+]

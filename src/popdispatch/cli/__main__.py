@@ -1,0 +1,7 @@
+"""``python -m popdispatch.cli``."""
+
+import sys
+
+from popdispatch.cli.process import main
+
+sys.exit(main())

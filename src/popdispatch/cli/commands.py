@@ -1,0 +1,293 @@
+"""The ``popdispatch`` commands: parse the options, call the library, render the result.
+
+See :mod:`popdispatch.cli.process` for exit codes, errors and times; heavy libraries are
+imported inside the commands that use them.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from popdispatch.cli.options import (
+    FOLDER,
+    MODE_CHOICE,
+    EngineChoice,
+    EventType,
+    MinutesType,
+    check_out,
+    check_shares,
+    json_option,
+    limit_option,
+    minute_option,
+    opendss_option,
+    option,
+    out_option,
+    profiles_option,
+    quiet_option,
+    refuse_opendss,
+    run_options,
+    settings_from,
+)
+from popdispatch.cli.process import Failure, stamp, start_clock
+from popdispatch.cli.render import (
+    announce_compile,
+    emit,
+    infeasible_day_message,
+    infeasible_minute_message,
+    write_day,
+    write_snapshot,
+)
+from popdispatch.report.output import json_text, staged_folder
+from popdispatch.report.progress import Progress
+from popdispatch.report.text import day_text, feeder_text, opf_text, snapshot_text
+
+
+def load_profiles(folder: Path | None, minute: int | None, progress: Progress):
+    """Profiles for a run (:func:`popdispatch.runs.load_profiles`)."""
+    from popdispatch import runs
+
+    return runs.load_profiles(folder, minute, progress)
+
+
+def build(profiles, limits, progress: Progress, opendss=None, events=(), minutes=None):
+    """The run's problem (:func:`popdispatch.runs.load_problem`) behind a progress step."""
+    from popdispatch.errors import OptionError
+    from popdispatch.runs import load_problem
+
+    what = f"the feeder in {opendss}" if opendss else "the ieee-elv feeder"
+    with progress.step(f"loading {what}"):
+        try:
+            return load_problem(profiles, limits, opendss, events, minutes)
+        except OptionError as exc:  # a bad --limit reads as click's own usage errors
+            if exc.option != "--limit":
+                raise
+            raise click.BadParameter(str(exc), param_hint="'--limit'") from None
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="popdispatch")
+@click.pass_context
+def cli(ctx: click.Context) -> None:
+    """Online, distributed, network-constrained dispatch of distributed generators
+    with population dynamics, compared with an exact DC-OPF (IEEE European LV feeder)."""
+    start_clock(ctx)
+
+
+@cli.command(short_help="The feeder: buses, key nodes, lines, loads, generators.")
+@click.option("--case", type=click.Choice(["ieee-elv"]), help="Built-in case (default).")
+@click.option("--opendss", type=FOLDER, help="Read the feeder from its OpenDSS files instead.")
+@json_option
+@quiet_option
+def feeder(case: str | None, opendss: Path | None, as_json: bool, quiet: bool) -> None:
+    """What the feeder is: buses, key nodes, lines, loads, generators, capacity."""
+    from popdispatch.feeder import load_case, reduce_feeder
+    from popdispatch.readers import read_opendss_feeder
+    from popdispatch.report.summaries import feeder_summary
+
+    if case and opendss:
+        raise click.UsageError("give either --case or --opendss, not both")
+    with Progress(quiet).step("loading the feeder"):
+        net = read_opendss_feeder(opendss) if opendss else load_case(case or "ieee-elv")
+        summary = feeder_summary(net, reduce_feeder(net))
+    emit(summary, as_json, feeder_text(summary))
+
+
+@cli.command(short_help="The exact DC-OPF of one minute (paper eq. 1).")
+@minute_option
+@limit_option
+@profiles_option
+@opendss_option
+@json_option
+@quiet_option
+def opf(minute: int, limits, profiles: Path | None, opendss, as_json: bool, quiet: bool) -> int:
+    """The exact DC-OPF of one minute (paper eq. 1): the cheapest dispatch meeting the
+    demand within the generator limits and the line limits. Exit code 1 (after the output)
+    when no such dispatch exists."""
+    from popdispatch.opf import solve_opf
+    from popdispatch.report.summaries import opf_summary
+
+    progress = Progress(quiet)
+    problem = build(load_profiles(profiles, minute, progress), limits, progress, opendss)
+    summary = opf_summary(problem, solve_opf(problem, minute), limits)
+    emit(summary, as_json, opf_text(summary))
+    if summary["status"] != "optimal":
+        raise Failure(infeasible_minute_message(summary))
+    return 0
+
+
+@cli.command(short_help="One minute of dynamics against the DC-OPF.")
+@minute_option
+@limit_option
+@run_options
+@profiles_option
+@opendss_option
+@out_option
+@json_option
+@quiet_option
+def snapshot(
+    minute, limits, dynamics, mode, x0, graph, profiles, opendss, out, as_json, quiet
+) -> int:
+    """One minute of dynamics: trajectory, convergence, comparison with the DC-OPF.
+
+    A minute whose DC-OPF is infeasible is still run and reported (set points, overflow,
+    set points outside their limits flagged; DC-OPF values null), then exit code 1.
+    """
+    from popdispatch.report.summaries import snapshot_summary, trajectory_table
+    from popdispatch.runs import run_snapshot_vs_opf
+
+    progress = Progress(quiet)
+    check_out(out)
+    settings = settings_from(dynamics, mode, x0, graph)
+    check_shares(x0, progress)
+    announce_compile(progress)
+    problem = build(load_profiles(profiles, minute, progress), limits, progress, opendss)
+    with progress.step(f"minute {minute}: {dynamics} dynamics and DC-OPF"):
+        result = run_snapshot_vs_opf(problem, minute, settings)
+    summary = snapshot_summary(problem, result, limits)
+    if out is not None:
+        write_snapshot(out, summary, trajectory_table(result), result, progress)
+    emit(stamp(summary), as_json, snapshot_text(summary))
+    if summary["status"] == "infeasible":
+        raise Failure(infeasible_minute_message(summary))
+    return 0
+
+
+@cli.command(short_help="The online day, minute by minute, against the DC-OPF.")
+@limit_option
+@run_options
+@option(
+    "--event",
+    "events",
+    type=EventType(),
+    multiple=True,
+    help="Generator availability: BUS:off@MIN trips the generator at BUS at minute MIN, "
+    "BUS:on@MIN brings it back (repeatable).",
+)
+@option("--minutes", type=MinutesType(), help="Simulate only minutes START-END (default 1-1440).")
+@option(
+    "--warm-start",
+    type=EngineChoice("popdispatch.warm_start:WARM_STARTS"),
+    help="How a minute starts from the last: shares (the paper's rule, p = x * new demand; "
+    "paper mode's default) or setpoints (set points kept, the demand step taken by the "
+    "generators inside their limits; exact mode's default).",
+)
+@profiles_option
+@opendss_option
+@out_option
+@json_option
+@quiet_option
+def day(
+    limits, dynamics, mode, x0, graph, events, minutes, warm_start, profiles, opendss, out,
+    as_json, quiet,
+) -> int:  # fmt: skip
+    """The online day: every minute continues from the last (warm start), against the DC-OPF.
+
+    Every minute asked for is run, also where the DC-OPF is infeasible (the line limits or
+    the generators online cannot meet the demand): those minutes are listed in
+    infeasible_minutes, their DC-OPF values are null, the dynamics' set points and overflow
+    are still reported, and the comparisons (errors, energy, cost) use the other minutes
+    only. Such a day is printed and written in full and then exits with code 1, naming the
+    infeasible minutes on stderr. Minutes with no generator online at all are an error
+    (exit 1, nothing run).
+
+    Times: wall_seconds is the engine's own (no start-up, imports, data loading or DC-OPF),
+    command_seconds the whole command's, from the process start.
+    """
+    import numpy as np
+
+    from popdispatch.events import event_label
+    from popdispatch.report.summaries import day_summary, day_table
+    from popdispatch.runs import run_day_vs_opf
+
+    progress = Progress(quiet)
+    check_out(out)
+    settings = settings_from(dynamics, mode, x0, graph, warm_start)
+    check_shares(x0, progress)
+    announce_compile(progress)
+    span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
+    day_profiles = load_profiles(profiles, None, progress)
+    problem = build(day_profiles, limits, progress, opendss, events, span)
+    result = run_day_vs_opf(problem, settings, span, progress)
+    labels = [event_label(event) for event in events]
+    summary = day_summary(problem, result, limits, labels)
+    if out is not None:
+        write_day(out, summary, day_table(result, problem), result, problem, progress)
+    emit(stamp(summary), as_json, day_text(summary))
+    if summary["infeasible_minutes"]:
+        raise Failure(infeasible_day_message(summary))
+    return 0
+
+
+@cli.command(short_help="The paper's three experiments: figures and report.md.")
+@profiles_option
+@option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Folder for figures, time series, summary.json and report.md.",
+)
+@option("--opendss", hidden=True, callback=refuse_opendss, expose_value=False, is_eager=True)
+@option(
+    "--mode",
+    type=MODE_CHOICE,
+    default="paper",
+    show_default=True,
+    help="Dispatch mode of every experiment.",
+)
+@option("--minutes", type=MinutesType(), help="Base day over minutes START-END only (quick look).")
+@json_option
+@quiet_option
+def reproduce(profiles, out, mode, minutes, as_json, quiet) -> None:
+    """The paper's three experiments end to end: figures, summary.json, report.md."""
+    import numpy as np
+
+    from popdispatch.report.reproduce import run_reproduction, write_reproduction
+
+    progress = Progress(quiet)
+    check_out(out)
+    settings = settings_from("smith", mode, "uniform", "complete")
+    announce_compile(progress)
+    day_profiles = load_profiles(profiles, None, progress)
+    span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
+    rep = run_reproduction(day_profiles, settings, span, progress)
+    with staged_folder(out) as folder:
+        summary = write_reproduction(rep, folder, progress)
+    progress.note(f"wrote {out}/report.md, summary.json and figures/")
+    if as_json:
+        click.echo(json_text(summary), nl=False)
+
+
+@cli.command(short_help="One minute as a MATPOWER or pandapower case.")
+@minute_option
+@option(
+    "--format",
+    "fmt",
+    type=click.Choice(["matpower", "pandapower"]),
+    required=True,
+    help="MATPOWER case file (.m) or pandapower JSON net.",
+)
+@option(
+    "--out", type=click.Path(dir_okay=False, path_type=Path), required=True, help="File to write."
+)
+@limit_option
+@profiles_option
+@opendss_option
+@quiet_option
+def export(minute, fmt, out, limits, profiles, opendss, quiet) -> None:
+    """The reduced feeder at one minute as a MATPOWER or pandapower case (DC-OPF cross-check)."""
+    from popdispatch.export import write_case
+
+    progress = Progress(quiet)
+    check_out(out)
+    day_profiles = load_profiles(profiles, minute, progress)
+    problem = build(day_profiles, limits, progress, opendss)
+    loads = minute_loads(problem, day_profiles, minute)
+    write_case(out, fmt, problem, minute, loads)
+    progress.note(f"wrote {out} ({fmt}, minute {minute})")
+
+
+def minute_loads(problem, profiles, minute: int):
+    """Per-load demand (kW) at ``minute`` in the order of the feeder's loads."""
+    return profiles.for_loads(problem.feeder.original.loads.index).at(minute).to_numpy(float)

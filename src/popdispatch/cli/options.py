@@ -1,0 +1,245 @@
+"""The CLI's option types and shared options: forms are checked here, at parse time (exit 2);
+names are checked against the problem by the library (:mod:`popdispatch.runs`)."""
+
+from __future__ import annotations
+
+import importlib
+import re
+from pathlib import Path
+
+import click
+
+from popdispatch.constants import MINUTES_PER_DAY
+from popdispatch.report.output import check_writable
+
+Limit = tuple[int, int, float]
+
+
+class LimitType(click.ParamType):
+    """``A:B=KW``: every line on the path between original buses A and B limited to KW kW."""
+
+    name = "A:B=KW"
+    pattern = re.compile(r"^\s*(\d+)\s*:\s*(\d+)\s*=\s*([^\s]+)\s*$")
+
+    def convert(self, value, param, ctx) -> Limit:
+        if isinstance(value, tuple):
+            return value
+        match = self.pattern.match(str(value))
+        if match is None:
+            self.fail(f"{value!r} is not of the form A:B=KW (e.g. 505:666=28)", param, ctx)
+        a, b, kw = int(match[1]), int(match[2]), _float(match[3])
+        if kw is None or kw < 0:
+            self.fail(f"{value!r}: limit {match[3]!r} is not a finite number >= 0 kW", param, ctx)
+        if a == b:
+            self.fail(f"{value!r}: buses A and B are the same; no line between them", param, ctx)
+        return a, b, kw
+
+
+def _float(text: str) -> float | None:
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if value == value and abs(value) != float("inf") else None
+
+
+class EventType(click.ParamType):
+    """``BUS:off@MIN`` or ``BUS:on@MIN``: the generator at BUS trips or returns at minute MIN."""
+
+    name = "BUS:off|on@MIN"
+    pattern = re.compile(r"^\s*(\d+)\s*:\s*(off|on)\s*@\s*(\d+)\s*$", re.IGNORECASE)
+
+    def convert(self, value, param, ctx) -> tuple[int, str, int]:
+        if isinstance(value, tuple):
+            return value
+        match = self.pattern.match(str(value))
+        if match is None:
+            self.fail(f"{value!r} is not of the form BUS:off@MIN or BUS:on@MIN", param, ctx)
+        minute = int(match[3])
+        if not 1 <= minute <= MINUTES_PER_DAY:
+            self.fail(f"{value!r}: minute {minute} is outside 1..{MINUTES_PER_DAY}", param, ctx)
+        return int(match[1]), match[2].lower(), minute
+
+
+class X0Type(click.ParamType):
+    """``uniform``, ``capacity`` or ``NAME=SHARE,...`` (names ``G114`` or buses ``114``).
+
+    Only the form is checked here; the names are checked against the problem's own fleet once
+    it is built (:func:`popdispatch.runs.check_x0`), still a usage error.
+    """
+
+    name = "uniform|capacity|G=SHARE,..."
+
+    def convert(self, value, param, ctx) -> str | dict[str, float]:
+        if isinstance(value, dict) or value in ("uniform", "capacity"):
+            return value
+        shares: dict[str, float] = {}
+        for item in str(value).split(","):
+            key, sep, share = item.partition("=")
+            key, number = key.strip(), _float(share)
+            name = f"G{key}" if key.isdigit() else key
+            if not sep or not key or number is None or number < 0:
+                self.fail(
+                    f"{item!r} is not NAME=SHARE with a share >= 0 (in {value!r})", param, ctx
+                )
+            shares[name] = number
+        if sum(shares.values()) <= 0:
+            self.fail(f"{value!r}: the shares sum to zero", param, ctx)
+        return shares
+
+
+class MinutesType(click.ParamType):
+    """``START-END``: a range of 1-based minutes, both included."""
+
+    name = "START-END"
+
+    def convert(self, value, param, ctx) -> tuple[int, int]:
+        if isinstance(value, tuple):
+            return value
+        match = re.fullmatch(r"\s*(\d+)\s*-\s*(\d+)\s*", str(value))
+        if match is None:
+            self.fail(f"{value!r} is not of the form START-END (e.g. 540-600)", param, ctx)
+        start, end = int(match[1]), int(match[2])
+        if not 1 <= start <= end <= MINUTES_PER_DAY:
+            self.fail(f"{value!r}: need 1 <= START <= END <= {MINUTES_PER_DAY}", param, ctx)
+        return start, end
+
+
+FOLDER = click.Path(exists=True, file_okay=False, dir_okay=True, readable=True, path_type=Path)
+
+
+class EngineChoice(click.Choice):
+    """A choice among names the engine defines (``"module:ATTRIBUTE"``), looked up only when
+    click needs them (parsing, help): importing the CLI must not import the engine (numba)."""
+
+    def __init__(self, source: str, case_sensitive: bool = True) -> None:
+        self.source = source
+        self.case_sensitive = case_sensitive
+
+    @property
+    def choices(self) -> tuple[str, ...]:
+        module, _, attribute = self.source.partition(":")
+        return tuple(getattr(importlib.import_module(module), attribute))
+
+
+DYNAMICS_CHOICE = EngineChoice("popdispatch.dynamics:DYNAMICS")
+MODE_CHOICE = EngineChoice("popdispatch.modes:MODES")
+GRAPH_CHOICE = EngineChoice("popdispatch.dynamics.graph:GRAPHS")
+
+
+option = click.option
+
+
+json_option = option("--json", "as_json", is_flag=True, help="Print one JSON object on stdout.")
+quiet_option = option("-q", "--quiet", is_flag=True, help="No progress bars or notes on stderr.")
+minute_option = option(
+    "--minute",
+    type=click.IntRange(1, MINUTES_PER_DAY),
+    required=True,
+    help="1-based minute of the day (566 = the peak).",
+)
+limit_option = option(
+    "--limit",
+    "limits",
+    type=LimitType(),
+    multiple=True,
+    help="Limit every line on the path between original buses A and B to KW kilowatts "
+    "(repeatable), e.g. 505:666=28.",
+)
+profiles_option = option(
+    "--profiles",
+    type=FOLDER,
+    help="Folder with the official load profiles (else $POPDISPATCH_PROFILES, else the shipped "
+    "synthetic default; minute 566 alone uses the official loads shipped by pandapower).",
+)
+out_option = option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Also write time series (CSV, units in column names), summary.json and a figure here.",
+)
+
+
+def run_options(func):
+    """``--dynamics``, ``--mode``, ``--x0`` and ``--graph``."""
+    decorators = [
+        option(
+            "--dynamics",
+            type=DYNAMICS_CHOICE,
+            default="smith",
+            show_default=True,
+            help="Population dynamics (paper eqs. 9-14).",
+        ),
+        option(
+            "--mode",
+            type=MODE_CHOICE,
+            default="paper",
+            show_default=True,
+            help="How node controllers turn flows into fitness signals.",
+        ),
+        option(
+            "--x0",
+            type=X0Type(),
+            default="uniform",
+            show_default=True,
+            help="Initial shares: uniform, capacity or e.g. G114=0,G1=1,G578=1 (generators "
+            "not named start at zero; a note on stderr names them).",
+        ),
+        option(
+            "--graph",
+            type=GRAPH_CHOICE,
+            default="complete",
+            show_default=True,
+            help="Communication graph (local-replicator and distributed-smith only).",
+        ),
+    ]
+    for decorate in reversed(decorators):
+        func = decorate(func)
+    return func
+
+
+opendss_option = option(
+    "--opendss",
+    type=FOLDER,
+    help="Read the feeder from its OpenDSS files in this folder instead of the built-in "
+    "ieee-elv case (the paper's six generators on the same buses).",
+)
+
+
+def settings_from(dynamics: str, mode: str, x0, graph: str, warm_start: str | None = None):
+    from popdispatch.online import RunSettings
+
+    return RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0, warm_start=warm_start)
+
+
+def check_out(out: Path | None) -> None:
+    """Usage error (exit 2) before any work if ``--out`` cannot be created where it is asked."""
+    if out is not None and not out.absolute().parent.is_dir():
+        raise click.BadParameter(
+            f"cannot write {out}: folder {out.absolute().parent} does not exist",
+            param_hint="'--out'",
+        )
+    if out is not None:
+        check_writable(out)  # read-only or forbidden: one line, exit 1, before any work
+
+
+def refuse_opendss(ctx: click.Context, param: click.Parameter, value) -> None:
+    """``reproduce --opendss``: a usage error saying which commands read OpenDSS files."""
+    if value is not None:
+        raise click.BadParameter(
+            "reproduce runs the paper's experiments on the built-in ieee-elv case; --opendss "
+            "is accepted by feeder, opf, snapshot, day and export",
+            ctx,
+            param,
+        )
+
+
+def check_shares(x0, progress) -> None:
+    """``--x0`` names checked before any data is read; a note names the generators left out."""
+    from popdispatch.runs import check_x0, fleet_names
+
+    zeroed = check_x0(x0, fleet_names())
+    if zeroed:
+        progress.note(
+            f"--x0 gives no share to {', '.join(zeroed)}: they start at 0 kW (imitative "
+            "dynamics such as replicator then keep them there)"
+        )

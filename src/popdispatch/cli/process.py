@@ -1,0 +1,166 @@
+"""The ``popdispatch`` command line (click): process plumbing (clock, signals, exit codes).
+
+Commands: ``feeder``, ``opf``, ``snapshot``, ``day``, ``reproduce``, ``export``. With ``--json``
+a command prints exactly one JSON object on stdout (see README, "JSON output"); progress and
+notes go to stderr. Exit codes: 0 success, 1 a problem (bad data, infeasible dispatch, cannot
+write), 2 bad usage (malformed or unknown option values, checked before any data is read),
+130 interrupted. Every error is one line on stderr, without traceback (set
+``POPDISPATCH_DEBUG=1`` to see one).
+
+Infeasible minutes: ``opf``, ``snapshot`` and ``day`` run and report everything they can also
+where the DC-OPF is infeasible (the line limits or the generators online cannot meet the
+demand). A day runs every minute asked for and lists those in ``infeasible_minutes`` (their
+DC-OPF values null, the dynamics' set points and overflow kept, comparisons over the other
+minutes). The output is printed (and written to ``--out``) in full; then the command exits
+with code 1 and one line on stderr naming how many minutes and the first of them. Code 1, not
+0, because a script must not take such a result for a complete comparison with the DC-OPF;
+the JSON on stdout is complete and parseable all the same.
+
+Importing this module imports only click and the standard library: numpy, pandas, numba,
+pandapower, scipy and matplotlib are imported by the commands that use them, so ``--help`` and
+usage errors are quick and a command pays only for what it runs.
+
+``day`` and ``snapshot`` report two times: ``wall_seconds``, the engine's own time (see
+:class:`popdispatch.online.DayResult`), and ``command_seconds``, the whole command's time: from
+the start of the process when run as the ``popdispatch`` program (read from ``/proc`` on Linux;
+elsewhere, and when :func:`main` is called with arguments, from :func:`main`'s entry) until
+the output is complete (files in ``--out`` written, before the JSON is printed). The
+interpreter's exit after that is kept short (see :func:`_spare_the_exit`).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from collections.abc import Sequence
+
+import click
+
+from popdispatch.errors import OptionError, PopdispatchError
+
+EXIT_PROBLEM, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
+
+
+class Failure(Exception):
+    """A problem to report on one line with exit code 1 (after any ``--json`` output)."""
+
+
+# -- the command's own clock --------------------------------------------------------------------
+
+
+def process_age_seconds() -> float | None:
+    """Seconds since this process started (Linux ``/proc/self/stat``), None where unknown."""
+    try:
+        with open("/proc/self/stat", "rb") as handle:
+            stat = handle.read()
+        start_ticks = int(stat[stat.rindex(b")") + 2 :].split()[19])  # field 22, starttime
+        age = time.clock_gettime(time.CLOCK_BOOTTIME) - start_ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, AttributeError):
+        return None
+    return age if 0.0 <= age < 3600.0 else None  # anything else is not this command's start
+
+
+class _Clock:
+    """``perf_counter()`` value at which the running command started (None: not running)."""
+
+    start: float | None = None
+
+
+def command_seconds() -> float:
+    """Seconds since the command started (see the module docstring)."""
+    if _Clock.start is None:
+        _Clock.start = time.perf_counter()
+    return time.perf_counter() - _Clock.start
+
+
+def start_clock(ctx: click.Context) -> None:
+    """Start the clock of a command invoked without :func:`main` (e.g. click's test runner)."""
+    if _Clock.start is None:
+        _Clock.start = time.perf_counter()
+        ctx.call_on_close(lambda: setattr(_Clock, "start", None))
+
+
+def stamp(summary: dict) -> dict:
+    """Add ``command_seconds`` to a summary once, when its output is complete."""
+    if summary.get("command_seconds") is None:
+        summary["command_seconds"] = command_seconds()
+    return summary
+
+
+# -- entry point --------------------------------------------------------------------------------
+
+
+def _one_line(message: str) -> str:
+    return " ".join(str(message).split())
+
+
+class _Interrupt:
+    """SIGINT handler that remembers it fired: compiled engine code may turn the
+    KeyboardInterrupt into another exception (numba raises SystemError), which must still be
+    reported as an interruption."""
+
+    fired = False
+
+    def __call__(self, signum, frame) -> None:
+        self.fired = True
+        raise KeyboardInterrupt
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; returns the exit code (0, 1 problem, 2 usage, 130 interrupted)."""
+    entered = time.perf_counter()
+    age = process_age_seconds() if argv is None else None
+    _Clock.start = entered - (age or 0.0)
+    try:
+        return _main(argv)
+    finally:
+        _Clock.start = None
+        if argv is None:  # run as the program: the interpreter exits next
+            _spare_the_exit()
+
+
+def _spare_the_exit() -> None:
+    """Move every live object out of the cyclic garbage collector's reach before the
+    interpreter exits: its final collections would otherwise scan all of numba's, pandas' and
+    scipy's objects, about 0.3-0.6 s after the work is done. Nothing is skipped (atexit handlers
+    and finalisers run as usual); only call this when the process is about to end, since frozen
+    objects are never collected."""
+    import gc
+
+    gc.freeze()
+
+
+def _main(argv: Sequence[str] | None) -> int:
+    debug = bool(os.environ.get("POPDISPATCH_DEBUG"))
+    interrupt = _Interrupt()
+    signal.signal(signal.SIGINT, interrupt)
+    from popdispatch.cli.commands import cli
+
+    try:
+        code = cli.main(args=argv, prog_name="popdispatch", standalone_mode=False)
+    except OptionError as exc:
+        where = f" {exc.option}" if exc.option else ""
+        click.echo(f"popdispatch: error: invalid value for{where}: {_one_line(str(exc))}", err=True)
+        return EXIT_USAGE
+    except click.UsageError as exc:
+        where = exc.ctx.command_path if exc.ctx else "popdispatch"
+        click.echo(f"{where}: error: {_one_line(exc.format_message())}", err=True)
+        return EXIT_USAGE
+    except click.ClickException as exc:
+        click.echo(f"popdispatch: error: {_one_line(exc.format_message())}", err=True)
+        return exc.exit_code
+    except (click.Abort, KeyboardInterrupt):
+        click.echo("popdispatch: interrupted; no output written", err=True)
+        return EXIT_INTERRUPTED
+    except (Failure, PopdispatchError, ValueError, OSError) as exc:
+        if debug:
+            raise
+        click.echo(f"popdispatch: error: {_one_line(str(exc))}", err=True)
+        return EXIT_PROBLEM
+    except Exception:
+        if not interrupt.fired or debug:
+            raise
+        click.echo("popdispatch: interrupted; no output written", err=True)
+        return EXIT_INTERRUPTED
+    return code if isinstance(code, int) else 0

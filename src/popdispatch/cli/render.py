@@ -1,0 +1,68 @@
+"""What the commands print and write: stdout (JSON or text), ``--out`` folders, the one-line
+messages of infeasible minutes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from popdispatch.cli.process import stamp
+from popdispatch.report.output import json_text, staged_folder
+from popdispatch.report.progress import Progress
+
+
+def emit(summary: dict, as_json: bool, text: str) -> None:
+    """Print the summary as JSON or the human-readable text on stdout."""
+    click.echo(json_text(summary) if as_json else text, nl=not as_json)
+
+
+def announce_compile(progress: Progress) -> None:
+    """Say on stderr (unless quiet) that the engine's kernels compile now, when they must."""
+    from popdispatch.compile_notice import COMPILE_NOTICE, kernels_cached
+
+    if kernels_cached() is False:
+        progress.note(COMPILE_NOTICE)
+
+
+def infeasible_minute_message(summary: dict) -> str:
+    """One line: the DC-OPF of a minute is infeasible, with its demand and online capacity."""
+    return (
+        f"the DC-OPF of minute {summary['minute']} is infeasible: no dispatch meets the demand "
+        f"{summary['demand_kw']:.3f} kW within the generator limits (online capacity "
+        f"{summary['capacity_kw']:.3f} kW) and the given line limits"
+    )
+
+
+def infeasible_day_message(summary: dict, shown: int = 5) -> str:
+    """One line naming how many minutes, and which first, have no feasible DC-OPF."""
+    from popdispatch.report.text import minute_ranges
+
+    bad = summary["infeasible_minutes"]
+    ranges = minute_ranges(bad).split(", ")
+    listed = ", ".join(ranges[:shown]) + (", ..." if len(ranges) > shown else "")
+    return (
+        f"the DC-OPF is infeasible at {len(bad)} of {summary['minutes']} minutes ({listed}) "
+        "with the given limits and events; every minute was run and reported "
+        "(infeasible_minutes)"
+    )
+
+
+def write_snapshot(out: Path, summary: dict, table, result, progress: Progress) -> None:
+    from popdispatch.report import figures
+
+    with progress.step(f"writing {out}"), staged_folder(out) as folder:
+        folder.write_csv("trajectory.csv", table)
+        figures.save_figure(figures.congestion_figure(result), folder.file("setpoints"))
+        folder.write_json("summary.json", stamp(summary))
+
+
+def write_day(out: Path, summary: dict, table, result, problem, progress: Progress) -> None:
+    from popdispatch.report import figures
+    from popdispatch.report.summaries import generator_buses
+
+    with progress.step(f"writing {out}"), staged_folder(out) as folder:
+        folder.write_csv("day.csv", table)
+        fig = figures.base_day_figure(result, generator_buses(problem))
+        figures.save_figure(fig, folder.file("setpoints"))
+        folder.write_json("summary.json", stamp(summary))
