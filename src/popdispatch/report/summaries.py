@@ -2,6 +2,13 @@
 
 Powers are in kW, energies in kWh, costs in EUR (a day) or EUR/h (one minute's dispatch, Table
 I's coefficients applied to MW). Key names carry their units. See README, "JSON output".
+
+Deprecated keys: ``cost``, ``opf_cost`` and ``cost_all_minutes`` meant EUR/h in a snapshot or
+DC-OPF summary and EUR in a day summary (with ``cost_unit`` saying which). Their unit-named
+twins carry the same values: ``cost_eur_per_h`` and ``opf_cost_eur_per_h`` (``opf``,
+``snapshot``), ``cost_eur``, ``opf_cost_eur`` and ``cost_all_minutes_eur`` (``day``). The old
+keys (and ``cost_unit``) stay for one release and will then be removed; new code should read
+the unit-named keys.
 """
 
 from __future__ import annotations
@@ -115,8 +122,9 @@ def opf_summary(
             {"name": name, "bus": bus, "p_kw": _finite(p)}
             for name, bus, p in zip(problem.generators, buses, opf.p_kw, strict=True)
         ],
-        "cost": _finite(opf.cost),
-        "cost_unit": "EUR/h",
+        "cost_eur_per_h": _finite(opf.cost),
+        "cost": _finite(opf.cost),  # deprecated: cost_eur_per_h
+        "cost_unit": "EUR/h",  # deprecated with cost
         "marginal_price_eur_per_mwh": _finite(opf.marginal_price),
     }
 
@@ -147,6 +155,7 @@ def snapshot_summary(
     online = problem.online[run.minute - 1]
     outside = outside_limits(problem, run.setpoints_kw, online)
     error = result.max_abs_error_kw if opf.status == "optimal" else None
+    cost = float(_cost(problem, run.setpoints_kw))
     return {
         "status": snapshot_status(result),
         "dynamics_status": run.status,
@@ -169,9 +178,11 @@ def snapshot_summary(
         "first_congestion_iteration": run.first_congestion,
         "max_overflow_kw": float(run.overflow_kw.max()) if run.overflow_kw.size else 0.0,
         "max_abs_error_kw": _finite(error),
-        "cost": float(_cost(problem, run.setpoints_kw)),
-        "opf_cost": _finite(opf.cost),
-        "cost_unit": "EUR/h",
+        "cost_eur_per_h": cost,
+        "opf_cost_eur_per_h": _finite(opf.cost),
+        "cost": cost,  # deprecated: cost_eur_per_h
+        "opf_cost": _finite(opf.cost),  # deprecated: opf_cost_eur_per_h
+        "cost_unit": "EUR/h",  # deprecated with cost
         "wall_seconds": run.wall_seconds,
     }
 
@@ -224,11 +235,12 @@ def day_summary(
     """An online day compared minute by minute with the DC-OPF (energies kWh, costs EUR).
 
     Every simulated minute is reported. ``infeasible_minutes`` (1-based) are those whose DC-OPF
-    is infeasible; errors, ``energy_kwh``/``opf_energy_kwh`` and ``cost``/``opf_cost`` compare
-    the dynamics with the DC-OPF over the other ``compared_minutes`` only (null when there
-    are none); ``energy_all_minutes_kwh`` and ``cost_all_minutes`` are the dynamics' own over
-    every simulated minute. ``price_runaway_minutes``: where exact mode's own infeasibility
-    signal fired (line prices past their cap); the DC-OPF's verdict is the one that counts.
+    is infeasible; errors, ``energy_kwh``/``opf_energy_kwh`` and ``cost_eur``/``opf_cost_eur``
+    compare the dynamics with the DC-OPF over the other ``compared_minutes`` only (null when
+    there are none); ``energy_all_minutes_kwh`` and ``cost_all_minutes_eur`` are the dynamics'
+    own over every simulated minute (deprecated twins: see the module docstring).
+    ``price_runaway_minutes``: where exact mode's own infeasibility signal fired (line prices
+    past their cap); the DC-OPF's verdict is the one that counts.
     ``minutes_outside_limits`` (and ``..._by_generator``) count minutes with a set point more
     than :data:`LIMIT_TOLERANCE_KW` outside its limits, ``max_outside_limits_kw`` the worst.
     """
@@ -274,6 +286,9 @@ def _day_comparison(problem: DispatchProblem, result: DayComparison) -> dict:
     distance = distance_outside_limits_kw(problem, run.setpoints_kw, run.online)
     outside = distance > LIMIT_TOLERANCE_KW
     counts = outside.sum(axis=0)
+    cost = float(run.cost[feasible].sum() / 60.0)
+    total_opf_cost = float(opf_cost.sum() / 60.0) if some else None
+    cost_all = float(run.cost.sum() / 60.0)
     return {
         "compared_minutes": int(feasible.sum()),
         "minutes_within_0_1_kw": int((worst <= MATCH_KW).sum()),
@@ -282,11 +297,14 @@ def _day_comparison(problem: DispatchProblem, result: DayComparison) -> dict:
         "median_max_abs_error_kw": float(np.median(worst)) if some else None,
         "energy_kwh": _by_bus(buses, run.setpoints_kw[feasible].sum(axis=0) / 60.0),
         "opf_energy_kwh": _by_bus(buses, result.opf_kw[feasible].sum(axis=0) / 60.0, some),
-        "cost": float(run.cost[feasible].sum() / 60.0),
-        "opf_cost": float(opf_cost.sum() / 60.0) if some else None,
-        "cost_unit": "EUR",
+        "cost_eur": cost,
+        "opf_cost_eur": total_opf_cost,
+        "cost": cost,  # deprecated: cost_eur
+        "opf_cost": total_opf_cost,  # deprecated: opf_cost_eur
+        "cost_unit": "EUR",  # deprecated with cost
         "energy_all_minutes_kwh": _by_bus(buses, run.setpoints_kw.sum(axis=0) / 60.0),
-        "cost_all_minutes": float(run.cost.sum() / 60.0),
+        "cost_all_minutes_eur": cost_all,
+        "cost_all_minutes": cost_all,  # deprecated: cost_all_minutes_eur
         "minutes_outside_limits": int(outside.any(axis=1).sum()),
         "max_outside_limits_kw": float(distance.max()) if distance.size else 0.0,
         "minutes_outside_limits_by_generator": {
