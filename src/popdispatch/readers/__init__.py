@@ -1,5 +1,6 @@
 """Readers of external data: the IEEE European LV Test Feeder's OpenDSS files and load profiles."""
 
+from popdispatch.readers.matpower import read_matpower
 from popdispatch.readers.opendss import read_opendss_feeder
 from popdispatch.readers.profiles import (
     PROFILES_ENV,
@@ -11,6 +12,7 @@ from popdispatch.readers.profiles import (
 __all__ = [
     "PROFILES_ENV",
     "default_profiles",
+    "read_matpower",
     "read_opendss_feeder",
     "read_profiles",
     "resolve_profiles",
