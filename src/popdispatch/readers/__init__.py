@@ -2,6 +2,7 @@
 
 from popdispatch.readers.matpower import read_matpower
 from popdispatch.readers.opendss import read_opendss_feeder
+from popdispatch.readers.pandapower import read_pandapower
 from popdispatch.readers.profiles import (
     PROFILES_ENV,
     default_profiles,
@@ -14,6 +15,7 @@ __all__ = [
     "default_profiles",
     "read_matpower",
     "read_opendss_feeder",
+    "read_pandapower",
     "read_profiles",
     "resolve_profiles",
 ]
