@@ -335,7 +335,7 @@ def test_default_regenerates_identically(tmp_path):
     pytest.importorskip("richardsonpy")
     import importlib.util
 
-    script = Path(__file__).resolve().parents[1] / "scripts" / "make_default_profiles.py"
+    script = Path(__file__).resolve().parents[2] / "scripts" / "make_default_profiles.py"
     spec = importlib.util.spec_from_file_location("make_default_profiles", script)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -1,5 +1,5 @@
 """Infeasible minutes do not throw results away (issue 10, items 3 and 6), run for real in
-subprocesses like ``test_cli.py``.
+subprocesses like ``test_commands.py``.
 
 A day runs every minute asked for and names those whose DC-OPF is infeasible; their DC-OPF
 values are null, the dynamics' are still reported, comparisons use the same minutes on both
@@ -14,9 +14,9 @@ import math
 
 import pandas as pd
 import pytest
-from test_cli import assert_one_line_error, gens, run
 
 from helpers import official_folder
+from test_commands import assert_one_line_error, gens, run
 
 #: Default (synthetic, shipped) profiles: with G739 off from minute 600 only minute 1123 of
 #: 1100-1130 has more demand (55.622 kW) than the 55 kW left online.

@@ -5,9 +5,10 @@ from __future__ import annotations
 import subprocess
 
 import pytest
-from test_cli import clean_env, command
 
 from popdispatch.compile_notice import kernels_cached
+
+from test_commands import clean_env, command
 
 NOTICE = "compiling the engine's kernels"
 
