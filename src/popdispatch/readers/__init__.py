@@ -2,6 +2,7 @@
 
 from popdispatch.readers.matpower import read_matpower
 from popdispatch.readers.opendss import read_opendss_feeder
+from popdispatch.readers.opendss_direct import read_opendss_master
 from popdispatch.readers.pandapower import read_pandapower
 from popdispatch.readers.profiles import (
     PROFILES_ENV,
@@ -15,6 +16,7 @@ __all__ = [
     "default_profiles",
     "read_matpower",
     "read_opendss_feeder",
+    "read_opendss_master",
     "read_pandapower",
     "read_profiles",
     "resolve_profiles",
