@@ -1,4 +1,14 @@
-"""Built-in cases. ``ieee-elv``: the IEEE European LV Test Feeder as shipped by pandapower.
+"""Built-in cases by name (:data:`CASES`, :func:`list_cases`, :func:`load_case`).
+
+``ieee-elv``: the IEEE European LV Test Feeder as shipped by pandapower, with the paper's fleet.
+The other cases are pandapower's radial networks read by
+:func:`popdispatch.readers.pandapower.read_pandapower` (its rules apply: the substation
+transformer's LV side is the source, ratings become ``limit_kw``), and SimBench grids as
+``simbench:<code>`` when the optional ``simbench`` package is installed. **Fleet:** a case
+whose net prices its generators (``poly_cost``; e.g. ``case33bw`` prices its ext_grid, which
+becomes a generator at the source) comes with that fleet; any other case (the Kerber and Dickert
+grids, SimBench) needs ``load_case(name, fleet=...)`` and raises
+:class:`~popdispatch.errors.FleetError` without one. There is no invented default fleet.
 
 pandapower is slow to import and to load the network (about 2-4 s together), so the tables
 popdispatch derives from it (buses, lines, loads, source bus, the minute-566 loads) are kept in
@@ -10,8 +20,11 @@ them; a missing, corrupt or inconsistent cache file is rebuilt too.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
+from collections.abc import Callable
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
@@ -22,7 +35,6 @@ from popdispatch import cache
 from popdispatch.feeder.generators import paper_fleet
 from popdispatch.feeder.model import Feeder
 
-CASES = ("ieee-elv",)
 #: Cache entry of the ieee-elv tables, and the version of its layout (bump on any change).
 ELV_CACHE, ELV_FORMAT = "ieee-elv", 1
 #: The arrays of the ieee-elv tables and their dtype kinds (``i`` int, ``f`` float, ``U`` text).
@@ -46,13 +58,148 @@ def _elv_net():
     return pn.ieee_european_lv_asymmetric("on_peak_566")
 
 
-def load_case(name: str) -> Feeder:
-    """Load a built-in case by name (see :data:`CASES`)."""
-    if name != "ieee-elv":
-        from popdispatch.errors import FeederError
+def load_case(name: str, *, fleet: pd.DataFrame | None = None) -> Feeder:
+    """Load a built-in case by name (see :data:`CASES`; ``simbench:<code>`` with the extra).
 
+    ``fleet`` (a fleet table, ``bus`` in the case's own bus ids) replaces the case's fleet; it
+    is required by cases whose network has no priced generator (see the module docstring).
+    """
+    from popdispatch.errors import FeederError
+
+    if name.startswith(SIMBENCH_PREFIX):
+        return _simbench_case(name, fleet)
+    if name not in CASES:
         raise FeederError(f"unknown case {name!r} (known: {', '.join(CASES)})")
-    return ieee_elv()
+    return CASES[name].loader(fleet)
+
+
+@dataclass(frozen=True)
+class Case:
+    """A built-in case: ``name``, ``size`` (a short description), ``source`` (where it comes
+    from) and ``loader(fleet) -> Feeder`` (``fleet`` may be ``None``)."""
+
+    name: str
+    size: str
+    source: str
+    loader: Callable[[pd.DataFrame | None], Feeder]
+
+
+def _elv_case(fleet: pd.DataFrame | None) -> Feeder:
+    feeder = ieee_elv()
+    return feeder if fleet is None else feeder.with_generators(fleet)
+
+
+@functools.cache
+def _pandapower_net(factory: str, kwargs: tuple = ()):
+    import pandapower.networks as pn
+
+    return getattr(pn, factory)(**dict(kwargs))
+
+
+def _pandapower_case(name: str, factory: str, root: int | None = None, **kwargs) -> Callable:
+    def loader(fleet: pd.DataFrame | None, placeholder: bool = False) -> Feeder:
+        from popdispatch.readers.pandapower import _read
+
+        net = _pandapower_net(factory, tuple(sorted(kwargs.items())))
+        return _read(net, fleet, root, True, name, placeholder)
+
+    return loader
+
+
+def _pp(name: str, size: str, factory: str, root: int | None = None, **kwargs) -> Case:
+    call = ", ".join(f"{k}={v!r}" for k, v in kwargs.items())
+    root_note = f", root={root}" if root is not None else ""
+    return Case(
+        name, size, f"pandapower.networks.{factory}({call}){root_note}",
+        _pandapower_case(name, factory, root, **kwargs),
+    )  # fmt: skip
+
+
+#: The built-in cases by name (SimBench grids are ``simbench:<code>``, see :func:`list_cases`).
+CASES: dict[str, Case] = {
+    case.name: case
+    for case in (
+        Case("ieee-elv", "LV 0.416 kV, 906 buses, 55 loads", "pandapower.networks."
+             "ieee_european_lv_asymmetric('on_peak_566'); paper fleet (Table I)", _elv_case),
+        _pp("kerber-landnetz-freileitung-1", "LV 0.4 kV, 14 buses, 13 loads",
+            "create_kerber_landnetz_freileitung_1"),
+        _pp("kerber-landnetz-freileitung-2", "LV 0.4 kV, 9 buses, 8 loads",
+            "create_kerber_landnetz_freileitung_2"),
+        _pp("kerber-landnetz-kabel-1", "LV 0.4 kV, 17 buses, 8 loads",
+            "create_kerber_landnetz_kabel_1"),
+        _pp("kerber-landnetz-kabel-2", "LV 0.4 kV, 29 buses, 14 loads",
+            "create_kerber_landnetz_kabel_2"),
+        _pp("kerber-dorfnetz", "LV 0.4 kV, 115 buses, 57 loads", "create_kerber_dorfnetz"),
+        _pp("kerber-vorstadtnetz-kabel-1", "LV 0.4 kV, 293 buses, 146 loads",
+            "create_kerber_vorstadtnetz_kabel_1"),
+        _pp("kerber-vorstadtnetz-kabel-2", "LV 0.4 kV, 289 buses, 144 loads",
+            "create_kerber_vorstadtnetz_kabel_2"),
+        _pp("dickert-lv", "LV 0.4 kV, 2 buses, 1 load", "create_dickert_lv_network"),
+        _pp("dickert-lv-long", "LV 0.4 kV, 121 buses, 120 loads", "create_dickert_lv_network",
+            feeders_range="long", linetype="C&OHL", customer="multiple", case="bad"),
+        _pp("cigre-lv-residential", "LV 0.4 kV, 18 buses, 6 loads (residential feeder)",
+            "create_cigre_network_lv", root=2),
+        _pp("case33bw", "MV 12.66 kV, 33 buses, 32 loads, priced source",
+            "case33bw"),
+    )
+}  # fmt: skip
+SIMBENCH_PREFIX = "simbench:"
+#: SimBench codes listed by :func:`list_cases` when the ``simbench`` package is installed.
+SIMBENCH_CODES = ("1-LV-rural1--0-sw", "1-LV-semiurb4--0-sw", "1-LV-urban6--0-sw",
+                  "1-MV-rural--0-sw")  # fmt: skip
+
+
+def simbench_available() -> bool:
+    """Whether the optional ``simbench`` package is importable."""
+    from importlib.util import find_spec
+
+    return find_spec("simbench") is not None
+
+
+def _simbench_case(name: str, fleet: pd.DataFrame | None, placeholder: bool = False) -> Feeder:
+    from popdispatch.errors import FeederError
+
+    code = name[len(SIMBENCH_PREFIX) :]
+    if not simbench_available():
+        raise FeederError(
+            f"case {name!r} needs the optional simbench package (pip install simbench)"
+        )
+    import simbench
+
+    from popdispatch.readers.pandapower import _read
+
+    try:
+        net = simbench.get_simbench_net(code)
+    except Exception as exc:  # simbench raises plain exceptions for unknown codes
+        raise FeederError(f"unknown SimBench code {code!r}: {exc}") from None
+    return _read(net, fleet, None, True, name, placeholder)
+
+
+def list_cases() -> pd.DataFrame:
+    """The built-in cases: index ``name``; columns ``buses``, ``lines``, ``loads``,
+    ``total_load_kw`` (the loads of the net's own snapshot; ieee-elv: minute 566), ``size``
+    and ``source``. Loads every case (about 20 s on a shared 2-core machine: pandapower's
+    network builders are slow; the reads themselves take under 0.05 s each)."""
+    rows = []
+    names = list(CASES)
+    if simbench_available():
+        names += [SIMBENCH_PREFIX + code for code in SIMBENCH_CODES]
+    for name in names:
+        if name == "ieee-elv":
+            feeder, total = ieee_elv(), float(elv_snapshot_566_kw().sum())
+            size, source = CASES[name].size, CASES[name].source
+        else:
+            if name.startswith(SIMBENCH_PREFIX):
+                feeder = _simbench_case(name, None, placeholder=True)
+                size, source = "SimBench", f"simbench.get_simbench_net({name[9:]!r})"
+            else:
+                feeder = CASES[name].loader(None, placeholder=True)
+                size, source = CASES[name].size, CASES[name].source
+            total = float(feeder.loads.p_kw.sum())
+        rows.append((name, len(feeder.buses), len(feeder.lines), len(feeder.loads), total,
+                     size, source))  # fmt: skip
+    columns = ["name", "buses", "lines", "loads", "total_load_kw", "size", "source"]
+    return pd.DataFrame(rows, columns=columns).set_index("name")
 
 
 def ieee_elv() -> Feeder:

@@ -110,6 +110,13 @@ def read_pandapower(
     name : the feeder's name; default the net's ``name``, else the file stem, else
         ``"pandapower"``.
     """
+    return _read(net_or_path, fleet, root, ratings, name)
+
+
+def _read(net_or_path, fleet, root, ratings, name, placeholder: bool = False) -> Feeder:
+    """:func:`read_pandapower`; ``placeholder``: a network without a priced generator gets a
+    0 kW generator ``placeholder`` at the source instead of a :class:`FleetError` (for counts
+    and totals only, never for a dispatch)."""
     net, default_name = _load(net_or_path)
     _check_unsupported(net)
     bus_table = net.bus
@@ -188,7 +195,12 @@ def read_pandapower(
         index=pd.Index(loads.index, name="load"),
     )
     if fleet is None:
-        generators = _fleet(net, position, bus_ok, rep, keep, ext, root_pos, sources)
+        try:
+            generators = _fleet(net, position, bus_ok, rep, keep, ext, root_pos, sources)
+        except FleetError:
+            if not placeholder:
+                raise
+            generators = make_fleet([(int(bus_ids[root_pos]), 0, 0, 0, 0, 0)], ["placeholder"])
     else:
         generators = _user_fleet(fleet, position, rep, bus_ids)
     feeder = Feeder(name or default_name, buses, lines, loads, int(bus_ids[root_pos]), generators)
