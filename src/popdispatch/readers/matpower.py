@@ -63,6 +63,7 @@ Conversion to the :class:`Feeder` (kW, ohm, km):
 
 from __future__ import annotations
 
+import io
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -512,19 +513,22 @@ _NUMERIC = re.compile(r"[\s\d.eE+\-,;Infa]*")
 
 
 def _fast_matrix(body: str) -> np.ndarray | None:
-    """A matrix of plain numbers without the evaluator, or None to use it."""
+    """A matrix of plain numbers without the evaluator (pandas' C parser), or None to let the
+    evaluator decide (expressions such as ``1 - 2``, rows of different lengths)."""
     if not _NUMERIC.fullmatch(body):
         return None
-    rows = [row.split() for row in body.replace(",", " ").split(";")]
-    rows = [row for row in rows if row]
-    if not rows:
+    text = body.replace(",", " ").replace("\n", ";")
+    if not text.replace(";", "").strip():
         return np.zeros((0, 0))
-    if len({len(row) for row in rows}) != 1:
-        return None
     try:
-        return np.array(rows, dtype=float)
-    except ValueError:
+        table = pd.read_csv(
+            io.StringIO(text), sep=r"\s+", header=None, lineterminator=";", dtype=float,
+            engine="c",
+        )  # fmt: skip
+    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError):
         return None
+    values = table.to_numpy(float)
+    return None if np.isnan(values).any() else values
 
 
 def _interpret(statement: str, case: _Case) -> None:
