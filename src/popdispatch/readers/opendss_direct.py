@@ -5,13 +5,13 @@ the plain-table :class:`~popdispatch.feeder.Feeder`: a positive-sequence single-
 
 Conversion rules
 ----------------
-- **Buses**: one per OpenDSS bus (``Circuit.AllBusNames``). A bus whose name is a canonical
-  non-negative integer (``"1"``, ``"650"``; not ``"007"``) keeps that number as its id; the
-  others (``sourcebus``, ``rg60``, ``814r``) get the next ids above the largest such number, in
-  OpenDSS's bus order. The ``name`` column keeps the OpenDSS name, ``kv_ln_base`` its base
-  voltage (kV line-to-neutral, 0 if the master sets none). A bus cut off from the source by an
-  open switch is dropped (with a :class:`UserWarning` naming it) if nothing is connected to it;
-  with a load or generator it is an error.
+- **Buses**: one per OpenDSS bus (``Circuit.AllBusNames`` after ``MakeBusList``). A bus whose
+  name is a canonical non-negative integer (``"1"``, ``"650"``; not ``"007"``) keeps that number
+  as its id; the others (``sourcebus``, ``rg60``, ``814r``) get the next ids above the largest
+  such number, in OpenDSS's bus order. The ``name`` column keeps the OpenDSS name,
+  ``kv_ln_base`` its base voltage (kV line-to-neutral, 0 if the master sets none). A bus cut
+  off from the source by an open switch is dropped (with a :class:`UserWarning` naming it) if
+  nothing is connected to it; with a load or generator it is an error.
 - **Lines** (``Line`` elements, enabled): ``length_km`` = ``Length`` x its ``Units`` in km
   (``none`` taken as km); ``r_ohm + j x_ohm`` = positive-sequence impedance per unit length x
   ``Length`` (ohm, whole line). The per-length value comes from OpenDSS's own phase matrices
@@ -528,6 +528,7 @@ def read_opendss_master(
             stacklevel=2,
         )
     circuit = ctx.Circuit.Name()
+    ctx.Text.Command("makebuslist")  # buses of elements defined after the master's last solve
     names = [b.lower() for b in ctx.Circuit.AllBusNames()]
     if not names:
         raise FeederError(f"{master_path}: the OpenDSS circuit {circuit!r} has no bus")
