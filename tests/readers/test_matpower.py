@@ -329,3 +329,23 @@ def test_idx_names_match_pandapowers_pypower():
             if name not in ("PQ", "PV", "REF", "NONE", "PW_LINEAR", "POLYNOMIAL"):
                 expected += 1  # pypower's column indices are 0-based
             assert value == expected, (function, name)
+
+
+@needs_cases
+def test_root_picks_one_tree_and_load_free_islands_are_dropped(tmp_path):
+    # branch 1 (1-2) opened and bus 2 made a reference bus: two separate feeders
+    split = "\nmpc.branch(1, BR_STATUS) = 0;\nmpc.bus(2, BUS_TYPE) = REF;\n"
+    path = with_lines(tmp_path, "case33bw", split)
+    with pytest.raises(FeederError, match=r"reference buses \[1, 2\]"):
+        read_matpower(path)
+    fleet = make_fleet([(2, 0.0, 10.0, 0.0, 0.0, 5000.0)])
+    feeder = read_matpower(path, root=2, fleet=fleet)
+    assert feeder.source_bus == 2 and len(feeder.buses) == 32 and len(feeder.lines) == 31
+    assert feeder.loads.p_kw.sum() == pytest.approx(3715.0)
+    # an island without load (bus 1 alone, once no longer a reference bus) is dropped
+    path = with_lines(tmp_path, "case33bw", split + "mpc.bus(1, BUS_TYPE) = PQ;\n")
+    assert len(read_matpower(path, fleet=fleet).buses) == 32
+    # ... but an island with load is reported
+    path = with_lines(tmp_path, "case33bw", split + "mpc.bus(1, [BUS_TYPE PD]) = [PQ 5];\n")
+    with pytest.raises(FeederError, match=r"bus 1 is not connected to source bus 2"):
+        read_matpower(path, fleet=fleet)

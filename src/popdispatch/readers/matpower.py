@@ -509,7 +509,7 @@ _VERSION = re.compile(r"mpc\.version\s*=\s*'([^']*)'")
 _CELL = re.compile(r"mpc\.(\w+)\s*=\s*\{.*\}", re.S)
 _IDX = re.compile(r"\[([\w\s,]*)\]\s*=\s*(\w+)")
 _MATRIX = re.compile(r"mpc\.(\w+)\s*=\s*\[([^\[\]()]*)\]", re.S)
-_NUMERIC = re.compile(r"[\s\d.eE+\-,;Infa]*")
+_NUMERIC = re.compile(r"[\s\d.eE+\-,;Infai]*")
 
 
 def _fast_matrix(body: str) -> np.ndarray | None:
