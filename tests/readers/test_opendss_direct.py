@@ -260,6 +260,20 @@ def test_ieee34_against_opendss():
     assert f.buses.loc[f.source_bus, "y"] == 0.0 and (f.buses.y <= 0).all()
 
 
+@needs_feeders
+def test_master_with_reports_writes_nothing_beside_it(tmp_path):
+    # Run_IEEE34Mod1.dss compiles ieee34Mod1.dss twice and has Show/Plot commands: compiled
+    # from a temporary copy, its reports go there, not into the master's folder
+    for path in IEEE34.parent.iterdir():
+        (tmp_path / path.name).write_bytes(path.read_bytes())
+    before = sorted(p.name for p in tmp_path.iterdir())
+    f = read_opendss_master(
+        tmp_path / "Run_IEEE34Mod1.dss", fleet=fleet([("G1", "sourcebus", 5.0, 1.0, 3000.0)])
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    assert (len(f.buses), len(f.lines), f.loads.p_kw.sum()) == (37, 36, pytest.approx(1769.0))
+
+
 @needs_elv
 def test_elv_same_reduction_as_pandapower():
     from popdispatch.feeder import ieee_elv, paper_fleet, reduce_feeder

@@ -60,9 +60,12 @@ Conversion rules
 Compiling
 ---------
 The master is compiled as it is, in a private OpenDSS context (the process's working directory
-and any circuit of the default OpenDSSDirect.py engine are untouched). Only when that fails is it
-compiled again from a temporary copy of the master and the files it redirects to, in which file
-references are made portable: ``\\`` separators and a file name differing only in case from an
+and any circuit of the default OpenDSSDirect.py engine are untouched). It is compiled from a
+temporary copy of the master and the files it redirects to only (a) when it contains commands
+that write files into OpenDSS's data folder, i.e. the master's own folder (``Show``, ``Export``,
+``Plot``, ``CloseDI``, ``Set Demand=true``, ...: they then write into the temporary folder,
+which is deleted), or (b) when compiling it as it is fails. In the copy, file references are
+made portable: ``\\`` separators and a file name differing only in case from an
 existing file (``Daily_1min_100profiles\\Load_profile_1.txt`` for ``load_profile_1.txt``) are
 replaced by the file's absolute path, and a ``Redirect``/``Compile`` of a file that does not exist
 (the ELV's ``Monitors.txt``) is commented out. Every such change is listed in a
@@ -117,32 +120,35 @@ def _opendss():
 def compile_master(master_path: str | Path):
     """Compile ``master_path`` in a new OpenDSS context; returns ``(context, notes)``.
 
-    ``notes`` lists the changes of the portable-copy fallback (empty when OpenDSS compiled the
-    master as it is). Raises :class:`FeederError` when neither compiles.
+    ``notes`` lists the file references a temporary copy had to change (see the module
+    docstring; empty when none). Raises :class:`FeederError` when OpenDSS cannot compile it.
     """
     path = Path(master_path)
     if not path.is_file():
         raise FeederError(f"OpenDSS master file {path} does not exist")
     dss = _opendss()
-    ctx = _new_context(dss)
-    try:
-        ctx.Text.Command(f'compile "{path.resolve()}"')
-        return ctx, []
-    except Exception as exc:  # DSSException; its class lives in dss-python
-        first = _one_line(exc)
-    ctx = _new_context(dss)
     with tempfile.TemporaryDirectory(prefix="popdispatch-dss-") as tmp:
         notes: list[str] = []
-        copy = _portable_copy(path.resolve(), Path(tmp), notes, {})
-        if not notes:
-            raise FeederError(f"OpenDSS cannot compile {path}: {first}")
+        writes: list[str] = []
+        copy = _portable_copy(path.resolve(), Path(tmp), notes, {}, writes)
+        first = None
+        if not writes:
+            ctx = _new_context(dss)
+            try:
+                ctx.Text.Command(f'compile "{path.resolve()}"')
+                return ctx, []
+            except Exception as exc:  # DSSException; its class lives in dss-python
+                first = _one_line(exc)
+            if not notes:
+                raise FeederError(f"OpenDSS cannot compile {path}: {first}")
+        ctx = _new_context(dss)
         cwd = os.getcwd()
         try:
             ctx.Text.Command(f'compile "{copy}"')
         except Exception as exc:
+            before = f"{first}; nor its portable copy ({_summary(notes)})" if first else "its copy"
             raise FeederError(
-                f"OpenDSS cannot compile {path}: {first}; nor its portable copy "
-                f"({_summary(notes)}): {_one_line(exc)}"
+                f"OpenDSS cannot compile {path}: {before}: {_one_line(exc)}"
             ) from None
         finally:
             os.chdir(cwd)
@@ -181,6 +187,12 @@ _FILE_KEY = re.compile(
     r"""((?:file|csvfile|sngfile|dblfile)\s*=\s*)("[^"]*"|'[^']*'|[^\s)\]]+)""", re.I
 )
 _COMMENT = re.compile(r"!|//")
+#: Commands that write report or result files into OpenDSS's data folder.
+_WRITES = re.compile(
+    r"\s*(show|export|plot|closedi|save|dump|visualize|fileedit|sample)\b"
+    r"|\s*set\b.*\b(demand|overloadreport|voltexcept|diverbose|keeplist)\s*=\s*[yt]",
+    re.I,
+)
 
 
 def _resolve(folder: Path, raw: str) -> Path | None:
@@ -192,8 +204,11 @@ def _resolve(folder: Path, raw: str) -> Path | None:
     return found if found is not None and found.is_file() else None
 
 
-def _portable_copy(source: Path, tmp: Path, notes: list[str], done: dict[Path, Path]) -> Path:
-    """Copy ``source`` (and the files it redirects to) into ``tmp`` with portable references."""
+def _portable_copy(
+    source: Path, tmp: Path, notes: list[str], done: dict[Path, Path], writes: list[str]
+) -> Path:
+    """Copy ``source`` (and the files it redirects to) into ``tmp`` with portable references;
+    ``notes`` gets the changes, ``writes`` the commands that write output files."""
     if source in done:
         return done[source]
     target = tmp / f"{len(done)}_{source.name}"
@@ -210,6 +225,8 @@ def _portable_copy(source: Path, tmp: Path, notes: list[str], done: dict[Path, P
             continue
         code = _COMMENT.split(line, maxsplit=1)[0]
         where = f"{source.name}:{number}"
+        if _WRITES.match(code):
+            writes.append(f"{where}: {stripped!r}")
         match = _FILE_COMMAND.match(code)
         if match:
             indent, command, _, raw = match.groups()
@@ -222,7 +239,7 @@ def _portable_copy(source: Path, tmp: Path, notes: list[str], done: dict[Path, P
                 out.append(line)
                 continue
             if command.lower() in ("redirect", "compile"):
-                new = _portable_copy(found, tmp, notes, done)
+                new = _portable_copy(found, tmp, notes, done, writes)
                 # Redirect, not compile: a nested compile would clear the circuit the same way.
                 out.append(f'{indent}{command} "{new}"')
                 if found != folder / raw.strip().strip("\"'"):
