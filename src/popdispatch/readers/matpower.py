@@ -34,7 +34,10 @@ statement; so do unsupported elements (phase shifters, shunt conductance, negati
 
 Conversion to the :class:`Feeder` (kW, ohm, km):
 
-- buses: the non-isolated buses (``BUS_TYPE`` 4 is dropped) by their MATPOWER numbers. MATPOWER
+- buses: the non-isolated buses by their MATPOWER numbers (an isolated bus, ``BUS_TYPE`` 4, is
+  dropped with its load and generators, as MATPOWER does; an in-service branch to one is an
+  error). Shunt conductance ``GS`` (a constant demand in MATPOWER's DC model) and negative
+  ``PD`` are refused. MATPOWER
   has no coordinates: ``x``/``y`` are a schematic layout of the tree (``x`` = hops from the
   source, ``y`` = number of leaves before the bus in depth-first order), not geography.
 - source bus: the reference bus (``BUS_TYPE`` 3), or ``root``. Several reference buses are an
