@@ -461,7 +461,7 @@ def _map_fleet(fleet: pd.DataFrame, ids: dict[str, int], candidates: pd.DataFram
     for generator, row in table.iterrows():
         element = by_name.get(str(generator).lower())
         bus = row["bus"]
-        if bus is None or (isinstance(bus, float) and math.isnan(bus)):
+        if bus is None or (np.ndim(bus) == 0 and pd.isna(bus)):
             if element is None:
                 raise FleetError(
                     f"generator {generator!r} has no bus and is no OpenDSS generator "
