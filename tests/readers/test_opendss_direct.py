@@ -158,18 +158,25 @@ def test_ieee13_impedances_and_ratings(ieee13):
     diag = (0.3465 + 1.0179j + 0.3375 + 1.0478j + 0.3414 + 1.0348j) / 3
     off = (0.1560 + 0.5017j + 0.1580 + 0.4236j + 0.1535 + 0.3849j) / 3
     z = (diag - off) * 2000 / 5280
+    # ohm referred to the 115 kV source bus: 4.16 kV lines x (115 / 4.16)^2
+    to_source = (115 / 4.16) ** 2
+    assert f.buses.loc[f.source_bus, "kv_ln_base"] == pytest.approx(115 / math.sqrt(3))
     line = f.lines.loc["650632"]
     assert line.length_km == pytest.approx(2000 * 0.3048e-3, rel=1e-12)
-    assert line.r_ohm == pytest.approx(z.real, rel=1e-9)
-    assert line.x_ohm == pytest.approx(z.imag, rel=1e-9)
+    assert line.r_ohm == pytest.approx(z.real * to_source, rel=1e-9)
+    assert line.x_ohm == pytest.approx(z.imag * to_source, rel=1e-9)
     # one-phase matrix line 684-611 (mtx605): its self impedance, 300 ft
-    assert f.lines.loc["684611", "r_ohm"] == pytest.approx(1.3292 * 300 / 5280, rel=1e-9)
-    # XFM1: %R 0.55 + 0.55, XHL 2 % on 500 kVA, referred to its 4.16 kV winding
-    base = 4.16**2 / 0.5
+    assert f.lines.loc["684611", "r_ohm"] == pytest.approx(
+        1.3292 * 300 / 5280 * to_source, rel=1e-9
+    )
+    # XFM1: %R 0.55 + 0.55, XHL 2 % on 500 kVA, on the 115 kV base
     xfm = f.lines.loc["Transformer.xfm1"]
-    assert xfm.r_ohm == pytest.approx(0.011 * base, rel=1e-12)
-    assert xfm.x_ohm == pytest.approx(0.02 * base, rel=1e-12)
+    assert xfm.r_ohm == pytest.approx(0.011 * 115**2 / 0.5, rel=1e-9)
+    assert xfm.x_ohm == pytest.approx(0.02 * 115**2 / 0.5, rel=1e-9)
     assert (xfm.length_km, xfm.limit_kw) == (0.0, 500.0)
+    # the regulator bank: three one-phase 1666 kVA units, XHL 0.01 %: per phase on V_LN^2
+    bank = f.lines.loc["Transformer.reg1+reg2+reg3"]
+    assert bank.x_ohm == pytest.approx(1e-4 * (115 / math.sqrt(3)) ** 2 / 1.666, rel=1e-9)
     # NormAmps 400 A (OpenDSS's default) at 4.16 kV: sqrt(3) * 4.16 * 400 kW, 1 phase: V_LN I
     assert line.limit_kw == pytest.approx(math.sqrt(3) * 4.16 * 400, rel=1e-6)
     assert f.lines.loc["684611", "limit_kw"] == pytest.approx(4.16 / math.sqrt(3) * 400, rel=1e-6)
@@ -192,6 +199,12 @@ def test_ieee13_fleet_by_opendss_bus_name(ieee13):
 def test_ieee13_root(ieee13):
     f = read_opendss_master(IEEE13, fleet=FLEET13, root=650)
     assert f.source_bus == 650 and len(f.buses) == 16
+    # rooted at the 4.16 kV bus 650: the 4.16 kV lines keep their own ohms
+    assert f.lines.loc["650632", "r_ohm"] == pytest.approx(
+        ieee13.lines.loc["650632", "r_ohm"] * (4.16 / 115) ** 2, rel=1e-9
+    )
+    own = (0.3465 + 0.3375 + 0.3414 - 0.1560 - 0.1580 - 0.1535) / 3 * 2000 / 5280
+    assert f.lines.loc["650632", "r_ohm"] == pytest.approx(own, rel=1e-9)
 
 
 @needs_feeders
@@ -223,8 +236,9 @@ def test_open_switch_generators_and_unsupported(tmp_path):
         f = read_opendss_master(spur, fleet=with_candidates)
     assert len(f.buses) == len(own["buses"]) - 1 == 17
     assert "spursw" not in f.lines.index and "spur" in f.lines.index
-    assert f.lines.loc["spur", "r_ohm"] == pytest.approx(0.02, rel=1e-9)
-    assert f.lines.loc["spur", "x_ohm"] == pytest.approx(0.04, rel=1e-9)
+    to_source = (115 / 4.16) ** 2  # the spur is at 4.16 kV (CalcVoltageBases), source 115 kV
+    assert f.lines.loc["spur", "r_ohm"] == pytest.approx(0.02 * to_source, rel=1e-9)
+    assert f.lines.loc["spur", "x_ohm"] == pytest.approx(0.04 * to_source, rel=1e-9)
     g5 = f.generators.loc["g5"]
     assert (g5.bus, g5.pmin_kw, g5.pmax_kw) == (675, 0.0, pytest.approx(500.0, rel=1e-12))
     # a series reactor and a three-winding transformer name themselves
@@ -285,6 +299,9 @@ def test_elv_same_reduction_as_pandapower():
     # above the root 1 that the reduction prunes)
     assert len(f.buses) == 907 and f.buses.loc[907, "name"] == "sourcebus"
     assert f.source_bus == reference.source_bus == 1
+    # rooted at the 416 V bus 1: the lines keep their own ohms; TR1 (800 kVA, XHL 4 %) on
+    # the 0.416 kV base
+    assert f.lines.loc["Transformer.tr1", "x_ohm"] == pytest.approx(0.04 * 0.416**2 / 0.8)
     assert f.loads.p_kw.sum() == pytest.approx(55.0)  # kW=1 per load (shapes not applied)
     assert f.loads.bus.tolist() == reference.loads.bus.tolist()
     assert f.loads.index.tolist() == [n.lower() for n in reference.loads.index]

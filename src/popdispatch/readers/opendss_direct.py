@@ -14,7 +14,8 @@ Conversion rules
   nothing is connected to it; with a load or generator it is an error.
 - **Lines** (``Line`` elements, enabled): ``length_km`` = ``Length`` x its ``Units`` in km
   (``none`` taken as km); ``r_ohm + j x_ohm`` = positive-sequence impedance per unit length x
-  ``Length`` (ohm, whole line). The per-length value comes from OpenDSS's own phase matrices
+  ``Length`` (ohm, whole line, then referred to the source: see *Impedance base*). The
+  per-length value comes from OpenDSS's own phase matrices
   (``Lines.RMatrix``/``XMatrix``, ohm per line unit, whatever defined them: sequence values,
   line code matrices or a line geometry): Kron-reduced to the phase conductors, then
   ``Z1 = mean(diagonal) - mean(off-diagonal)`` (exactly ``R1 + j X1`` for sequence-defined
@@ -24,15 +25,19 @@ Conversion rules
 - **Switches** (``Switch=yes`` lines) are lines with ``kind = "switch"``. A line or switch with a
   terminal open on every phase (``open Line.X 1``) is removed; a partly open one is kept.
 - **Transformers and regulators** are branches with ``length_km = 0`` and the series impedance
-  ``(%R1 + %R2 kVA1/kVA2)/100 + j XHL/100`` per unit on winding 1's rating, converted to ohm
-  **referred to winding 1** (the ``Bus1`` side): ``Z_base = kV1^2 / MVA1`` with kV1 and kVA1
-  the unit's own winding-1 rating (line-to-line for three-phase units, the winding voltage for
-  one-phase ones), i.e. the per-phase ohmic impedance seen from that side. Line impedances stay
-  in ohm at their own voltage; the engine's lossless DC flows use the topology only. One-phase
+  ``z = (%R1 + %R2 kVA1/kVA2)/100 + j XHL/100`` per unit on the unit's own winding-1 rating,
+  in ohm on the source's base: ``z V_LL^2 / MVA1`` for a three-phase unit and ``z V_LN^2 /
+  MVA1`` (per phase) for a one-phase unit, with ``V`` the source bus's base voltage. One-phase
   units between the same two buses (a regulator bank such as ``reg1a/b/c``) are one branch named
   ``Transformer.reg1a+reg1b+reg1c`` with the mean of their impedances (a bank of equal units:
   the unit's). ``kind`` is ``"regulator"`` when a ``RegControl`` acts on a unit, else
-  ``"transformer"``. Taps are ignored. Three-winding transformers are refused.
+  ``"transformer"``. Taps and off-nominal ratios are ignored. Three-winding transformers are
+  refused.
+- **Impedance base**: as in the pandapower reader, every ``r_ohm``/``x_ohm`` is in ohm referred
+  to the base voltage of the source bus (its ``kv_ln_base``): a line whose from-bus base is
+  ``V`` has its own ohmic impedance times ``(V_source / V)^2``; on a single-voltage feeder
+  (the ELV rooted at bus 1) they are the lines' own ohms. Nominal ratios only; the engine's
+  lossless DC flows use the topology and the limits, the impedances are for AC work.
 - Any other series element (a two-terminal ``Reactor``, ``Capacitor``, ``AutoTrans``, ...)
   is refused with an error naming it; shunt capacitors and reactors are ignored (no active power).
 - **Loads** (``Load`` elements, enabled): one row per OpenDSS load, index its name (OpenDSS
@@ -43,8 +48,9 @@ Conversion rules
   at unity power factor. OpenDSS gives every line ``NormAmps = 400`` unless told otherwise and
   this reader cannot tell that default from a stated rating: pass ``ratings=False`` (all limits
   ``inf``) when the master states none. A transformer branch's limit is its winding-1 kVA
-  (summed over a bank's units) in kW. When a master sets no voltage bases, ``CalcVoltageBases``
-  is run once to get them.
+  (summed over a bank's units) in kW.
+- **Base voltages**: OpenDSS's own (``Bus.kVBase``); when a bus has none, ``CalcVoltageBases``
+  is run once (OpenDSS's default ``VoltageBases`` list applies if the master sets none).
 - **Coordinates**: the circuit's bus coordinates (``BusCoords`` in the master) where present; a
   bus without any takes its nearest placed neighbour's towards the source. A circuit with none
   gets a schematic layout: ``y = -100 x depth`` from the source and ``x = 100 x`` leaf order.
@@ -359,6 +365,7 @@ def _read_lines(ctx, ids: dict[str, int], kv: dict[str, float], ratings: bool) -
             "length_km": length * KM_PER_DSS_UNIT[units], "r_ohm": abs(z1.real),
             "x_ohm": abs(z1.imag), "limit_kw": limit,
             "kind": "switch" if ctx.Lines.IsSwitch() else "line",
+            "_kv": kv.get(bus1, 0.0),  # ohm at this voltage: referred to the source's later
         })  # fmt: skip
     return rows
 
@@ -381,15 +388,17 @@ def _read_transformers(ctx, ids: dict[str, int], ratings: bool) -> list[dict]:
         buses = [_bus(b) for b in ctx.CktElement.BusNames()]
         xhl = ctx.Transformers.Xhl()
         ctx.Transformers.Wdg(1)
-        kv1, kva1, r1 = ctx.Transformers.kV(), ctx.Transformers.kVA(), ctx.Transformers.R()
+        kva1, r1 = ctx.Transformers.kVA(), ctx.Transformers.R()
         ctx.Transformers.Wdg(2)
         kva2, r2 = ctx.Transformers.kVA(), ctx.Transformers.R()
-        base = kv1**2 * 1e3 / kva1
-        unit = {
-            "name": name, "buses": buses, "r": (r1 + r2 * kva1 / kva2) / 100 * base,
-            "x": xhl / 100 * base, "kva": kva1, "reg": name.lower() in regulated,
-        }  # fmt: skip
         one_phase = ctx.CktElement.NumPhases() == 1
+        # ohm per (kV line-to-neutral)^2 of the voltage they are referred to: z_pu V_LL^2 / MVA
+        # for a three-phase unit, z_pu V_LN^2 / MVA for a one-phase one (per phase)
+        per_kv2 = (1.0 if one_phase else 3.0) * 1e3 / kva1
+        unit = {
+            "name": name, "buses": buses, "r": (r1 + r2 * kva1 / kva2) / 100 * per_kv2,
+            "x": xhl / 100 * per_kv2, "kva": kva1, "reg": name.lower() in regulated,
+        }  # fmt: skip
         key = (frozenset(buses),) if one_phase else (name,)
         units.setdefault(key, []).append(unit)
     rows = []
@@ -402,6 +411,7 @@ def _read_transformers(ctx, ids: dict[str, int], ratings: bool) -> list[dict]:
             "x_ohm": float(np.mean([u["x"] for u in group])),
             "limit_kw": float(sum(u["kva"] for u in group)) if ratings else math.inf,
             "kind": "regulator" if any(u["reg"] for u in group) else "transformer",
+            "_kv": math.nan,  # r_ohm, x_ohm: ohm / kV^2 of the source's base, see the caller
         })  # fmt: skip
     return rows
 
@@ -550,9 +560,7 @@ def read_opendss_master(
     if not names:
         raise FeederError(f"{master_path}: the OpenDSS circuit {circuit!r} has no bus")
     ids = bus_ids(names)
-    kv = {}
-    if ratings:
-        kv = _base_voltages(ctx, names)
+    kv = _base_voltages(ctx, names)
     _check_other_series(ctx)
     branches = _read_lines(ctx, ids, kv, ratings) + _read_transformers(ctx, ids, ratings)
     if not branches:
@@ -588,6 +596,7 @@ def read_opendss_master(
         keep_ids = {ids[b] for b in names if b in parent}
         lines = lines[lines.from_bus.isin(keep_ids) & lines.to_bus.isin(keep_ids)]
     kept = [b for b in names if b in parent]
+    lines = _refer_to_source(lines, kv[name_of[source]], name_of, master_path)
 
     coords = {}
     for bus in kept:
@@ -595,8 +604,6 @@ def read_opendss_master(
         if ctx.Bus.Coorddefined():
             coords[bus] = (ctx.Bus.X(), ctx.Bus.Y())
     xy = _layout(kept, parent, order, coords)
-    if not kv:
-        kv = {b: _kv(ctx, b) for b in kept}
     buses = pd.DataFrame(
         {
             "x": [xy[b][0] for b in kept],
@@ -629,6 +636,28 @@ def read_opendss_master(
     lines.index.name = "line"
     lines = lines.astype({"from_bus": np.int64, "to_bus": np.int64})
     return Feeder(name or circuit, buses, lines, load_table, source, generators)
+
+
+def _refer_to_source(
+    lines: pd.DataFrame, kv_source: float, name_of: dict[int, str], master_path
+) -> pd.DataFrame:
+    """Impedances in ohm referred to the source bus's base voltage (see the module docstring)."""
+    if not kv_source > 0:
+        raise FeederError(f"{master_path}: the source bus has no base voltage (set voltagebases)")
+    line_kv = lines["_kv"].to_numpy(float)
+    transformer = np.isnan(line_kv)
+    bad = ~transformer & ~(line_kv > 0)
+    if bad.any():
+        name = lines.index[bad][0]
+        raise FeederError(
+            f"{master_path}: line {name!r}: bus {name_of[lines.loc[name, 'from_bus']]!r} has no "
+            "base voltage to refer its impedance to the source's (set voltagebases)"
+        )
+    scale = np.where(transformer, kv_source**2, (kv_source / np.where(bad, 1.0, line_kv)) ** 2)
+    lines = lines.drop(columns="_kv")
+    lines["r_ohm"] = lines["r_ohm"].to_numpy(float) * scale
+    lines["x_ohm"] = lines["x_ohm"].to_numpy(float) * scale
+    return lines
 
 
 def _kv(ctx, bus: str) -> float:
