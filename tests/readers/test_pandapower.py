@@ -138,6 +138,21 @@ def test_case33bw_with_ties_in_service_names_a_loop():
     assert "\n" not in str(e.value)
 
 
+def test_ieee_elv_net_reads_like_the_ieee_elv_case():
+    """pandapower's own ELV net (asymmetric loads, a transformer from SOURCEBUS) gives the
+    ieee-elv feeder: same counts, total, impedances and the paper's 110-node reduction."""
+    net = cases._elv_net()
+    elv = cases.ieee_elv()
+    index_of = pd.Series(net.bus.index, index=net.bus.name)
+    paper = elv.generators.assign(bus=index_of[elv.generators.bus.astype(str)].to_numpy())
+    feeder = read_pandapower(net, fleet=paper, ratings=False)
+    assert (len(feeder.buses), len(feeder.lines), len(feeder.loads)) == (906, 905, 55)
+    assert feeder.loads.p_kw.sum() == pytest.approx(cases.elv_snapshot_566_kw().sum(), rel=1e-9)
+    assert feeder.lines.r_ohm.sum() == pytest.approx(elv.lines.r_ohm.sum(), rel=1e-12)
+    reduced, expected = reduce_feeder(feeder), reduce_feeder(elv)
+    assert (reduced.n_nodes, reduced.n_lines) == (expected.n_nodes, expected.n_lines) == (110, 109)
+
+
 # -- switches, service, loads --------------------------------------------------------------------
 
 
@@ -312,6 +327,19 @@ def test_generators_without_costs_ask_for_a_fleet():
     pp.create_poly_cost(net, 0, "sgen", cp1_eur_per_mw=1.0, cp2_eur_per_mw2=0.5)
     fleet = read_pandapower(net).generators
     assert fleet.loc["sgen0"].tolist() == [3, 0.0, 1.0, 0.5, 0.0, 10.0]  # pmax from p_mw
+
+
+def test_storage_and_ext_grid_fleet_rules():
+    net = tiny_net()
+    pp.create_storage(net, 3, p_mw=0.0, max_e_mwh=0.1, max_p_mw=0.002, min_p_mw=-0.005)
+    pp.create_poly_cost(net, 0, "storage", cp1_eur_per_mw=-4.0, cp2_eur_per_mw2=0.5)
+    pp.create_poly_cost(net, 0, "ext_grid", cp1_eur_per_mw=30.0)
+    fleet = read_pandapower(net).generators
+    # storage in load convention: discharging up to 5 kW, b = -cp1
+    assert fleet.loc["storage0"].tolist() == [3, 0.0, 4.0, 0.5, 0.0, 5.0]
+    # the ext_grid behind the substation transformer is a generator at the source, its pmax
+    # (no max_p_mw) the transformer's 0.4 MVA
+    assert fleet.loc["ext_grid0"].tolist() == [1, 0.0, 30.0, 0.0, 0.0, 400.0]
 
 
 # -- the DC-OPF and exact mode ------------------------------------------------------------------

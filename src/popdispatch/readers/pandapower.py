@@ -143,7 +143,8 @@ def _read(net_or_path, fleet, root, ratings, name, placeholder: bool = False) ->
     hv_of_ext = set(ext.pos.tolist()) - ({root_pos} if root_pos is not None else set())
     trafo = branches.kind == "trafo"
     substation = trafo & branches.a.isin(hv_of_ext).to_numpy()
-    sources = _sources(ext, branches[substation])
+    dropped = branches[substation]
+    sources = _sources(ext, dropped)
     branches = branches[~substation]
 
     a = branches.a.to_numpy()
@@ -196,7 +197,7 @@ def _read(net_or_path, fleet, root, ratings, name, placeholder: bool = False) ->
     )
     if fleet is None:
         try:
-            generators = _fleet(net, position, bus_ok, rep, keep, ext, root_pos, sources)
+            generators = _fleet(net, position, bus_ok, rep, keep, ext, root_pos, dropped)
         except FleetError:
             if not placeholder:
                 raise
@@ -418,7 +419,7 @@ def _ext_grids(net, position: pd.Index, bus_ok: np.ndarray, rep: np.ndarray) -> 
 
 def _sources(ext: pd.DataFrame, substation: pd.DataFrame) -> list[tuple[int, str]]:
     """(representative position, label) of every source bus: the LV side of substation
-    transformers, or the ext_grid's own bus."""
+    transformers, or the ext_grid's own bus. Labels start ``ext_grid <index>``."""
     out = []
     for index, pos in ext.pos.items():
         through = substation[substation.a == pos]
@@ -428,6 +429,12 @@ def _sources(ext: pd.DataFrame, substation: pd.DataFrame) -> list[tuple[int, str
         else:
             out.append((int(pos), f"ext_grid {index}"))
     return out
+
+
+def _substation_mva(substation: pd.DataFrame, ext: pd.DataFrame, index, root_pos: int) -> float:
+    """Rating (MVA) of the substation transformers from ext_grid ``index`` to the root."""
+    rows = substation[(substation.a == ext.pos[index]) & (substation.b == root_pos)]
+    return float(rows.sn_mva.sum()) if len(rows) else np.nan
 
 
 def _pick_root(sources, component, root_pos, bus_ids) -> int:
@@ -564,7 +571,7 @@ def _user_fleet(fleet: pd.DataFrame, position: pd.Index, rep, bus_ids) -> pd.Dat
     return fleet
 
 
-def _fleet(net, position, bus_ok, rep, keep, ext, root_pos, sources) -> pd.DataFrame:
+def _fleet(net, position, bus_ok, rep, keep, ext, root_pos, substation) -> pd.DataFrame:
     costs = _table(net, "poly_cost")
     cost = {}
     if costs is not None:
@@ -618,15 +625,15 @@ def _fleet(net, position, bus_ok, rep, keep, ext, root_pos, sources) -> pd.DataF
                     _known(pmax, et, index))  # fmt: skip
     ext_table = _table(net, "ext_grid")
     for index, pos in ext.pos.items():
-        feeds = [p for p, label in sources if label.split(" via ")[0] == f"ext_grid {index}"]
-        at_root = pos == root_pos or root_pos in feeds
-        if not at_root or ("ext_grid", int(index)) not in cost:
+        feeds = (pos == root_pos) or len(
+            substation[(substation.a == pos) & (substation.b == root_pos)]
+        ) > 0
+        if not feeds or ("ext_grid", int(index)) not in cost:
             continue
         row = ext_table.loc[[index]]
         pmax = _finite(row, "max_p_mw", np.nan)[0]
         if not np.isfinite(pmax):
-            sub = _substation_sn(net, index)
-            pmax = sum(sub) if sub else np.nan
+            pmax = _substation_mva(substation, ext, index, root_pos)
         pmin = _finite(row, "min_p_mw", 0.0)[0]
         add("ext_grid", index, int(bus_ids[root_pos]), pmin, _known(pmax, "ext_grid", index))
     if not rows:
@@ -643,12 +650,3 @@ def _known(pmax: float, et: str, index) -> float:
             f"{et} {index} has no usable max_p_mw (nor sn_mva): give a fleet (fleet=..., --fleet)"
         )
     return float(pmax)
-
-
-def _substation_sn(net, ext_index) -> list[float]:
-    trafo = _table(net, "trafo")
-    if trafo is None:
-        return []
-    bus = net.ext_grid.bus[ext_index]
-    rows = trafo[(trafo.hv_bus == bus) & _in_service(trafo)]
-    return (rows.sn_mva * _finite(rows, "parallel", 1.0)).tolist()
