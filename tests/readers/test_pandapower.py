@@ -385,9 +385,9 @@ def test_exact_mode_on_kerber_lands_on_the_dc_opf(limit_kw):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="issue 12 open point: exact mode reaches the Kerber optimum with a binding limit "
-    "within 3.4e-5 kW but does not declare convergence in 6000 iterations (measured before the "
-    "engine's rescaling); remove this mark when it does",
+    reason="issue 12 open point (exact mode's absolute stopping tolerance): measured on "
+    "2026-12-01, status not_converged after 6000 iterations although 3.4e-5 kW from the DC-OPF "
+    "(line price -11.2 EUR/MWh); remove this mark when it converges",
 )
 def test_exact_mode_on_kerber_with_a_binding_limit_converges():
     fleet = make_fleet([(1, 0, 20.0, 0.5, 0, 200), (8, 0, 5.0, 20.0, 0, 60),
