@@ -420,3 +420,6 @@ def test_list_cases_counts_and_totals(monkeypatch):
     assert table.loc["case33bw", "total_load_kw"] == pytest.approx(3715.0)
     assert table.loc["kerber-landnetz-freileitung-1", "total_load_kw"] == pytest.approx(104.0)
     assert table.source.str.startswith("pandapower.networks.").all()
+    # the counts are cached: a second listing reads no network
+    monkeypatch.setattr(cases, "_case_counts", lambda names: pytest.fail("read again"))
+    pd.testing.assert_frame_equal(cases.list_cases(), table)

@@ -20,6 +20,7 @@ them; a missing, corrupt or inconsistent cache file is rebuilt too.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import json
@@ -175,31 +176,103 @@ def _simbench_case(name: str, fleet: pd.DataFrame | None, placeholder: bool = Fa
     return _read(net, fleet, None, True, name, placeholder)
 
 
+#: Cache entry of the :func:`list_cases` counts, and the version of its layout.
+CASES_CACHE, CASES_FORMAT = "cases", 1
+
+
 def list_cases() -> pd.DataFrame:
     """The built-in cases: index ``name``; columns ``buses``, ``lines``, ``loads``,
     ``total_load_kw`` (the loads of the net's own snapshot; ieee-elv: minute 566), ``size``
-    and ``source``. Loads every case (about 20 s on a shared 2-core machine: pandapower's
-    network builders are slow; the reads themselves take under 0.05 s each)."""
-    rows = []
+    and ``source``.
+
+    The counts come from reading every case (about 20 s on a shared 2-core machine:
+    pandapower's network builders are slow, the reads take under 0.05 s each), so they are
+    kept in the on-disk cache under a key of the case names, the pandapower, simbench and
+    popdispatch versions and the code of this module and of the pandapower reader.
+    """
     names = list(CASES)
     if simbench_available():
         names += [SIMBENCH_PREFIX + code for code in SIMBENCH_CODES]
+    key = _cases_cache_key(names)
+    counts = cache.load_arrays(CASES_CACHE, key)
+    if not _sound_counts(counts, names):
+        counts = _case_counts(names)
+        cache.save_arrays(CASES_CACHE, key, counts)
+    table = pd.DataFrame(
+        {
+            "buses": counts["buses"].astype(np.int64),
+            "lines": counts["lines"].astype(np.int64),
+            "loads": counts["loads"].astype(np.int64),
+            "total_load_kw": counts["total_load_kw"].astype(float),
+            "size": [CASES[n].size if n in CASES else "SimBench" for n in names],
+            "source": [
+                CASES[n].source if n in CASES
+                else f"simbench.get_simbench_net({n[len(SIMBENCH_PREFIX):]!r})"
+                for n in names
+            ],
+        },
+        index=pd.Index(names, name="name"),
+    )  # fmt: skip
+    return table
+
+
+def _sound_counts(counts: dict[str, np.ndarray] | None, names: list[str]) -> bool:
+    """Whether cached counts have the expected arrays, one value per case, all finite."""
+    expected = {"name", "buses", "lines", "loads", "total_load_kw"}
+    if counts is None or set(counts) != expected or counts["name"].tolist() != names:
+        return False
+    return all(
+        counts[k].shape == (len(names),) and counts[k].dtype.kind in "if"
+        and np.isfinite(counts[k]).all()
+        for k in expected - {"name"}
+    )  # fmt: skip
+
+
+def _case_counts(names: list[str]) -> dict[str, np.ndarray]:
+    """Bus, line and load counts and total load (kW) of each case, read afresh."""
+    rows = []
     for name in names:
         if name == "ieee-elv":
             feeder, total = ieee_elv(), float(elv_snapshot_566_kw().sum())
-            size, source = CASES[name].size, CASES[name].source
         else:
             if name.startswith(SIMBENCH_PREFIX):
                 feeder = _simbench_case(name, None, placeholder=True)
-                size, source = "SimBench", f"simbench.get_simbench_net({name[9:]!r})"
             else:
                 feeder = CASES[name].loader(None, placeholder=True)
-                size, source = CASES[name].size, CASES[name].source
             total = float(feeder.loads.p_kw.sum())
-        rows.append((name, len(feeder.buses), len(feeder.lines), len(feeder.loads), total,
-                     size, source))  # fmt: skip
-    columns = ["name", "buses", "lines", "loads", "total_load_kw", "size", "source"]
-    return pd.DataFrame(rows, columns=columns).set_index("name")
+        rows.append((len(feeder.buses), len(feeder.lines), len(feeder.loads), total))
+    values = np.array(rows, dtype=float).reshape(len(names), 4)
+    return {
+        "name": np.array(names, dtype=str),
+        "buses": values[:, 0].astype(np.int64),
+        "lines": values[:, 1].astype(np.int64),
+        "loads": values[:, 2].astype(np.int64),
+        "total_load_kw": values[:, 3],
+    }
+
+
+def _cases_cache_key(names: list[str]) -> dict:
+    from importlib.metadata import PackageNotFoundError, version
+
+    def installed(package: str) -> str | None:
+        try:
+            return version(package)
+        except PackageNotFoundError:
+            return None
+
+    code = hashlib.sha256()
+    for path in (Path(__file__), Path(__file__).parents[1] / "readers" / "pandapower.py"):
+        with contextlib.suppress(OSError):
+            code.update(path.read_bytes())
+    key = elv_cache_key()
+    key.update(
+        case="built-in case counts",
+        format=CASES_FORMAT,
+        names=names,
+        simbench=installed("simbench"),
+        code=code.hexdigest()[:16],
+    )
+    return key
 
 
 def ieee_elv() -> Feeder:
