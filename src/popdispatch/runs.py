@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from popdispatch.errors import OptionError
@@ -53,15 +54,85 @@ def load_profiles(
     return profiles
 
 
-def load_feeder(opendss: Path | None = None) -> Feeder:
-    """The built-in ieee-elv feeder, or the one in the OpenDSS files of folder ``opendss``."""
-    if opendss is not None:
+@dataclass(frozen=True)
+class FeederSource:
+    """Where a run's feeder comes from (the CLI's ``--opendss``, ``--net``, ``--fleet``,
+    ``--root``, ``--no-ratings``).
+
+    ``net``: a network file, read by its suffix (:data:`NETWORK_READERS`: ``.m`` MATPOWER,
+    ``.json`` pandapower, ``.dss`` OpenDSS master); it runs on its own loads (one time step,
+    repeated) with its own generators and costs, or ``fleet`` (a CSV or TOML fleet file, see
+    :func:`popdispatch.feeder.generators.read_fleet`; buses as the network numbers them) in
+    their place. ``root``: the source bus when the network has several. ``ratings``: line
+    limits from the network's own ratings. Without ``net``: the built-in ieee-elv case, or its
+    OpenDSS folder ``opendss``, with the paper's fleet (or ``fleet``) and the official or
+    default profiles.
+    """
+
+    opendss: Path | None = None
+    net: Path | None = None
+    fleet: Path | None = None
+    root: int | None = None
+    ratings: bool = True
+
+    def __post_init__(self) -> None:
+        if self.net is not None and self.opendss is not None:
+            raise OptionError("give either --net or --opendss, not both", "--net")
+        if self.net is not None and self.net.suffix.lower() not in NETWORK_READERS:
+            known = ", ".join(NETWORK_READERS)
+            raise OptionError(f"{self.net}: unknown network format (known: {known})", "--net")
+        if self.net is None and (self.root is not None or not self.ratings):
+            raise OptionError("--root and --no-ratings apply to a --net network", "--root")
+
+    @property
+    def label(self) -> str:
+        """What is read, for progress lines."""
+        where = self.net or self.opendss
+        return f"the feeder in {where}" if where else "the ieee-elv feeder"
+
+
+#: Network file suffix -> reader in :mod:`popdispatch.readers`.
+NETWORK_READERS = {".m": "read_matpower", ".json": "read_pandapower", ".dss": "read_opendss_master"}
+
+
+def read_network(path: Path, fleet=None, root: int | None = None, ratings: bool = True) -> Feeder:
+    """A network file as a feeder, by its suffix (:data:`NETWORK_READERS`)."""
+    import popdispatch.readers as readers
+
+    reader = getattr(readers, NETWORK_READERS[path.suffix.lower()])
+    return reader(path, fleet=fleet, root=root, ratings=ratings)
+
+
+def load_feeder(source: FeederSource | Path | None = None) -> Feeder:
+    """The feeder of ``source`` (a :class:`FeederSource`; a folder means its OpenDSS files;
+    ``None`` the built-in ieee-elv case)."""
+    if not isinstance(source, FeederSource):
+        source = FeederSource(opendss=source)
+    from popdispatch.feeder.generators import read_fleet
+
+    fleet = read_fleet(source.fleet) if source.fleet is not None else None
+    if source.net is not None:
+        return read_network(source.net, fleet, source.root, source.ratings)
+    if source.opendss is not None:
         from popdispatch.readers import read_opendss_feeder
 
-        return read_opendss_feeder(opendss)
-    from popdispatch.feeder.cases import ieee_elv
+        feeder = read_opendss_feeder(source.opendss)
+    else:
+        from popdispatch.feeder.cases import ieee_elv
 
-    return ieee_elv()
+        feeder = ieee_elv()
+    return feeder if fleet is None else feeder.with_generators(fleet)
+
+
+def network_profiles(feeder: Feeder) -> LoadProfiles:
+    """A network without profiles runs on its own loads (column ``p_kw``, kW), the same at
+    every minute."""
+    from popdispatch.errors import ProfileError
+    from popdispatch.feeder.profiles import single_minute_profiles
+
+    if "p_kw" not in feeder.loads.columns:
+        raise ProfileError(f"feeder {feeder.name} has no load values (p_kw) to run on")
+    return single_minute_profiles(1, feeder.loads["p_kw"].astype(float), f"{feeder.name} loads")
 
 
 def check_limits(limits: Sequence[Limit], feeder: Feeder) -> None:
@@ -78,37 +149,43 @@ def check_limits(limits: Sequence[Limit], feeder: Feeder) -> None:
 
 
 def load_problem(
-    profiles: LoadProfiles,
+    profiles: LoadProfiles | None,
     limits: Sequence[Limit] = (),
-    opendss: Path | None = None,
+    source: FeederSource | Path | None = None,
     events: Sequence[Event] = (),
     minutes=None,
 ) -> DispatchProblem:
     """The dispatch problem of a run: the feeder (:func:`load_feeder`) with path ``limits``
     (checked, :func:`check_limits`) and ``events`` applied (:func:`popdispatch.events.
     apply_events`, which checks a generator is online at each of ``minutes``, default all).
+    ``profiles``: ``None`` runs a network on its own loads (:func:`network_profiles`).
 
     Demand is not checked against the fleet here: a run checks only the minutes it runs.
     """
-    feeder = load_feeder(opendss)
+    feeder = load_feeder(source)
     check_limits(limits, feeder)
+    profiles = profiles or network_profiles(feeder)
     problem = elv_problem(profiles, limits, feeder, check=False)
     return apply_events(problem, events, minutes) if events else problem
 
 
-def fleet_names() -> list[str]:
-    """Names of the generators of every feeder :func:`load_feeder` returns (the paper's fleet,
-    Table I, on the built-in case and on a feeder read from OpenDSS files): initial shares can
-    be checked against them before any data is read."""
-    from popdispatch.feeder.generators import paper_fleet
+def fleet_names(source: FeederSource | None = None) -> list[str] | None:
+    """Names of the generators of the feeder ``source`` gives, where they are known before any
+    network is read (the paper's fleet, Table I, on the built-in case and its OpenDSS folder;
+    a ``--fleet`` file's names); ``None`` for a network's own generators."""
+    from popdispatch.feeder.generators import paper_fleet, read_fleet
 
+    if source is not None and source.fleet is not None:
+        return list(read_fleet(source.fleet).index)
+    if source is not None and source.net is not None:
+        return None
     return list(paper_fleet().index)
 
 
-def check_x0(x0: str | dict[str, float], names: Sequence[str]) -> list[str]:
+def check_x0(x0: str | dict[str, float], names: Sequence[str] | None) -> list[str]:
     """:class:`OptionError` (``--x0``) for initial shares naming a generator not in ``names``;
     returns the generators the shares leave out (they start at zero share)."""
-    if not isinstance(x0, dict):
+    if not isinstance(x0, dict) or names is None:
         return []
     unknown = [name for name in x0 if name not in names]
     if unknown:

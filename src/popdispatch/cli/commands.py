@@ -11,17 +11,16 @@ from pathlib import Path
 import click
 
 from popdispatch.cli.options import (
-    FOLDER,
     MODE_CHOICE,
     EngineChoice,
     EventType,
     MinutesType,
     check_out,
     check_shares,
+    feeder_options,
     json_option,
     limit_option,
     minute_option,
-    opendss_option,
     option,
     out_option,
     profiles_option,
@@ -44,26 +43,23 @@ from popdispatch.report.progress import Progress
 from popdispatch.report.text import day_text, feeder_text, opf_text, snapshot_text
 
 
-def load_profiles(folder: Path | None, minute: int | None, progress: Progress):
-    """Profiles for a run (:func:`popdispatch.runs.load_profiles`)."""
+def build(source, profiles, minute, limits, progress: Progress, events=(), minutes=None):
+    """``(problem, profiles)`` of a run (:mod:`popdispatch.runs`): the official or default
+    profiles on ieee-elv, the network's own loads (profiles ``None``) on a ``--net`` network."""
     from popdispatch import runs
-
-    return runs.load_profiles(folder, minute, progress)
-
-
-def build(profiles, limits, progress: Progress, opendss=None, events=(), minutes=None):
-    """The run's problem (:func:`popdispatch.runs.load_problem`) behind a progress step."""
     from popdispatch.errors import OptionError
-    from popdispatch.runs import load_problem
 
-    what = f"the feeder in {opendss}" if opendss else "the ieee-elv feeder"
-    with progress.step(f"loading {what}"):
+    if source.net is not None and profiles is not None:
+        raise OptionError("a --net network runs on its own loads; --profiles is for ieee-elv")
+    day_profiles = None if source.net else runs.load_profiles(profiles, minute, progress)
+    with progress.step(f"loading {source.label}"):
         try:
-            return load_problem(profiles, limits, opendss, events, minutes)
+            problem = runs.load_problem(day_profiles, limits, source, events, minutes)
         except OptionError as exc:  # a bad --limit reads as click's own usage errors
             if exc.option != "--limit":
                 raise
             raise click.BadParameter(str(exc), param_hint="'--limit'") from None
+    return problem, day_profiles or runs.network_profiles(problem.feeder.original)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -77,19 +73,19 @@ def cli(ctx: click.Context) -> None:
 
 @cli.command(short_help="The feeder: buses, key nodes, lines, loads, generators.")
 @click.option("--case", type=click.Choice(["ieee-elv"]), help="Built-in case (default).")
-@click.option("--opendss", type=FOLDER, help="Read the feeder from its OpenDSS files instead.")
+@feeder_options
 @json_option
 @quiet_option
-def feeder(case: str | None, opendss: Path | None, as_json: bool, quiet: bool) -> None:
+def feeder(case: str | None, source, as_json: bool, quiet: bool) -> None:
     """What the feeder is: buses, key nodes, lines, loads, generators, capacity."""
-    from popdispatch.feeder import load_case, reduce_feeder
-    from popdispatch.readers import read_opendss_feeder
+    from popdispatch.feeder import reduce_feeder
     from popdispatch.report.summaries import feeder_summary
+    from popdispatch.runs import load_feeder
 
-    if case and opendss:
-        raise click.UsageError("give either --case or --opendss, not both")
-    with Progress(quiet).step("loading the feeder"):
-        net = read_opendss_feeder(opendss) if opendss else load_case(case or "ieee-elv")
+    if case and (source.opendss or source.net):
+        raise click.UsageError("give either --case or --opendss/--net, not both")
+    with Progress(quiet).step(f"loading {source.label}"):
+        net = load_feeder(source)
         summary = feeder_summary(net, reduce_feeder(net))
     emit(summary, as_json, feeder_text(summary))
 
@@ -98,10 +94,10 @@ def feeder(case: str | None, opendss: Path | None, as_json: bool, quiet: bool) -
 @minute_option
 @limit_option
 @profiles_option
-@opendss_option
+@feeder_options
 @json_option
 @quiet_option
-def opf(minute: int, limits, profiles: Path | None, opendss, as_json: bool, quiet: bool) -> int:
+def opf(minute: int, limits, profiles: Path | None, source, as_json: bool, quiet: bool) -> int:
     """The exact DC-OPF of one minute (paper eq. 1): the cheapest dispatch meeting the
     demand within the generator limits and the line limits. Exit code 1 (after the output)
     when no such dispatch exists."""
@@ -109,7 +105,7 @@ def opf(minute: int, limits, profiles: Path | None, opendss, as_json: bool, quie
     from popdispatch.report.summaries import opf_summary
 
     progress = Progress(quiet)
-    problem = build(load_profiles(profiles, minute, progress), limits, progress, opendss)
+    problem, _ = build(source, profiles, minute, limits, progress)
     summary = opf_summary(problem, solve_opf(problem, minute), limits)
     emit(summary, as_json, opf_text(summary))
     if summary["status"] != "optimal":
@@ -122,12 +118,12 @@ def opf(minute: int, limits, profiles: Path | None, opendss, as_json: bool, quie
 @limit_option
 @run_options
 @profiles_option
-@opendss_option
+@feeder_options
 @out_option
 @json_option
 @quiet_option
 def snapshot(
-    minute, limits, dynamics, mode, x0, graph, profiles, opendss, out, as_json, quiet
+    minute, limits, dynamics, mode, x0, graph, profiles, source, out, as_json, quiet
 ) -> int:
     """One minute of dynamics: trajectory, convergence, comparison with the DC-OPF.
 
@@ -140,9 +136,9 @@ def snapshot(
     progress = Progress(quiet)
     check_out(out)
     settings = settings_from(dynamics, mode, x0, graph)
-    check_shares(x0, progress)
+    check_shares(x0, progress, source)
     announce_compile(progress)
-    problem = build(load_profiles(profiles, minute, progress), limits, progress, opendss)
+    problem, _ = build(source, profiles, minute, limits, progress)
     with progress.step(f"minute {minute}: {dynamics} dynamics and DC-OPF"):
         result = run_snapshot_vs_opf(problem, minute, settings)
     summary = snapshot_summary(problem, result, limits)
@@ -174,12 +170,12 @@ def snapshot(
     "generators inside their limits; exact mode's default).",
 )
 @profiles_option
-@opendss_option
+@feeder_options
 @out_option
 @json_option
 @quiet_option
 def day(
-    limits, dynamics, mode, x0, graph, events, minutes, warm_start, profiles, opendss, out,
+    limits, dynamics, mode, x0, graph, events, minutes, warm_start, profiles, source, out,
     as_json, quiet,
 ) -> int:  # fmt: skip
     """The online day: every minute continues from the last (warm start), against the DC-OPF.
@@ -204,11 +200,10 @@ def day(
     progress = Progress(quiet)
     check_out(out)
     settings = settings_from(dynamics, mode, x0, graph, warm_start)
-    check_shares(x0, progress)
+    check_shares(x0, progress, source)
     announce_compile(progress)
     span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
-    day_profiles = load_profiles(profiles, None, progress)
-    problem = build(day_profiles, limits, progress, opendss, events, span)
+    problem, _ = build(source, profiles, None, limits, progress, events, span)
     result = run_day_vs_opf(problem, settings, span, progress)
     labels = [event_label(event) for event in events]
     summary = day_summary(problem, result, limits, labels)
@@ -243,13 +238,14 @@ def reproduce(profiles, out, mode, minutes, as_json, quiet) -> None:
     """The paper's three experiments end to end: figures, summary.json, report.md."""
     import numpy as np
 
+    from popdispatch import runs
     from popdispatch.report.reproduce import run_reproduction, write_reproduction
 
     progress = Progress(quiet)
     check_out(out)
     settings = settings_from("smith", mode, "uniform", "complete")
     announce_compile(progress)
-    day_profiles = load_profiles(profiles, None, progress)
+    day_profiles = runs.load_profiles(profiles, None, progress)
     span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
     rep = run_reproduction(day_profiles, settings, span, progress)
     with staged_folder(out) as folder:
@@ -273,16 +269,15 @@ def reproduce(profiles, out, mode, minutes, as_json, quiet) -> None:
 )
 @limit_option
 @profiles_option
-@opendss_option
+@feeder_options
 @quiet_option
-def export(minute, fmt, out, limits, profiles, opendss, quiet) -> None:
+def export(minute, fmt, out, limits, profiles, source, quiet) -> None:
     """The reduced feeder at one minute as a MATPOWER or pandapower case (DC-OPF cross-check)."""
     from popdispatch.export import write_case
 
     progress = Progress(quiet)
     check_out(out)
-    day_profiles = load_profiles(profiles, minute, progress)
-    problem = build(day_profiles, limits, progress, opendss)
+    problem, day_profiles = build(source, profiles, minute, limits, progress)
     loads = minute_loads(problem, day_profiles, minute)
     write_case(out, fmt, problem, minute, loads)
     progress.note(f"wrote {out} ({fmt}, minute {minute})")

@@ -3,6 +3,7 @@ names are checked against the problem by the library (:mod:`popdispatch.runs`)."
 
 from __future__ import annotations
 
+import functools
 import importlib
 import re
 from pathlib import Path
@@ -197,12 +198,43 @@ def run_options(func):
     return func
 
 
-opendss_option = option(
-    "--opendss",
-    type=FOLDER,
-    help="Read the feeder from its OpenDSS files in this folder instead of the built-in "
-    "ieee-elv case (the paper's six generators on the same buses).",
-)
+def feeder_options(func):
+    """``--opendss``, ``--net``, ``--fleet``, ``--root`` and ``--no-ratings``, handed to the
+    command as one ``source`` (:class:`popdispatch.runs.FeederSource`), checked before any
+    data is read."""
+
+    @functools.wraps(func)
+    def command(*args, opendss, net, fleet, root, no_ratings, **kwargs):
+        from popdispatch.runs import FeederSource
+
+        source = FeederSource(opendss, net, fleet, root, not no_ratings)
+        return func(*args, source=source, **kwargs)
+
+    decorators = [
+        option(
+            "--opendss",
+            type=FOLDER,
+            help="Read the ieee-elv feeder from its OpenDSS files in this folder instead of "
+            "the built-in case (the paper's six generators on the same buses).",
+        ),
+        option(
+            "--net",
+            type=click.Path(exists=True, dir_okay=False, path_type=Path),
+            help="Any radial network: MATPOWER case (.m), pandapower JSON (.json) or OpenDSS "
+            "master (.dss); runs on its own loads, generators and costs.",
+        ),
+        option(
+            "--fleet",
+            type=click.Path(exists=True, dir_okay=False, path_type=Path),
+            help="Generators (CSV or TOML: bus,name,a,b,c,pmin_kw,pmax_kw) replacing the "
+            "network's own.",
+        ),
+        option("--root", type=int, help="Source bus of a --net network with several."),
+        option("--no-ratings", is_flag=True, help="Ignore a --net network's line ratings."),
+    ]
+    for decorate in reversed(decorators):
+        command = decorate(command)
+    return command
 
 
 def settings_from(dynamics: str, mode: str, x0, graph: str, warm_start: str | None = None):
@@ -233,11 +265,12 @@ def refuse_opendss(ctx: click.Context, param: click.Parameter, value) -> None:
         )
 
 
-def check_shares(x0, progress) -> None:
-    """``--x0`` names checked before any data is read; a note names the generators left out."""
+def check_shares(x0, progress, source=None) -> None:
+    """``--x0`` names checked before any data is read (where the fleet is known then); a note
+    names the generators left out."""
     from popdispatch.runs import check_x0, fleet_names
 
-    zeroed = check_x0(x0, fleet_names())
+    zeroed = check_x0(x0, fleet_names(source))
     if zeroed:
         progress.note(
             f"--x0 gives no share to {', '.join(zeroed)}: they start at 0 kW (imitative "
