@@ -423,3 +423,25 @@ def test_list_cases_counts_and_totals(monkeypatch):
     # the counts are cached: a second listing reads no network
     monkeypatch.setattr(cases, "_case_counts", lambda names: pytest.fail("read again"))
     pd.testing.assert_frame_equal(cases.list_cases(), table)
+
+
+@pytest.mark.parametrize(
+    "code, n_buses", [("1-LV-rural1--0-sw", 14), ("1-MV-rural--0-sw", 94)], ids=["LV", "MV"]
+)
+def test_simbench_grids_read_when_installed(code, n_buses):
+    sb = pytest.importorskip("simbench", reason="the optional simbench extra is not installed")
+    net = sb.get_simbench_net(code)
+    with pytest.raises(FleetError, match=r"^sgen \d+ at bus \d+ has no poly_cost: give a fleet"):
+        cases.load_case(f"simbench:{code}")
+    lv = int(net.trafo.lv_bus.min())
+    feeder = read_pandapower(net, fleet=one_gen(lv))
+    n_loads, p_kw, _ = own_totals(net)
+    assert (len(feeder.buses), len(feeder.lines)) == (n_buses, n_buses - 1)
+    assert (len(feeder.loads), feeder.loads.p_kw.sum()) == (n_loads, pytest.approx(p_kw))
+    feeder = cases.load_case(f"simbench:{code}", fleet=small_fleet(feeder))
+    problem = dc_problem(feeder)
+    opf = solve_opf(problem, 1)
+    snap = run_snapshot(problem, 1, RunSettings(mode="exact"))
+    assert snap.status == "converged"
+    tolerance = max(1e-6 * opf.demand_kw, 1e-3)
+    np.testing.assert_allclose(snap.setpoints_kw, opf.p_kw, atol=tolerance)
