@@ -99,8 +99,10 @@ def read_network(path: Path, fleet=None, root: int | None = None, ratings: bool 
     """A network file as a feeder, by its suffix (:data:`NETWORK_READERS`)."""
     import popdispatch.readers as readers
 
-    reader = getattr(readers, NETWORK_READERS[path.suffix.lower()])
-    return reader(path, fleet=fleet, root=root, ratings=ratings)
+    suffix = path.suffix.lower()
+    if suffix == ".dss" and root is not None:
+        root = str(root)  # OpenDSS names its buses; numbered ones keep their number
+    return getattr(readers, NETWORK_READERS[suffix])(path, fleet=fleet, root=root, ratings=ratings)
 
 
 def load_feeder(source: FeederSource | Path | None = None) -> Feeder:
