@@ -92,9 +92,19 @@ def _elv_case(fleet: pd.DataFrame | None) -> Feeder:
 
 @functools.cache
 def _pandapower_net(factory: str, kwargs: tuple = ()):
+    """``pandapower.networks.<factory>(**kwargs)``, built once per process. pandapower draws the
+    cable types of the Kerber grids' branch lines with Python's ``random``; it is seeded with 0
+    for the call (and its state restored), so a case is the same network in every process."""
+    import random
+
     import pandapower.networks as pn
 
-    return getattr(pn, factory)(**dict(kwargs))
+    state = random.getstate()
+    try:
+        random.seed(0)
+        return getattr(pn, factory)(**dict(kwargs))
+    finally:
+        random.setstate(state)
 
 
 def _pandapower_case(name: str, factory: str, root: int | None = None, **kwargs) -> Callable:
