@@ -63,7 +63,9 @@ class FeederSource:
     ``.json`` pandapower, ``.dss`` OpenDSS master); it runs on its own loads (one time step,
     repeated) with its own generators and costs, or ``fleet`` (a CSV or TOML fleet file, see
     :func:`popdispatch.feeder.generators.read_fleet`; buses as the network numbers them) in
-    their place. ``root``: the source bus when the network has several. ``ratings``: line
+    their place. ``case``: a built-in case by name (:func:`popdispatch.feeder.cases.
+    list_cases`); other than ieee-elv it runs on its own loads like a network. ``root``: the
+    source bus when the network has several. ``ratings``: line
     limits from the network's own ratings. Without ``net``: the built-in ieee-elv case, or its
     OpenDSS folder ``opendss``, with the paper's fleet (or ``fleet``) and the official or
     default profiles.
@@ -74,21 +76,37 @@ class FeederSource:
     fleet: Path | None = None
     root: int | None = None
     ratings: bool = True
+    case: str | None = None
 
     def __post_init__(self) -> None:
-        if self.net is not None and self.opendss is not None:
-            raise OptionError("give either --net or --opendss, not both", "--net")
+        given = [name for name, value in self._inputs() if value is not None]
+        if len(given) > 1:
+            raise OptionError(f"give one of {', '.join(given)}, not several", given[0])
+        if self.case is not None:
+            from popdispatch.feeder.cases import CASES, SIMBENCH_PREFIX
+
+            if self.case not in CASES and not self.case.startswith(SIMBENCH_PREFIX):
+                known = ", ".join(CASES)
+                raise OptionError(f"unknown case {self.case!r} (known: {known})", "--case")
         if self.net is not None and self.net.suffix.lower() not in NETWORK_READERS:
             known = ", ".join(NETWORK_READERS)
             raise OptionError(f"{self.net}: unknown network format (known: {known})", "--net")
         if self.net is None and (self.root is not None or not self.ratings):
             raise OptionError("--root and --no-ratings apply to a --net network", "--root")
 
+    def _inputs(self) -> list[tuple[str, object]]:
+        return [("--opendss", self.opendss), ("--net", self.net), ("--case", self.case)]
+
+    @property
+    def own_loads(self) -> bool:
+        """Whether the run uses the network's own loads (not the ieee-elv profiles)."""
+        return self.net is not None or self.case not in (None, "ieee-elv")
+
     @property
     def label(self) -> str:
         """What is read, for progress lines."""
         where = self.net or self.opendss
-        return f"the feeder in {where}" if where else "the ieee-elv feeder"
+        return f"the feeder in {where}" if where else f"the {self.case or 'ieee-elv'} feeder"
 
 
 #: Network file suffix -> reader in :mod:`popdispatch.readers`.
@@ -115,6 +133,10 @@ def load_feeder(source: FeederSource | Path | None = None) -> Feeder:
     fleet = read_fleet(source.fleet) if source.fleet is not None else None
     if source.net is not None:
         return read_network(source.net, fleet, source.root, source.ratings)
+    if source.case is not None:
+        from popdispatch.feeder.cases import load_case
+
+        return load_case(source.case, fleet=fleet)
     if source.opendss is not None:
         from popdispatch.readers import read_opendss_feeder
 
@@ -171,6 +193,28 @@ def load_problem(
     return apply_events(problem, events, minutes) if events else problem
 
 
+def load_run(
+    source: FeederSource,
+    profiles: Path | None = None,
+    minute: int | None = None,
+    limits: Sequence[Limit] = (),
+    progress: Progress | None = None,
+    events: Sequence[Event] = (),
+    minutes=None,
+) -> tuple[DispatchProblem, LoadProfiles]:
+    """``(problem, profiles)`` of a run as the commands make it: ieee-elv with the profiles of
+    folder ``profiles`` (:func:`load_profiles`), or a network or case on its own loads."""
+    progress = progress or Progress(quiet=True)
+    if source.own_loads and profiles is not None:
+        raise OptionError(
+            "a network or case runs on its own loads; --profiles is for ieee-elv", "--profiles"
+        )
+    day_profiles = None if source.own_loads else load_profiles(profiles, minute, progress)
+    with progress.step(f"loading {source.label}"):
+        problem = load_problem(day_profiles, limits, source, events, minutes)
+    return problem, day_profiles or network_profiles(problem.feeder.original)
+
+
 def fleet_names(source: FeederSource | None = None) -> list[str] | None:
     """Names of the generators of the feeder ``source`` gives, where they are known before any
     network is read (the paper's fleet, Table I, on the built-in case and its OpenDSS folder;
@@ -179,7 +223,7 @@ def fleet_names(source: FeederSource | None = None) -> list[str] | None:
 
     if source is not None and source.fleet is not None:
         return list(read_fleet(source.fleet).index)
-    if source is not None and source.net is not None:
+    if source is not None and source.own_loads:
         return None
     return list(paper_fleet().index)
 

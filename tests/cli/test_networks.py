@@ -86,3 +86,21 @@ def test_unknown_network_format_is_a_usage_error(tmp_path: Path):
     net = tmp_path / "grid.xlsx"
     net.write_text("")
     assert_one_line_error(run("feeder", "--net", str(net)), 2, "unknown network format", ".m")
+
+
+def test_cases_lists_the_built_in_cases_with_their_sizes():
+    result = run("cases", "--json", "-q")
+    assert result.returncode == 0, result.stderr
+    cases = {c["name"]: c for c in json.loads(result.stdout)["cases"]}
+    # Baran & Wu's published totals and the ELV's official minute-566 peak.
+    assert (cases["case33bw"]["buses"], cases["case33bw"]["lines"]) == (33, 32)
+    assert cases["case33bw"]["total_load_kw"] == pytest.approx(3715.0)
+    assert cases["ieee-elv"]["total_load_kw"] == pytest.approx(57.358, abs=1e-3)
+
+
+def test_case_option_reads_a_built_in_case_and_refuses_unknown_names():
+    summary = json.loads(run("feeder", "--case", "case33bw", "--json", "-q").stdout)
+    assert (summary["buses"], summary["original_lines"], summary["loads"]) == (33, 32, 32)
+    assert_one_line_error(run("feeder", "--case", "nope"), 2, "unknown case 'nope'", "case33bw")
+    unpriced = run("opf", "--minute", "1", "--case", "kerber-landnetz-freileitung-1")
+    assert_one_line_error(unpriced, 1, "give a fleet")

@@ -40,26 +40,27 @@ from popdispatch.cli.render import (
 )
 from popdispatch.report.output import json_text, staged_folder
 from popdispatch.report.progress import Progress
-from popdispatch.report.text import day_text, feeder_text, opf_text, snapshot_text
+from popdispatch.report.text import (
+    cases_summary,
+    cases_text,
+    day_text,
+    feeder_text,
+    opf_text,
+    snapshot_text,
+)
 
 
 def build(source, profiles, minute, limits, progress: Progress, events=(), minutes=None):
-    """``(problem, profiles)`` of a run (:mod:`popdispatch.runs`): the official or default
-    profiles on ieee-elv, the network's own loads (profiles ``None``) on a ``--net`` network."""
-    from popdispatch import runs
+    """``(problem, profiles)`` of a run (:func:`popdispatch.runs.load_run`)."""
     from popdispatch.errors import OptionError
+    from popdispatch.runs import load_run
 
-    if source.net is not None and profiles is not None:
-        raise OptionError("a --net network runs on its own loads; --profiles is for ieee-elv")
-    day_profiles = None if source.net else runs.load_profiles(profiles, minute, progress)
-    with progress.step(f"loading {source.label}"):
-        try:
-            problem = runs.load_problem(day_profiles, limits, source, events, minutes)
-        except OptionError as exc:  # a bad --limit reads as click's own usage errors
-            if exc.option != "--limit":
-                raise
-            raise click.BadParameter(str(exc), param_hint="'--limit'") from None
-    return problem, day_profiles or runs.network_profiles(problem.feeder.original)
+    try:
+        return load_run(source, profiles, minute, limits, progress, events, minutes)
+    except OptionError as exc:  # a bad --limit reads as click's own usage errors
+        if exc.option != "--limit":
+            raise
+        raise click.BadParameter(str(exc), param_hint="'--limit'") from None
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -71,19 +72,28 @@ def cli(ctx: click.Context) -> None:
     start_clock(ctx)
 
 
+@cli.command(short_help="The built-in cases: size and source.")
+@json_option
+@quiet_option
+def cases(as_json: bool, quiet: bool) -> None:
+    """The built-in cases (--case NAME): buses, lines, loads, total load, source."""
+    from popdispatch.feeder.cases import list_cases
+
+    with Progress(quiet).step("listing the built-in cases"):
+        table = list_cases()
+    emit(cases_summary(table), as_json, cases_text(table))
+
+
 @cli.command(short_help="The feeder: buses, key nodes, lines, loads, generators.")
-@click.option("--case", type=click.Choice(["ieee-elv"]), help="Built-in case (default).")
 @feeder_options
 @json_option
 @quiet_option
-def feeder(case: str | None, source, as_json: bool, quiet: bool) -> None:
+def feeder(source, as_json: bool, quiet: bool) -> None:
     """What the feeder is: buses, key nodes, lines, loads, generators, capacity."""
     from popdispatch.feeder import reduce_feeder
     from popdispatch.report.summaries import feeder_summary
     from popdispatch.runs import load_feeder
 
-    if case and (source.opendss or source.net):
-        raise click.UsageError("give either --case or --opendss/--net, not both")
     with Progress(quiet).step(f"loading {source.label}"):
         net = load_feeder(source)
         summary = feeder_summary(net, reduce_feeder(net))

@@ -199,15 +199,15 @@ def run_options(func):
 
 
 def feeder_options(func):
-    """``--opendss``, ``--net``, ``--fleet``, ``--root`` and ``--no-ratings``, handed to the
-    command as one ``source`` (:class:`popdispatch.runs.FeederSource`), checked before any
-    data is read."""
+    """``--opendss``, ``--net``, ``--case``, ``--fleet``, ``--root`` and ``--no-ratings``,
+    handed to the command as one ``source`` (:class:`popdispatch.runs.FeederSource`), checked
+    before any data is read."""
 
     @functools.wraps(func)
-    def command(*args, opendss, net, fleet, root, no_ratings, **kwargs):
+    def command(*args, opendss, net, case, fleet, root, no_ratings, **kwargs):
         from popdispatch.runs import FeederSource
 
-        source = FeederSource(opendss, net, fleet, root, not no_ratings)
+        source = FeederSource(opendss, net, fleet, root, not no_ratings, case)
         return func(*args, source=source, **kwargs)
 
     decorators = [
@@ -222,6 +222,11 @@ def feeder_options(func):
             type=click.Path(exists=True, dir_okay=False, path_type=Path),
             help="Any radial network: MATPOWER case (.m), pandapower JSON (.json) or OpenDSS "
             "master (.dss); runs on its own loads, generators and costs.",
+        ),
+        option(
+            "--case",
+            metavar="NAME",
+            help="A built-in case (popdispatch cases lists them); default ieee-elv.",
         ),
         option(
             "--fleet",

@@ -234,3 +234,20 @@ def day_text(s: dict) -> str:
         f"max overflow {s['max_overflow_kw']:.3f} kW (over all {s['minutes']} minutes)",
     ]
     return "\n".join(lines)
+
+
+def cases_summary(table) -> dict:
+    """``popdispatch cases --json``: ``{"cases": [...]}``, one object per built-in case."""
+    rows = table.to_dict(orient="index").items()
+    return {"cases": [{"name": name, **row} for name, row in rows]}
+
+
+def cases_text(table) -> str:
+    """``popdispatch cases``: one line per built-in case."""
+    lines = [f"{'case':<32}{'buses':>7}{'lines':>7}{'loads':>7}{'load kW':>11}  source"]
+    for name, row in table.iterrows():
+        lines.append(
+            f"{name:<32}{row.buses:>7}{row.lines:>7}{row.loads:>7}"
+            f"{row.total_load_kw:>11.1f}  {row.source}"
+        )
+    return "\n".join(lines)
