@@ -1,6 +1,6 @@
 """Radial feeders: the model, built-in cases, synthetic feeders, key-node reduction, DC flows."""
 
-from popdispatch.feeder.cases import elv_snapshot_566_kw, ieee_elv, load_case
+from popdispatch.feeder.cases import elv_snapshot_566_kw, ieee_elv, list_cases, load_case
 from popdispatch.feeder.generators import make_fleet, paper_fleet, read_fleet
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.reduction import ReducedFeeder, reduce_feeder
@@ -25,6 +25,7 @@ __all__ = [
     "elv_snapshot_566_kw",
     "ieee_elv",
     "line_flows",
+    "list_cases",
     "load_case",
     "make_fleet",
     "paper_fleet",
