@@ -23,7 +23,7 @@ from datetime import date
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.feeder.synthetic import synthetic_feeder, synthetic_load_kw
 from popdispatch.game.problem import build_problem_from_loads
-from popdispatch.integrate import Integrator
+from popdispatch.integrate import Integrator, Status
 from popdispatch.modes import get_mode
 from popdispatch.online import Engine, RunSettings, initial_shares
 
@@ -43,9 +43,9 @@ def per_iteration(problem, iterations: int, repeat: int) -> tuple[float, float]:
         engine = Engine(problem, RunSettings(mode="exact", integrator=fixed))
         x = initial_shares(problem, "uniform", 1)
         start = time.perf_counter()
-        steps, *_ = engine.run_minute(x, 1, record=False)
+        steps = engine.run_minute(x, 1, record=False).iterations
         times.append((time.perf_counter() - start) / steps)
-        evaluations.append(engine.ws[5][0] / steps)
+        evaluations.append(engine.evaluations / steps)
     return statistics.median(times[1:]), statistics.median(evaluations[1:])
 
 
@@ -53,10 +53,8 @@ def to_converge(problem, horizon: int) -> tuple[int, bool]:
     stepping = get_mode("exact").integrator
     capped = Integrator(**{**stepping.__dict__, "max_iterations": horizon})
     engine = Engine(problem, RunSettings(mode="exact", integrator=capped))
-    steps, _, converged_at, _ = engine.run_minute(
-        initial_shares(problem, "uniform", 1), 1, record=False
-    )
-    return steps, converged_at >= 0
+    run = engine.run_minute(initial_shares(problem, "uniform", 1), 1, record=False)
+    return run.iterations, run.status == Status.CONVERGED
 
 
 def main() -> None:

@@ -182,7 +182,7 @@ def test_paper_mode_has_rest_points_away_from_the_dc_opf(official_problem):
     for substeps in (100, 1000):
         never_stop = Integrator(substeps=substeps, tol_kw=1e-12)
         engine = Engine(official_problem, RunSettings(integrator=never_stop))
-        trajectory, *_ = engine.run_minute(x, 1205, max_iterations=1000)
+        trajectory = engine.run_minute(x, 1205, max_iterations=1000).trajectory
         drift = np.abs(trajectory[-100:].mean(axis=0) - trajectory[100:200].mean(axis=0))
         assert drift.max() * 1000 < 0.02
     opf = solve_opf(official_problem, 1205).p_kw

@@ -93,16 +93,17 @@ def compare(problem, settings, minute, iterations, atol=1e-9):
     """Compiled and reference set points (MW) agree within ``atol`` at every iteration."""
     engine = Engine(problem, settings)
     x0 = initial_shares(problem, settings.x0, minute)
-    compiled, _, converged, _ = engine.run_minute(x0, minute, max_iterations=iterations)
+    run = engine.run_minute(x0, minute, max_iterations=iterations)
+    compiled = run.trajectory
     reference = ReferenceMinute(problem, settings, minute)
     x_ref = x0.copy()
     if get_bounded(settings):
         x_ref = compiled[0] / reference.demand  # both start from the projected shares
-    ref, _, _, ref_converged = reference.run(x_ref, max_iterations=iterations)
+    ref, _, _, ref_status, ref_converged = reference.run(x_ref, max_iterations=iterations)
     rows = min(len(ref), len(compiled))
     assert rows > 10
     np.testing.assert_allclose(compiled[:rows], ref[:rows], atol=atol, rtol=0)
-    assert converged == ref_converged
+    assert (run.status, run.converged_at) == (ref_status, ref_converged)
     return compiled
 
 
@@ -149,7 +150,7 @@ def test_flux_limiter_keeps_every_step_inside_the_limits(congested, method):
     problem = congested
     engine = Engine(problem, RunSettings(mode="exact", integrator=loose))
     x0 = initial_shares(problem, "uniform", PEAK_MINUTE)
-    trajectory, _, _, _ = engine.run_minute(x0, PEAK_MINUTE)
+    trajectory = engine.run_minute(x0, PEAK_MINUTE).trajectory
     assert len(trajectory) > 5
     assert (trajectory >= problem.pmin - 1e-15).all()
     assert (trajectory <= problem.pmax + 1e-15).all()

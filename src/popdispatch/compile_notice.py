@@ -19,8 +19,8 @@ import importlib
 #: The kernels every engine run compiles (``module:function``); their callees are compiled and
 #: cached with them.
 ENTRY_POINTS = (
-    "popdispatch.integrate:integrate",
-    "popdispatch.integrate:integrate_day",
+    "popdispatch.integrate.solve:integrate",
+    "popdispatch.online.day:integrate_day",
     "popdispatch.game.flows:limited_ancestors",
 )
 

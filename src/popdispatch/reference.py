@@ -1,11 +1,15 @@
 """Plain-numpy reference of one minute of dynamics (the compiled engine's yardstick).
 
-Written for clarity, not speed: the dense ``(lines x generators)`` matrix ``D`` for flows and
-signals, the full ``(n x n)`` matrix of pairwise flows, Python loops over steps. It follows
-the same equations and the same numerical scheme as the compiled kernels
-(:mod:`popdispatch.integrate`, :mod:`popdispatch.game.payoffs`,
+Written for clarity, not speed, and deliberately naive where the engine is clever: the dense
+``(lines x generators)`` matrix ``D`` for flows and signals (the engine: one pass each way over
+the tree of limited lines), the full ``(n x n)`` matrix of pairwise flows (the engine: sorted
+running sums), Python loops over steps. It follows the same equations and the same numerical
+scheme as the compiled kernels (:mod:`popdispatch.integrate`, :mod:`popdispatch.modes`,
 :mod:`popdispatch.dynamics.pairwise`), so both must give the same trajectories; the tests
-check that they do. Powers in MW, shares dimensionless.
+check that they do. The fitness (eqs. 5-7) and the share bounds are not re-derived: they are
+the engine's own (:func:`popdispatch.game.fitness.generator_fitness`,
+:class:`popdispatch.game.parameters.MinuteInputs`), one implementation for both. Powers in MW,
+shares dimensionless.
 """
 
 from __future__ import annotations
@@ -13,12 +17,12 @@ from __future__ import annotations
 import numpy as np
 
 from popdispatch.dynamics import communication_graph, get_dynamics
-from popdispatch.dynamics.fields import CAPACITY_SMITH, SMITH
-from popdispatch.game.fitness import FitnessParameters
-from popdispatch.game.payoffs import PAPER
+from popdispatch.dynamics.fields import Field
+from popdispatch.game.fitness import FitnessParameters, generator_fitness
+from popdispatch.game.parameters import MinuteInputs
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
-from popdispatch.integrate import INFEASIBLE, STABLE_STEP
-from popdispatch.modes import get_mode
+from popdispatch.integrate import STABLE_STEP, Status
+from popdispatch.modes import ModeCode, get_mode
 
 
 def overflow_signals(flow: np.ndarray, limit: np.ndarray, C: float) -> np.ndarray:
@@ -27,18 +31,22 @@ def overflow_signals(flow: np.ndarray, limit: np.ndarray, C: float) -> np.ndarra
     return np.where(flow > limit, -(flow - limit) * C, below)
 
 
-def game(mode: int, p, z, problem: DispatchProblem, minute: int, fp: FitnessParameters):
+def fitness(problem: DispatchProblem, p, signal, fp: FitnessParameters, gain: float, barrier):
+    """Eqs. 5-7 plus ``signal`` by the engine's own fitness kernel."""
+    return generator_fitness(p, problem.b, problem.c, problem.pmin, problem.pmax, float(fp.B),
+                             float(fp.m), signal, float(gain), bool(barrier))  # fmt: skip
+
+
+def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: FitnessParameters):
     """``(fitness, z_rate, congestion, residual)`` of a mode at set points ``p`` (MW)."""
     down = problem.down
     flow = problem.load_flow[minute - 1] - down @ p
-    cost = problem.b + 2.0 * problem.c * p
-    if mode == PAPER:
+    if mode == ModeCode.PAPER:
         parent = overflow_signals(flow, problem.limit, fp.C)
         child = np.where(parent != 0.0, overflow_signals(-flow, problem.limit, fp.C), 0.0)
         signal = (1.0 - down).T @ parent + down.T @ child
-        barrier = np.where(p < problem.pmin, fp.m * p, np.where(p > problem.pmax, -fp.m * p, 0.0))
         congestion = np.abs(signal).max() if len(signal) else 0.0
-        return fp.B - cost + barrier + signal, np.zeros_like(z), congestion, 0.0
+        return fitness(problem, p, signal, fp, 1.0, True), np.zeros_like(z), congestion, 0.0
     excess = np.concatenate([flow - problem.limit, -flow - problem.limit])
     z_rate = fp.price_rate * excess
     slack = np.where(z > 0.0, np.abs(excess), np.maximum(excess, 0.0))
@@ -47,14 +55,14 @@ def game(mode: int, p, z, problem: DispatchProblem, minute: int, fp: FitnessPara
     signal = down.T @ (0.5 * nu) - (1.0 - down).T @ (0.5 * nu)
     congestion = np.abs(nu).max() if len(nu) else 0.0
     residual = slack.max() if len(slack) else 0.0
-    return fp.gain * (fp.B - cost + signal), z_rate, congestion, residual
+    return fitness(problem, p, signal, fp, fp.gain, False), z_rate, congestion, residual
 
 
-def weights(field: int, x, lo, hi, active):
+def weights(field: Field, x, lo, hi, active):
     """Receiver weight, movable mass and room of a field (see :mod:`popdispatch.dynamics`)."""
-    if field == SMITH:
+    if field == Field.SMITH:
         return active * 1.0, np.where(active, np.maximum(x, 0.0), 0.0), np.full(len(x), np.inf)
-    if field == CAPACITY_SMITH:
+    if field == Field.CAPACITY_SMITH:
         width = hi - lo
         part = active & (width > 0.0)
         room = np.where(part, np.maximum(hi - x, 0.0), 0.0)
@@ -81,10 +89,10 @@ class ReferenceMinute:
         self.field = dynamics.bounded_field if self.mode.bounded else dynamics.field
         kind = settings.graph if dynamics.uses_graph else "complete"
         self.graph = communication_graph(kind, list(problem.generators))
-        self.active = problem.online[minute - 1]
-        self.demand = float(problem.demand[minute - 1])
-        self.lo = np.where(self.active, problem.pmin, 0.0) / self.demand
-        self.hi = np.where(self.active, problem.pmax, 0.0) / self.demand
+        inputs = MinuteInputs.of(problem, minute)
+        self.active, self.demand, self.lo, self.hi = (
+            inputs.active, inputs.demand, inputs.lo, inputs.hi
+        )
         self.integrator = settings.stepping
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
 
@@ -166,7 +174,8 @@ class ReferenceMinute:
         return float(np.sqrt(turned / moved) / h) if moved > 0.0 else 0.0
 
     def run(self, x, z=None, max_iterations: int | None = None):
-        """``(setpoints per iteration (MW), x, z, converged_at)`` from shares ``x``."""
+        """``(setpoints per iteration (MW), x, z, status, converged_at)`` from shares ``x``
+        (``converged_at`` -1 unless converged)."""
         it = self.integrator
         horizon = max_iterations or it.max_iterations
         z = np.zeros(self.mode.controller_states(self.problem)) if z is None else z
@@ -179,11 +188,11 @@ class ReferenceMinute:
             x, z, _, residual, h_try = self.advance(x, z, h_try)
             samples.append(x * self.demand)
             if len(z) and z.max() > self.z_cap:
-                return np.array(samples), x, z, INFEASIBLE
+                return np.array(samples), x, z, Status.INFEASIBLE, -1
             calm = calm + 1 if residual <= tol else 0
             if k >= need and calm >= it.window and self._windows_agree(samples, tol):
-                return np.array(samples), x, z, k - it.window
-        return np.array(samples), x, z, -1
+                return np.array(samples), x, z, Status.CONVERGED, k - it.window
+        return np.array(samples), x, z, Status.NOT_CONVERGED, -1
 
     def _windows_agree(self, samples, tol) -> bool:
         window = self.integrator.window

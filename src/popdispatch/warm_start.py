@@ -14,13 +14,24 @@ All functions are compiled: the day loop calls them every minute.
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 import numba as nb
 import numpy as np
 
 from popdispatch.dynamics.capacity import project_to_box
+from popdispatch.game.parameters import share_bounds
 
-SHARES, SETPOINTS = range(2)
-WARM_STARTS = {"shares": SHARES, "setpoints": SETPOINTS}
+
+class WarmStart(IntEnum):
+    """Warm-start policies (see the module docstring)."""
+
+    SHARES = 0
+    SETPOINTS = 1
+
+
+SHARES, SETPOINTS = WarmStart
+WARM_STARTS = {policy.name.lower(): policy for policy in WarmStart}
 
 
 @nb.njit(cache=True)
@@ -100,9 +111,10 @@ def warm_start(policy, bounded, x, old_demand, demand, pmin, pmax, active, weigh
     redistribute_offline(x, active)
     if not bounded:
         return
-    if policy == SETPOINTS and old_demand > 0.0:
+    if policy == WarmStart.SETPOINTS and old_demand > 0.0:
         continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight)
         return
-    lo = np.where(active, pmin, 0.0) / demand
-    hi = np.where(active, pmax, 0.0) / demand
+    lo = np.empty(x.shape[0])
+    hi = np.empty(x.shape[0])
+    share_bounds(pmin, pmax, active, demand, lo, hi)
     x[:] = project_to_box(x, lo, hi)

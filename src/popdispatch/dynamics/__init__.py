@@ -8,18 +8,15 @@ the integrator.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
 
 from popdispatch.dynamics.capacity import project_to_box
-from popdispatch.dynamics.fields import CAPACITY_SMITH, LOCAL_REPLICATOR, REPLICATOR, SMITH
+from popdispatch.dynamics.fields import Field, field_weights
 from popdispatch.dynamics.graph import GRAPHS, communication_graph
 from popdispatch.dynamics.pairwise import pairwise_flows, sort_by_fitness
-from popdispatch.dynamics.replicator import replicator_weights
-from popdispatch.dynamics.smith import smith_weights
 
 
 @dataclass(frozen=True)
@@ -29,38 +26,31 @@ class Dynamics:
     Attributes
     ----------
     name : CLI name.
-    weights : compiled ``(x, lo, hi, active, w, v, room)``: fills the receiver weight ``w``,
-        the movable mass ``v`` and the room below the upper limit (shares, dimensionless).
-    field : its code for :func:`popdispatch.dynamics.fields.field_weights`.
+    field : its vector field (weights in :func:`popdispatch.dynamics.fields.field_weights`).
     uses_graph : whether the communication graph matters (else the complete graph is used).
-    extinction : whether a strategy at zero share stays at zero (imitative dynamics).
-    equation : the paper's equation number.
-    bounded_field : code of the capacity-constrained variant used by the exact mode (None if
-        there is none).
+    bounded_field : the capacity-constrained variant used by the exact mode (None if there is
+        none: imitative dynamics, whose zero shares stay at zero).
     """
 
     name: str
-    weights: Callable
-    field: int
+    field: Field
     uses_graph: bool
-    extinction: bool
-    equation: str
-    bounded_field: int | None = None
+    bounded_field: Field | None = None
 
 
 DYNAMICS = {
     d.name: d
     for d in (
-        Dynamics("smith", smith_weights, SMITH, False, False, "13", CAPACITY_SMITH),
-        Dynamics("replicator", replicator_weights, REPLICATOR, False, True, "9"),
-        Dynamics("local-replicator", replicator_weights, LOCAL_REPLICATOR, True, True, "12"),
-        Dynamics("distributed-smith", smith_weights, SMITH, True, False, "14", CAPACITY_SMITH),
+        Dynamics("smith", Field.SMITH, False, Field.CAPACITY_SMITH),  # eq. 13
+        Dynamics("replicator", Field.REPLICATOR, False),  # eq. 9
+        Dynamics("local-replicator", Field.LOCAL_REPLICATOR, True),  # eq. 12
+        Dynamics("distributed-smith", Field.SMITH, True, Field.CAPACITY_SMITH),  # eq. 14
     )
 }
 
 
 def field_rate(
-    field: int,
+    field: Field,
     x: np.ndarray,
     f: np.ndarray,
     adjacency: np.ndarray,
@@ -68,10 +58,8 @@ def field_rate(
     hi: np.ndarray,
     active: np.ndarray | None = None,
 ) -> np.ndarray:
-    """``x'`` of the field ``field`` (a code of :mod:`popdispatch.dynamics.fields`) at shares
-    ``x`` and fitness ``f``, on a dense 0/1 ``adjacency``, with the compiled kernels."""
-    from popdispatch.dynamics.fields import field_weights
-
+    """``x'`` of the field ``field`` at shares ``x`` and fitness ``f``, on a dense 0/1
+    ``adjacency``, with the compiled kernels."""
     n = len(x)
     x, f = np.asarray(x, dtype=float), np.asarray(f, dtype=float)
     active = np.ones(n, dtype=bool) if active is None else np.asarray(active, dtype=bool)
@@ -99,6 +87,7 @@ __all__ = [
     "DYNAMICS",
     "GRAPHS",
     "Dynamics",
+    "Field",
     "communication_graph",
     "field_rate",
     "get_dynamics",

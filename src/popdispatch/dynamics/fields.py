@@ -1,4 +1,4 @@
-"""Compiled dispatch from a vector-field code to its weights.
+"""Compiled dispatch from a vector field (:class:`Field`) to its weights.
 
 Every dynamic is a pairwise-comparison flow (:mod:`popdispatch.dynamics.pairwise`) defined by a
 receiver weight ``w``, a sender weight ``v`` (the movable mass) and the ``room`` each strategy
@@ -11,21 +11,33 @@ here and a branch below; the integrator does not change.
 
 from __future__ import annotations
 
+from enum import IntEnum
+
 import numba as nb
 
 from popdispatch.dynamics.capacity import capacity_smith_weights
 from popdispatch.dynamics.replicator import replicator_weights
 from popdispatch.dynamics.smith import smith_weights
 
-SMITH, REPLICATOR, LOCAL_REPLICATOR, CAPACITY_SMITH = range(4)
+
+class Field(IntEnum):
+    """The vector fields, by their weights (see :mod:`popdispatch.dynamics`)."""
+
+    SMITH = 0
+    REPLICATOR = 1
+    LOCAL_REPLICATOR = 2
+    CAPACITY_SMITH = 3
+
+
+SMITH, REPLICATOR, LOCAL_REPLICATOR, CAPACITY_SMITH = Field
 
 
 @nb.njit(cache=True, inline="always")
 def field_weights(code, x, lo, hi, active, w, v, room):
-    """Fill ``w``, ``v``, ``room`` for the field ``code`` (see the module constants) at ``x``."""
-    if code == SMITH:
+    """Fill ``w``, ``v``, ``room`` for the field ``code`` (a :class:`Field`) at ``x``."""
+    if code == Field.SMITH:
         smith_weights(x, lo, hi, active, w, v, room)
-    elif code in (REPLICATOR, LOCAL_REPLICATOR):
+    elif code == Field.REPLICATOR or code == Field.LOCAL_REPLICATOR:
         replicator_weights(x, lo, hi, active, w, v, room)
     else:
         capacity_smith_weights(x, lo, hi, active, w, v, room)

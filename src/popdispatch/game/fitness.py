@@ -39,16 +39,36 @@ class FitnessParameters:
                 raise ValueError(f"fitness constant {name} must be finite and >= 0, got {value}")
 
 
+@nb.njit(cache=True, inline="always")
+def barrier_at(p: float, pmin: float, pmax: float, m: float) -> float:
+    """Eq. 7 for one generator: ``m p`` below ``pmin``, 0 inside the limits, ``-m p`` above
+    ``pmax`` (MW in, EUR/MW out)."""
+    if p < pmin:
+        return m * p
+    if p > pmax:
+        return -m * p
+    return 0.0
+
+
 @nb.njit(cache=True)
 def barrier(p: np.ndarray, pmin: np.ndarray, pmax: np.ndarray, m: float) -> np.ndarray:
-    """Eq. 7: ``m p`` below ``pmin``, 0 inside the limits, ``-m p`` above ``pmax`` (MW in)."""
+    """Eq. 7 per generator (see :func:`barrier_at`)."""
     out = np.zeros_like(p)
     for i in range(p.shape[0]):
-        if p[i] < pmin[i]:
-            out[i] = m * p[i]
-        elif p[i] > pmax[i]:
-            out[i] = -m * p[i]
+        out[i] = barrier_at(p[i], pmin[i], pmax[i], m)
     return out
+
+
+@nb.njit(cache=True, inline="always")
+def fitness_into(p, b, c, pmin, pmax, B, m, gain, signal, with_barrier, fitness):
+    """The fitness kernel, eqs. 5-7: ``gain * (B - (b_i + 2 c_i p_i) + s_i [+ barrier_i])``
+    into ``fitness`` (which may be ``signal`` itself). The engine (every mode), the public
+    :func:`generator_fitness` and the plain-numpy reference all use it."""
+    for i in range(p.shape[0]):
+        f = B - (b[i] + 2.0 * c[i] * p[i]) + signal[i]
+        if with_barrier:
+            f += barrier_at(p[i], pmin[i], pmax[i], m)
+        fitness[i] = gain * f
 
 
 @nb.njit(cache=True)
@@ -61,6 +81,11 @@ def generator_fitness(
     B: float,
     m: float,
     signal: np.ndarray,
+    gain: float = 1.0,
+    with_barrier: bool = True,
 ) -> np.ndarray:
-    """Eqs. 5-7 plus congestion signals: ``B - (b + 2 c p) + barrier(p) + signal``."""
-    return B - (b + 2.0 * c * p) + barrier(p, pmin, pmax, m) + signal
+    """Eqs. 5-7 plus congestion signals, ``gain * (B - (b + 2 c p) + barrier(p) + signal)``
+    (exact mode: ``with_barrier=False`` and its revision ``gain``), by :func:`fitness_into`."""
+    fitness = np.empty_like(p)
+    fitness_into(p, b, c, pmin, pmax, B, m, gain, signal, with_barrier, fitness)
+    return fitness

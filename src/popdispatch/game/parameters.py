@@ -1,0 +1,88 @@
+"""What the compiled game takes, by name: the game's parameters, one minute's inputs and the
+game's scratch arrays. ``typing.NamedTuple``\\ s, which numba compiles and caches like tuples:
+fields are read by name in the kernels, and each record is built in one place (its
+constructor here), never by position.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba as nb
+import numpy as np
+
+from popdispatch.game.fitness import FitnessParameters
+from popdispatch.game.problem import DispatchProblem
+
+
+class GameParameters(NamedTuple):
+    """The game's parameters, the same for every minute of a problem (one layout for all modes,
+    so one compiled kernel). Powers MW, costs EUR/MWh and EUR/MW^2h, signals EUR/MW."""
+
+    b: np.ndarray  # linear cost coefficient per generator
+    c: np.ndarray  # quadratic cost coefficient per generator
+    pmin: np.ndarray  # generator limits, MW
+    pmax: np.ndarray
+    B: float  # fitness constants (FitnessParameters)
+    m: float
+    C: float
+    gain: float
+    price_rate: float
+    limit: np.ndarray  # per limited line, MW
+    generator_line: np.ndarray  # tree of limited lines (game/flows.py)
+    line_up: np.ndarray
+    line_preorder: np.ndarray
+
+    @classmethod
+    def of(cls, problem: DispatchProblem, fp: FitnessParameters) -> GameParameters:
+        return cls(
+            problem.b, problem.c, problem.pmin, problem.pmax, float(fp.B), float(fp.m),
+            float(fp.C), float(fp.gain), float(fp.price_rate), problem.limit,
+            problem.generator_line, problem.line_up, problem.line_preorder,
+        )  # fmt: skip
+
+
+class MinuteInputs(NamedTuple):
+    """What changes from minute to minute: demand (MW), the loads-only flow of each limited
+    line (MW), the share bounds ``lo``/``hi`` (``Pmin / P_d``, ``Pmax / P_d`` online, 0
+    offline) and the online generators."""
+
+    demand: float
+    load_flow: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    active: np.ndarray
+
+    @classmethod
+    def of(cls, problem: DispatchProblem, minute: int) -> MinuteInputs:
+        """The inputs of the 1-based ``minute``."""
+        row = minute - 1
+        n = problem.n_generators
+        demand = float(problem.demand[row])
+        lo, hi = np.empty(n), np.empty(n)
+        active = problem.online[row]
+        share_bounds(problem.pmin, problem.pmax, active, demand, lo, hi)
+        return cls(demand, problem.load_flow[row], lo, hi, active)
+
+
+@nb.njit(cache=True, inline="always")
+def share_bounds(pmin, pmax, active, demand, lo, hi):
+    """Share bounds ``lo = Pmin / P_d``, ``hi = Pmax / P_d`` of the online generators (0 for the
+    offline ones), into ``lo`` and ``hi``."""
+    for i in range(pmin.shape[0]):
+        lo[i] = pmin[i] / demand if active[i] else 0.0
+        hi[i] = pmax[i] / demand if active[i] else 0.0
+
+
+class GameWork(NamedTuple):
+    """Scratch of one game evaluation, one value per limited line: flows (MW), the values sent
+    to the parent and child sides of each line, path sums of the broadcast."""
+
+    flow: np.ndarray
+    parent_side: np.ndarray
+    child_side: np.ndarray
+    path: np.ndarray
+
+    @classmethod
+    def empty(cls, n_lines: int) -> GameWork:
+        return cls(*(np.zeros(n_lines) for _ in range(4)))

@@ -1,0 +1,108 @@
+"""Integration of the mean dynamics on the paper's 0.01 s grid.
+
+The paper ran the MATLAB population-dynamics toolbox: an adaptive ODE solver whose state is
+sampled every 0.01 s; one sample is one *iteration*. As in diffrax, the pieces are apart:
+
+- :mod:`~popdispatch.integrate.term`: the ODE term, evaluation of the vector field (the mode's
+  payoff map, :mod:`popdispatch.modes`, and the dynamic's weights and pairwise flows,
+  :mod:`popdispatch.dynamics`) into a :class:`~popdispatch.integrate.term.Stage`;
+- :mod:`~popdispatch.integrate.steppers`: one iteration of flux-limited Euler substeps or
+  adaptive Heun with a stiffness cap (:class:`Method`);
+- :mod:`~popdispatch.integrate.stopping`: the stopping rule, a :class:`Status`;
+- :mod:`~popdispatch.integrate.solve`: :func:`integrate`, steps until the stopping rule says.
+
+:class:`Integrator` holds the settings a person chooses and builds the named records the
+compiled kernels take. The online day loop is :mod:`popdispatch.online.day`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from popdispatch.constants import KW_PER_MW
+from popdispatch.integrate.solve import Outcome, integrate
+from popdispatch.integrate.steppers import (
+    STABLE_STEP,
+    Method,
+    StepperSettings,
+    Workspace,
+    workspace,
+)
+from popdispatch.integrate.stopping import Status, StopRule
+from popdispatch.integrate.term import Stage, Term
+
+METHODS = {method.name.lower(): method for method in Method}
+
+
+@dataclass(frozen=True)
+class Integrator:
+    """Solver, step-size control and stopping rule.
+
+    Attributes
+    ----------
+    dt : sampling interval, s (one iteration; paper: 0.01 s).
+    method : ``"euler"`` (fixed substeps) or ``"heun"`` (adaptive), see
+        :mod:`popdispatch.integrate.steppers`.
+    substeps : Euler steps per iteration (internal step ``dt / substeps``, s).
+    rtol, atol : Heun error control: relative, and absolute on the shares (dimensionless).
+    price_atol : Heun error control: absolute on controller states, EUR/MW.
+    tol_kw : convergence tolerance on window means of the set points and on the residual, kW.
+    window : iterations per averaging window.
+    max_iterations : horizon per run (per minute in the day loop); 6000 = one minute.
+    extrapolate : also require the geometrically projected remaining motion to be within
+        ``tol_kw`` (for smooth, slowly converging runs; chatter in paper mode defeats it).
+    """
+
+    dt: float = 0.01
+    method: str = "euler"
+    substeps: int = 100
+    rtol: float = 1e-4
+    atol: float = 1e-8
+    price_atol: float = 1e-4
+    tol_kw: float = 0.01
+    window: int = 20
+    max_iterations: int = 6000
+    extrapolate: bool = False
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"unknown integration method {self.method!r} (euler or heun)")
+        for name in ("dt", "tol_kw", "rtol", "atol", "price_atol"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"integrator {name} must be positive, got {getattr(self, name)}")
+        for name in ("substeps", "window", "max_iterations"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"integrator {name} must be >= 1, got {getattr(self, name)}")
+
+    @property
+    def method_code(self) -> Method:
+        return METHODS[self.method]
+
+    def stepper(self) -> StepperSettings:
+        """The stepper's settings for the compiled kernels."""
+        return StepperSettings(
+            int(self.method_code), float(self.dt), int(self.substeps), float(self.rtol),
+            float(self.atol), float(self.price_atol),
+        )  # fmt: skip
+
+    def stop_rule(self, z_cap: float) -> StopRule:
+        """The stopping rule's settings for the compiled kernels (``tol_kw`` in MW)."""
+        return StopRule(float(self.tol_kw / KW_PER_MW), int(self.window),
+                        int(self.max_iterations), float(z_cap), bool(self.extrapolate))  # fmt: skip
+
+
+__all__ = [
+    "METHODS",
+    "STABLE_STEP",
+    "Integrator",
+    "Method",
+    "Outcome",
+    "Stage",
+    "Status",
+    "StepperSettings",
+    "StopRule",
+    "Term",
+    "Workspace",
+    "integrate",
+    "workspace",
+]

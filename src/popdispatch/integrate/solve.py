@@ -1,0 +1,72 @@
+"""One run of the dynamics at fixed inputs: stepper after stepper until the stopping rule."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba as nb
+import numpy as np
+
+from popdispatch.integrate.steppers import advance
+from popdispatch.integrate.stopping import Status, check
+
+
+class Outcome(NamedTuple):
+    """How a run ended: ``iterations`` run, :class:`Status`, ``converged_at`` (the first
+    iteration of the last window if converged, else -1), ``first_congestion`` (first iteration
+    with a non-zero signal, -1 if none) and the step size to try next (``h_try``, s)."""
+
+    iterations: int
+    status: Status
+    converged_at: int
+    first_congestion: int
+    h_try: float
+
+
+@nb.njit(cache=True)
+def integrate(x, z, term, params, minute, ws, stepper, rule, h_try, history):
+    """Run the dynamics from shares ``x`` (and controller states ``z``, both updated in place)
+    at fixed ``minute`` inputs until converged, infeasible or the horizon; an :class:`Outcome`.
+
+    ``term``: :class:`~popdispatch.integrate.term.Term`; ``params``/``minute``: the game's
+    :class:`~popdispatch.game.parameters.GameParameters` and
+    :class:`~popdispatch.game.parameters.MinuteInputs`; ``ws``:
+    :func:`~popdispatch.integrate.steppers.workspace`; ``stepper``/``rule``: from
+    :class:`~popdispatch.integrate.Integrator`. ``history`` (rows ``max_iterations + 1`` or 0)
+    receives the set points (MW) of every iteration when it has rows.
+    """
+    ring = ws.ring
+    size = ring.shape[0]
+    record = history.shape[0] > 0
+    demand = minute.demand
+    for i in range(x.shape[0]):
+        ring[0, i] = x[i] * demand
+        if record:
+            history[0, i] = ring[0, i]
+    first_congestion = -1
+    last_x, last_z = ws.last_x, ws.last_z
+    stationary = False
+    residual = 0.0
+    calm = 0  # iterations in a row with the residual within tol_mw
+    congested = 0.0
+    for k in range(1, rule.max_iterations + 1):
+        # A state that an iteration left exactly unchanged is a fixed point of the scheme:
+        # later iterations would repeat it, so they are recorded without being recomputed.
+        if not stationary:
+            last_x[:] = x
+            last_z[:] = z
+            congested, residual, h_try = advance(x, z, term, params, minute, ws, stepper, h_try)
+            stationary = np.array_equal(x, last_x) and np.array_equal(z, last_z)
+        row = k % size
+        for i in range(x.shape[0]):
+            ring[row, i] = x[i] * demand
+            if record:
+                history[k, i] = ring[row, i]
+        if first_congestion < 0 and congested > 0.0:
+            first_congestion = k
+        status, calm = check(rule, ring, k, z, residual, calm)
+        if status == Status.CONVERGED:
+            return Outcome(k, status, k - rule.window, first_congestion, h_try)
+        if status == Status.INFEASIBLE:
+            return Outcome(k, status, -1, first_congestion, h_try)
+    return Outcome(rule.max_iterations, Status.NOT_CONVERGED, -1, first_congestion, h_try)

@@ -1,0 +1,64 @@
+"""What a dispatch mode is: a payoff mechanism (popgames' ``PayoffMechanism``) and its defaults.
+
+A mode turns set points into fitness and its node controllers' state into a rate: the *payoff
+map* ``(p, z) -> fitness`` and the *controller-state map* ``(p, z) -> z'``, with ``z`` of the
+mode's dimension (:attr:`Mode.controller_states`). Both maps are one compiled kernel per mode,
+``payoff(p, z, params, minute, work, fitness, z_rate) -> (congestion, residual)``, in the mode's
+own module (:mod:`popdispatch.modes.paper`, :mod:`popdispatch.modes.exact`), reached through
+:func:`popdispatch.modes.payoff` by the mode's :class:`ModeCode`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import TYPE_CHECKING
+
+from popdispatch.game.problem import DispatchProblem
+
+if TYPE_CHECKING:
+    from popdispatch.integrate import Integrator
+
+
+class ModeCode(IntEnum):
+    """The compiled payoff map of a mode (branch of :func:`popdispatch.modes.payoff`)."""
+
+    PAPER = 0
+    EXACT = 1
+
+
+@dataclass(frozen=True)
+class Mode:
+    """A dispatch mode: its payoff mechanism and its defaults.
+
+    ``code``: its payoff kernel. ``controller_states``: the dimension of ``z`` for a problem.
+    ``bounded``: generator limits are kept by a capacity-constrained revision rule (the
+    dynamics' ``bounded_field``) and warm starts respect the limits, instead of a barrier.
+    ``integrator``: keyword arguments of the default :class:`~popdispatch.integrate.Integrator`.
+    ``warm_start``: the default policy between minutes (:mod:`popdispatch.warm_start`).
+    ``claims_dc_opf``: whether a run that comes to rest claims the DC-OPF optimum, so that its
+    end state is checked against the DC-OPF's KKT conditions
+    (:func:`popdispatch.online.kkt_violations`) and reported ``stalled`` where they fail.
+    """
+
+    name: str
+    code: ModeCode
+    controller_states: Callable[[DispatchProblem], int]
+    bounded: bool
+    integrator_options: dict = field(default_factory=dict)
+    warm_start: str = "shares"
+    claims_dc_opf: bool = False
+
+    @property
+    def integrator(self) -> Integrator:
+        """The mode's default integrator."""
+        from popdispatch.integrate import Integrator
+
+        return Integrator(**self.integrator_options)
+
+    def price_cap(self, problem: DispatchProblem) -> float:
+        """Price (EUR/MW) beyond which congestion is deemed impossible to relieve: ten times
+        the spread of marginal costs; an optimal line price never exceeds that spread."""
+        marginal = problem.b + 2.0 * problem.c * problem.pmax
+        return 10.0 * float(marginal.max() - problem.b.min()) + 10.0

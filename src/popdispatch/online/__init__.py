@@ -1,0 +1,244 @@
+"""Running the population game: one minute (snapshot) or the online day.
+
+Online: each minute the demand changes and the dynamics continue from where they were (warm
+start, :mod:`popdispatch.warm_start`: the paper continues the shares, ``p = x * P_d`` with the
+new ``P_d``; exact mode by default continues the set points). Generators may go off- and
+on-line at given minutes; the mass of a generator that trips is handed to the online generators
+in proportion to their shares, and the offline one takes no part in any revision until it
+returns (at zero share; imitative dynamics cannot bring it back: extinction).
+
+- :mod:`~popdispatch.online.settings`: :class:`RunSettings`, :func:`initial_shares`;
+- :mod:`~popdispatch.online.engine`: :class:`Engine`, the compiled pieces of a configuration;
+- :mod:`~popdispatch.online.day`: the day loop, one compiled loop over minutes, called in
+  chunks so that progress can be reported; a day keeps only per-minute arrays;
+- :mod:`~popdispatch.online.kkt`: the DC-OPF's KKT check of an end state;
+- here: :func:`run_snapshot`, :func:`run_day` and their results.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from popdispatch.game.problem import KW_PER_MW, DispatchProblem
+from popdispatch.integrate import Status
+from popdispatch.online.day import DayArrays
+from popdispatch.online.engine import Engine, MinuteRun, limited_flows_mw, overflow_kw
+from popdispatch.online.kkt import KktTolerances, kkt_violations
+from popdispatch.online.settings import SHARES_NAME, X0_CHOICES, RunSettings, initial_shares
+from popdispatch.opf import generation_cost
+
+
+@dataclass(frozen=True)
+class SnapshotResult:
+    """One minute of dynamics. Powers in kW.
+
+    ``trajectory_kw``: set points per iteration (rows 0..last, columns generators);
+    ``converged_at`` / ``first_congestion``: iterations (None if never);
+    ``overflow_kw``: final overflow per limited line (max(|flow| - U, 0)).
+
+    Status semantics: ``converged`` means the dynamics came to rest (the stopping rule of
+    :mod:`popdispatch.integrate`) and, in a mode that claims the DC-OPF (exact), that the end
+    state passes the DC-OPF's KKT check (:func:`kkt_violations`). A run of such a mode that
+    came to rest at a state failing the check is ``stalled``: ``converged_at`` is then None,
+    ``rest_at`` the iteration it came to rest and ``stall_reason`` says which condition failed.
+    Paper mode claims only a rest point of the paper's dynamics (its rules do not land on the
+    DC-OPF, docs/paper-mode.md), so its ``converged`` is never checked against the KKT system.
+    """
+
+    minute: int
+    demand_kw: float
+    settings: RunSettings
+    generators: pd.Index
+    trajectory_kw: np.ndarray
+    converged_at: int | None
+    first_congestion: int | None
+    overflow_kw: np.ndarray
+    flows_kw: np.ndarray
+    wall_seconds: float
+    profile_source: str
+    infeasible: bool = False
+    stall_reason: str | None = None
+    rest_at: int | None = None
+
+    @property
+    def setpoints_kw(self) -> np.ndarray:
+        return self.trajectory_kw[-1]
+
+    @property
+    def status(self) -> str:
+        """``"converged"``, ``"stalled"`` (at rest, not the DC-OPF: see ``stall_reason``),
+        ``"not_converged"`` or ``"infeasible"`` (prices ran away)."""
+        if self.infeasible:
+            return "infeasible"
+        if self.stall_reason is not None:
+            return "stalled"
+        return "converged" if self.converged_at is not None else "not_converged"
+
+    @property
+    def iterations(self) -> int:
+        return len(self.trajectory_kw) - 1
+
+
+
+def run_snapshot(
+    problem: DispatchProblem, minute: int, settings: RunSettings | None = None
+) -> SnapshotResult:
+    """Run the dynamics for one minute from ``settings.x0`` until converged or the horizon."""
+    settings = settings or RunSettings()
+    engine = Engine(problem, settings)
+    x = initial_shares(problem, settings.x0, minute)
+    engine.warm_up(x, minute)
+    start = time.perf_counter()
+    run = engine.run_minute(x, minute)
+    setpoints, converged_at = run.trajectory, run.converged_at
+    first_congestion = run.first_congestion
+    wall = time.perf_counter() - start
+    final = setpoints[-1]
+    flows = limited_flows_mw(problem, final, minute)
+    rested = run.status == Status.CONVERGED
+    reason = engine.stall_reasons(np.array([minute]), final[None], engine.z[None],
+                                  np.array([rested]))[0]  # fmt: skip
+    return SnapshotResult(
+        minute=minute,
+        demand_kw=float(problem.demand[minute - 1] * KW_PER_MW),
+        settings=settings,
+        generators=problem.generators,
+        trajectory_kw=setpoints * KW_PER_MW,
+        converged_at=int(converged_at) if rested and reason is None else None,
+        first_congestion=None if first_congestion < 0 else int(first_congestion),
+        overflow_kw=overflow_kw(problem, final, minute),
+        flows_kw=flows * KW_PER_MW,
+        wall_seconds=wall,
+        profile_source=problem.profile_source,
+        infeasible=run.status == Status.INFEASIBLE,
+        stall_reason=reason,
+        rest_at=int(converged_at) if rested else None,
+    )
+
+
+@dataclass(frozen=True)
+class DayResult:
+    """An online day. Arrays have one row per simulated minute; powers in kW.
+
+    ``setpoints_kw`` (minutes, generators); ``iterations`` and ``converged`` per minute;
+    ``overflow_kw`` (minutes, limited lines); ``cost`` per minute (EUR/h, Table I's units).
+    ``wall_seconds`` is the engine's own time (no imports, data loading or DC-OPF).
+
+    Per minute, as for a snapshot (:class:`SnapshotResult`): ``converged`` means at rest and,
+    in a mode that claims the DC-OPF, passing its KKT check; ``stalled`` means at rest but
+    failing it (``stall_reasons`` maps such 1-based minutes to the reason). A stalled minute
+    is never counted as converged.
+    """
+
+    minutes: np.ndarray
+    settings: RunSettings
+    generators: pd.Index
+    demand_kw: np.ndarray
+    setpoints_kw: np.ndarray
+    iterations: np.ndarray
+    converged: np.ndarray
+    overflow_kw: np.ndarray
+    cost: np.ndarray
+    online: np.ndarray
+    wall_seconds: float
+    profile_source: str
+    infeasible: np.ndarray | None = None
+    stalled: np.ndarray | None = None
+    stall_reasons: dict[int, str] = field(default_factory=dict)
+
+    @property
+    def status(self) -> str:
+        """``"infeasible"`` if any minute was, else ``"converged"`` if every minute converged,
+        else ``"stalled"`` if some minute came to rest away from the DC-OPF, else
+        ``"not_converged"``."""
+        if self.infeasible is not None and self.infeasible.any():
+            return "infeasible"
+        if self.converged.all():
+            return "converged"
+        if self.stalled is not None and self.stalled.any():
+            return "stalled"
+        return "not_converged"
+
+
+#: Minutes per call of the compiled day loop when progress is reported.
+PROGRESS_CHUNK = 60
+
+
+def run_day(
+    problem: DispatchProblem,
+    settings: RunSettings | None = None,
+    minutes: np.ndarray | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> DayResult:
+    """The online day: every minute continues from the previous state until converged.
+
+    ``minutes``: 1-based minutes to simulate in order (default the whole day 1..1440); each
+    minute warm-starts from the state the previous simulated minute ended in.
+    ``progress``: called with each minute once it is done (e.g. to advance a progress bar);
+    the compiled loop then runs in chunks of :data:`PROGRESS_CHUNK` minutes.
+    """
+    settings = settings or RunSettings()
+    minutes = np.arange(1, len(problem.demand) + 1) if minutes is None else np.asarray(minutes)
+    minutes = minutes.astype(np.int64)
+    engine = Engine(problem, settings)
+    x = initial_shares(problem, settings.x0, int(minutes[0]))
+    engine.warm_up(x, int(minutes[0]))
+    out = DayArrays.empty(len(minutes), problem.n_generators, len(engine.z))
+    chunk = PROGRESS_CHUNK if progress is not None else len(minutes)
+    start = time.perf_counter()
+    for first in range(0, len(minutes), chunk):
+        part = slice(first, first + chunk)
+        view = out.chunk(part)
+        engine.run_day_chunk(x, minutes[part], view)
+        out.last_demand = view.last_demand
+        if progress is not None:
+            for minute in minutes[part]:
+                progress(int(minute))
+    wall = time.perf_counter() - start
+    setpoints = out.setpoints
+    overflow = np.stack([overflow_kw(problem, setpoints[r], m) for r, m in enumerate(minutes)])
+    online = problem.online[minutes - 1]
+    rested = out.status == Status.CONVERGED
+    reasons = engine.stall_reasons(minutes, setpoints, out.states, rested)
+    stalled = np.array([r is not None for r in reasons], dtype=bool)
+    return DayResult(
+        minutes=minutes,
+        settings=settings,
+        generators=problem.generators,
+        demand_kw=problem.demand[minutes - 1] * KW_PER_MW,
+        setpoints_kw=setpoints * KW_PER_MW,
+        iterations=out.iterations,
+        converged=rested & ~stalled,
+        overflow_kw=overflow,
+        cost=generation_cost(problem, setpoints, online),
+        online=online,
+        wall_seconds=wall,
+        profile_source=problem.profile_source,
+        infeasible=out.status == Status.INFEASIBLE,
+        stalled=stalled,
+        stall_reasons={int(m): r for m, r in zip(minutes, reasons, strict=True) if r},
+    )
+
+
+__all__ = [
+    "PROGRESS_CHUNK",
+    "SHARES_NAME",
+    "X0_CHOICES",
+    "DayResult",
+    "Engine",
+    "KktTolerances",
+    "MinuteRun",
+    "RunSettings",
+    "SnapshotResult",
+    "initial_shares",
+    "kkt_violations",
+    "limited_flows_mw",
+    "overflow_kw",
+    "run_day",
+    "run_snapshot",
+]

@@ -1,0 +1,108 @@
+"""The online day as one compiled loop over minutes: warm start, then run until converged.
+
+Per minute the demand and the online set change, the state warm-starts
+(:mod:`popdispatch.warm_start`) and the dynamics run (:func:`popdispatch.integrate.integrate`)
+until the stopping rule says; one row per minute is written to :class:`DayOutputs`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numba as nb
+import numpy as np
+
+from popdispatch.game.parameters import MinuteInputs, share_bounds
+from popdispatch.integrate import Status, integrate
+from popdispatch.warm_start import WarmStart, warm_start
+
+
+class DayInputs(NamedTuple):
+    """The minutes of a day (or a chunk of it), one row each: demand (MW), loads-only flows of
+    the limited lines (MW), online generators; the warm-start policy (its integer value, see
+    :class:`~popdispatch.integrate.term.Term`), whether the mode keeps
+    generator limits (``bounded``) and the demand of the minute before the first (MW, 0 if
+    none)."""
+
+    demand: np.ndarray
+    load_flow: np.ndarray
+    online: np.ndarray
+    warm_start: WarmStart
+    bounded: bool
+    previous_demand: float
+
+
+class DayOutputs(NamedTuple):
+    """One row per minute: set points (MW), iterations, :class:`~popdispatch.integrate.Status`
+    (as integers), iteration of convergence (-1 if none) and the controller states at the
+    minute's end (for the KKT check)."""
+
+    setpoints: np.ndarray
+    iterations: np.ndarray
+    status: np.ndarray
+    converged_at: np.ndarray
+    states: np.ndarray
+
+
+@nb.njit(cache=True)
+def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
+    """The minutes of ``day`` (:class:`DayInputs`) in order from shares ``x`` and controller
+    states ``z`` (both updated in place), into ``out`` (:class:`DayOutputs`).
+    Returns ``(h_try, demand of the last minute)``."""
+    n = x.shape[0]
+    lo = np.empty(n)
+    hi = np.empty(n)
+    weight = np.empty(n)
+    no_history = np.empty((0, n))
+    old_demand = day.previous_demand
+    pmin, pmax = params.pmin, params.pmax
+    for row in range(day.demand.shape[0]):
+        active = day.online[row]
+        demand = day.demand[row]
+        warm_start(day.warm_start, day.bounded, x, old_demand, demand, pmin, pmax, active, weight)
+        share_bounds(pmin, pmax, active, demand, lo, hi)
+        minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active)
+        outcome = integrate(x, z, term, params, minute, ws, stepper, rule, h_try, no_history)
+        h_try = outcome.h_try
+        for i in range(n):
+            out.setpoints[row, i] = x[i] * demand
+        for k in range(z.shape[0]):
+            out.states[row, k] = z[k]
+        out.iterations[row] = outcome.iterations
+        out.status[row] = outcome.status
+        out.converged_at[row] = outcome.converged_at
+        old_demand = demand
+    return h_try, old_demand
+
+
+@dataclass
+class DayArrays:
+    """Per-minute outputs of the day loop, filled chunk by chunk."""
+
+    setpoints: np.ndarray
+    iterations: np.ndarray
+    status: np.ndarray
+    converged_at: np.ndarray
+    states: np.ndarray  # controller states at each minute's end (exact mode's prices)
+    last_demand: float = 0.0
+
+    @classmethod
+    def empty(cls, minutes: int, n: int, n_states: int) -> DayArrays:
+        return cls(
+            np.zeros((minutes, n)), np.zeros(minutes, np.int64), np.zeros(minutes, np.int64),
+            np.zeros(minutes, np.int64), np.zeros((minutes, n_states)),
+        )  # fmt: skip
+
+    def chunk(self, part: slice) -> DayArrays:
+        """Views of the rows ``part`` (the last demand carried over)."""
+        return DayArrays(self.setpoints[part], self.iterations[part], self.status[part],
+                         self.converged_at[part], self.states[part], self.last_demand)  # fmt: skip
+
+    def outputs(self) -> DayOutputs:
+        return DayOutputs(self.setpoints, self.iterations, self.status, self.converged_at,
+                          self.states)  # fmt: skip
+
+    def statuses(self) -> np.ndarray:
+        """Each minute's :class:`~popdispatch.integrate.Status`."""
+        return np.array([Status(s) for s in self.status], dtype=object)

@@ -1,0 +1,160 @@
+"""The compiled pieces of one run configuration (:class:`Engine`) and the flows of its state."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import NamedTuple
+
+import numpy as np
+from scipy import sparse
+
+from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.game.flows import limited_line_flows
+from popdispatch.game.parameters import GameParameters, MinuteInputs
+from popdispatch.game.problem import KW_PER_MW, DispatchProblem
+from popdispatch.integrate import Status, Term, integrate, workspace
+from popdispatch.modes import get_mode
+from popdispatch.online.day import DayArrays, DayInputs, integrate_day
+from popdispatch.online.kkt import KktTolerances, kkt_violations
+from popdispatch.online.settings import RunSettings
+from popdispatch.warm_start import SHARES, WARM_STARTS, warm_start
+
+
+class MinuteRun(NamedTuple):
+    """One run of :meth:`Engine.run_minute`: set points per iteration (MW; no rows without
+    ``record``), final shares, :class:`~popdispatch.integrate.Status`, iteration of
+    convergence and of the first congestion (-1 if none), iterations run."""
+
+    trajectory: np.ndarray
+    x: np.ndarray
+    status: Status
+    converged_at: int
+    first_congestion: int
+    iterations: int
+
+
+class Engine:
+    """The compiled pieces of one run configuration, reused minute after minute: the term
+    (field, mode, graph), the game's parameters, the stepper's and the stopping rule's
+    settings, the workspace, and the state carried between minutes (``z``, ``h_try``)."""
+
+    def __init__(self, problem: DispatchProblem, settings: RunSettings):
+        self.problem = problem
+        self.settings = settings
+        self.dynamics = get_dynamics(settings.dynamics)
+        self.mode = get_mode(settings.mode)
+        field = self.dynamics.bounded_field if self.mode.bounded else self.dynamics.field
+        if field is None:
+            raise ValueError(
+                f"{self.mode.name} mode cannot run {self.dynamics.name} dynamics: they are "
+                "imitative, so a generator at zero share stays at zero (extinction) and the "
+                "DC-OPF is out of reach whenever it uses one; use smith or distributed-smith"
+            )
+        self.term = Term.of(field, self.mode.code, *self._graph())
+        self.params = GameParameters.of(problem, settings.fitness)
+        self.z = np.zeros(self.mode.controller_states(problem))
+        self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
+        integrator = settings.stepping
+        self.ws = workspace(
+            problem.n_generators, len(problem.limit), len(self.z), integrator.window
+        )
+        self.h_try = integrator.dt
+
+    @property
+    def evaluations(self) -> int:
+        """Evaluations of the game and field so far."""
+        return int(self.ws.counters.evaluations[0])
+
+    @property
+    def kkt_tolerances(self) -> KktTolerances:
+        """Tolerances of the KKT check, from the integrator in force and the revision gain."""
+        return KktTolerances.of(self.settings.stepping, self.settings.fitness.gain)
+
+    def stall_reasons(
+        self, minutes: np.ndarray, p_mw: np.ndarray, z: np.ndarray, rested: np.ndarray
+    ) -> list[str | None]:
+        """Per minute: why a run that came to rest (``rested``) is not at the DC-OPF, in a
+        mode that claims it (else None everywhere)."""
+        reasons: list[str | None] = [None] * len(minutes)
+        if not self.mode.claims_dc_opf or not np.any(rested):
+            return reasons
+        rows = np.flatnonzero(rested)
+        checked = kkt_violations(self.problem, minutes[rows], p_mw[rows], z[rows],
+                                 self.kkt_tolerances, self.settings.fitness.C)  # fmt: skip
+        for r, reason in zip(rows, checked, strict=True):
+            reasons[r] = reason
+        return reasons
+
+    def _graph(self) -> tuple[bool, np.ndarray, np.ndarray]:
+        """``(complete?, indptr, indices)`` of the communication graph (CSR)."""
+        names = list(self.problem.generators)
+        if not self.dynamics.uses_graph or self.settings.graph == "complete":
+            communication_graph("complete", names)  # validates the names
+            empty = np.zeros(0, dtype=np.int64)
+            return True, empty, empty
+        adjacency = sparse.csr_matrix(communication_graph(self.settings.graph, names))
+        return False, adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64)
+
+    def warm_up(self, x: np.ndarray, minute: int) -> None:
+        """Compile (or load from the disk cache) the kernels outside any timed region."""
+        z, h_try = self.z.copy(), self.h_try
+        self.run_minute(x.copy(), minute, max_iterations=1)
+        self.run_day_chunk(x.copy(), np.array([minute]), DayArrays.empty(1, len(x), len(z)))
+        self.z, self.h_try = z, h_try
+
+    def run_minute(
+        self, x: np.ndarray, minute: int, max_iterations: int | None = None, record: bool = True
+    ) -> MinuteRun:
+        """Integrate one minute from shares ``x`` at the given minute's inputs (no warm-start
+        step: ``x`` is projected onto the limits in bounded modes); without ``record`` no
+        per-iteration history is kept."""
+        x = np.array(x, dtype=float)
+        minute_inputs = MinuteInputs.of(self.problem, minute)
+        weight = np.empty_like(x)
+        warm_start(SHARES, self.mode.bounded, x, 0.0, minute_inputs.demand, self.params.pmin,
+                   self.params.pmax, minute_inputs.active, weight)  # fmt: skip
+        integrator = self.settings.stepping
+        if max_iterations is not None:
+            integrator = replace(integrator, max_iterations=int(max_iterations))
+        history = np.empty((integrator.max_iterations + 1 if record else 0, len(x)))
+        outcome = integrate(
+            x, self.z, self.term, self.params, minute_inputs, self.ws, integrator.stepper(),
+            integrator.stop_rule(self.z_cap), self.h_try, history,
+        )  # fmt: skip
+        self.h_try = outcome.h_try
+        steps = outcome.iterations
+        trajectory = history[: steps + 1] if record else history
+        return MinuteRun(trajectory, x, Status(outcome.status), outcome.converged_at,
+                         outcome.first_congestion, steps)  # fmt: skip
+
+    def run_day_chunk(self, x: np.ndarray, minutes: np.ndarray, out: DayArrays) -> None:
+        """Run consecutive ``minutes`` (1-based) from shares ``x`` (updated in place)."""
+        problem = self.problem
+        rows = minutes - 1
+        day = DayInputs(
+            problem.demand[rows], problem.load_flow[rows], problem.online[rows],
+            int(WARM_STARTS[self.settings.warm_start_policy]), self.mode.bounded,
+            out.last_demand,
+        )  # fmt: skip
+        integrator = self.settings.stepping
+        self.h_try, out.last_demand = integrate_day(
+            x, self.z, self.term, self.params, day, self.ws, integrator.stepper(),
+            integrator.stop_rule(self.z_cap), self.h_try, out.outputs(),
+        )  # fmt: skip
+
+
+def limited_flows_mw(problem: DispatchProblem, p_mw: np.ndarray, minute: int) -> np.ndarray:
+    """Flows (MW) on the limited lines for set points ``p_mw`` (MW) at a 1-based minute."""
+    flow = np.empty(len(problem.limit))
+    limited_line_flows(
+        problem.load_flow[minute - 1], np.ascontiguousarray(p_mw, dtype=float),
+        problem.generator_line, problem.line_up, problem.line_preorder, flow,
+    )  # fmt: skip
+    return flow
+
+
+def overflow_kw(problem: DispatchProblem, p_mw: np.ndarray, minute: int) -> np.ndarray:
+    """Overflow (kW) per limited line: ``max(|flow| - U, 0)`` for set points ``p_mw`` (MW)."""
+    flows = limited_flows_mw(problem, p_mw, minute)
+    return np.maximum(np.abs(flows) - problem.limit, 0.0) * KW_PER_MW
+

@@ -1,0 +1,156 @@
+"""The DC-OPF's KKT conditions, checked at the end state of a mode that claims the DC-OPF."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from popdispatch.game.problem import KW_PER_MW, DispatchProblem
+from popdispatch.integrate import Integrator
+
+
+@dataclass(frozen=True)
+class KktTolerances:
+    """Tolerances of the DC-OPF KKT check, derived from the integrator that ran (see
+    :func:`kkt_violations`). ``power_mw``: on bounds, overflow and slack, MW; ``flow_gap``:
+    on marginal-cost gap times movable power, EUR/MW * MW (= EUR/h); ``price``: on the net
+    price of one limited line, EUR/MW."""
+
+    power_mw: float
+    flow_gap: float
+    price: float
+
+    @classmethod
+    def of(cls, integrator: Integrator, gain: float) -> KktTolerances:
+        """``power_mw = tol_kw``; ``flow_gap = tol_kw / (gain * window * dt)``; ``price =
+        2 price_atol`` (see :func:`kkt_violations`)."""
+        tol_mw = integrator.tol_kw / KW_PER_MW
+        flow_gap = tol_mw / (max(gain, 1e-300) * integrator.window * integrator.dt)
+        return cls(tol_mw, flow_gap, 2.0 * integrator.price_atol)
+
+
+def kkt_violations(
+    problem: DispatchProblem,
+    minutes: np.ndarray,
+    p_mw: np.ndarray,
+    z: np.ndarray,
+    tol: KktTolerances,
+    C: float = 0.0,
+) -> list[str | None]:
+    """Per minute, why set points ``p_mw`` (minutes x generators, MW) and controller prices
+    ``z`` (minutes x 2 limited lines, EUR/MW: upward then downward) are *not* a KKT point of the
+    DC-OPF (paper eq. 1), or ``None`` where they are, within ``tol``.
+
+    The candidate duals are the prices the controllers broadcast, ``mu = max(0, z + C e)``
+    per line-direction with excess ``e`` (``flow - U`` upward, ``-flow - U`` downward; ``C``
+    the proportional part, EUR/MW per MW: at a state within ``tol_kw`` of the limit it shifts
+    a price by up to ``C tol_kw``, which the dynamics do see). With ``nu = mu_up - mu_down``
+    and ``D_ki = 1`` for generator ``i`` below line ``k``, the locational marginal cost is
+    ``lmc_i = b_i + 2 c_i p_i - (D^T nu)_i`` (EUR/MW; the exact mode's fitness is
+    ``gain * (B - lmc_i)`` up to a constant, docs/exact-mode.md). KKT of eq. 1 (flows
+    ``load_flow - D p``):
+
+    1. primal feasibility: ``Pmin <= p <= Pmax`` and ``|flow_k| <= U_k``, within ``power_mw``;
+    2. dual feasibility and complementarity: ``z >= 0`` (the controllers project), and a
+       positive price only on a line-direction at its limit (slack at most ``power_mw``);
+    3. stationarity: one value ``lambda`` with ``lmc_i = lambda`` for generators strictly
+       inside their limits, ``lmc_i <= lambda`` at Pmax and ``>= lambda`` at Pmin. Equivalently
+       no *giver* ``j`` (above Pmin by more than ``power_mw``) has a higher ``lmc`` than a
+       *taker* ``i`` (below Pmax by more than ``power_mw``).
+
+    Tolerance of 3: on the complete graph the capacity-constrained Smith dynamics move power
+    from giver ``j`` to the cheapest taker ``i`` at ``gain * (lmc_j - lmc_i) * (p_j - Pmin_j)``
+    MW/s (receiver weight 1, sender weight its movable power), and ``i`` only receives. The
+    stopping rule accepts a state whose window means move at most ``tol_kw`` per window of
+    ``window * dt`` seconds; so every giver-taker pair of a state it may accept has
+    ``(lmc_j - lmc_i) (p_j - Pmin_j) <= tol_kw / (gain * window * dt)`` = ``flow_gap``. A gap
+    beyond that is a pair the complete graph would still trade: the state is a rest point of
+    the run's dynamics (e.g. distributed Smith on a sparse graph) but not the DC-OPF. Prices
+    are resolved only to the Heun error control's ``price_atol`` (EUR/MW), so the net price
+    of a line (two such states) is known to ``price = 2 price_atol``; a pair separated by
+    ``s`` limited lines may differ by ``s * price`` more (measured: a converged random feeder
+    left 1.3e-5 EUR/MW across a binding line while its set points were within 4e-6 kW of the
+    DC-OPF; the ring rest point of minute 566 leaves 1.0 EUR/MW). The powers' tolerance is
+    the convergence criterion's residual, ``tol_kw``.
+    """
+    rows = np.asarray(minutes, dtype=np.int64) - 1
+    p_mw, z = np.atleast_2d(p_mw), np.atleast_2d(z)
+    n_lines = len(problem.limit)
+    down = problem.down
+    flow = problem.load_flow[rows] - p_mw @ down.T
+    excess = np.concatenate([flow - problem.limit, -flow - problem.limit], axis=1)
+    mu = np.maximum(0.0, z + C * excess)
+    nu = mu[:, :n_lines] - mu[:, n_lines:]
+    lmc = problem.b + 2.0 * problem.c * p_mw - nu @ down
+    online = problem.online[rows]
+    lo = np.where(online, problem.pmin, 0.0)
+    hi = np.where(online, problem.pmax, 0.0)
+    reasons: list[str | None] = []
+    for r in range(len(rows)):
+        reasons.append(
+            _bounds_violation(problem, p_mw[r], lo[r], hi[r], tol)
+            or _price_violation(problem, flow[r], mu[r], tol)
+            or _stationarity_violation(problem, p_mw[r], lmc[r], (lo[r], hi[r]), online[r], tol)
+        )
+    return reasons
+
+
+def _bounds_violation(problem, p, lo, hi, tol: KktTolerances) -> str | None:
+    outside = (p < lo - tol.power_mw) | (p > hi + tol.power_mw)
+    if not outside.any():
+        return None
+    i = int(np.argmax(outside))
+    return (
+        f"{problem.generators[i]} at {p[i] * KW_PER_MW:.6g} kW is outside its limits "
+        f"[{lo[i] * KW_PER_MW:g}, {hi[i] * KW_PER_MW:g}] kW"
+    )
+
+
+def _line_name(problem: DispatchProblem, k: int) -> str:
+    row = problem.feeder.lines.iloc[int(problem.lines[k])]
+    return f"line {int(row.from_bus)}-{int(row.to_bus)}"
+
+
+def _price_violation(problem, flow, z, tol: KktTolerances) -> str | None:
+    n_lines = len(problem.limit)
+    for k in range(n_lines):
+        for sign, price, direction in ((1.0, z[k], "+"), (-1.0, z[n_lines + k], "-")):
+            excess = sign * flow[k] - problem.limit[k]
+            if excess > tol.power_mw:
+                return f"{_line_name(problem, k)} is {excess * KW_PER_MW:.3g} kW over its limit"
+            if price > 0.0 and excess < -tol.power_mw:
+                return (
+                    f"{_line_name(problem, k)} has price {price:.4g} EUR/MWh ({direction}) but "
+                    f"is {-excess * KW_PER_MW:.3g} kW below its limit"
+                )
+    return None
+
+
+def _where(p, lo, hi, i, tol: KktTolerances) -> str:
+    if p[i] >= hi[i] - tol.power_mw:
+        return "at Pmax"
+    return "at Pmin" if p[i] <= lo[i] + tol.power_mw else "interior"
+
+
+def _stationarity_violation(problem, p, lmc, limits, online, tol: KktTolerances) -> str | None:
+    lo, hi = limits
+    givers = online & (p > lo + tol.power_mw)
+    takers = online & (p < hi - tol.power_mw)
+    if not givers.any() or not takers.any():
+        return None
+    i = int(np.flatnonzero(takers)[np.argmin(lmc[takers])])
+    separating = np.abs(problem.down - problem.down[:, [i]]).sum(axis=0)
+    movable = np.maximum(p - lo, tol.power_mw)
+    allowed = separating * tol.price + tol.flow_gap / movable
+    excess = np.where(givers, lmc - lmc[i] - allowed, -np.inf)
+    j = int(np.argmax(excess))
+    if excess[j] <= 0.0:
+        return None
+    names = problem.generators
+    return (
+        f"rest point is not a KKT point of the DC-OPF: {names[j]} {_where(p, lo, hi, j, tol)} "
+        f"has marginal cost {lmc[j]:.6f} EUR/MWh (with line prices) above the "
+        f"{lmc[i]:.6f} of {names[i]} {_where(p, lo, hi, i, tol)}, which could take more"
+    )
+

@@ -1,0 +1,152 @@
+"""What to run (:class:`RunSettings`) and where a run starts (:func:`initial_shares`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import networkx as nx
+import numpy as np
+
+from popdispatch.dynamics import DYNAMICS, GRAPHS, get_dynamics
+from popdispatch.errors import OptionError
+from popdispatch.game.fitness import FitnessParameters
+from popdispatch.game.problem import DispatchProblem
+from popdispatch.integrate import Integrator
+from popdispatch.modes import get_mode
+from popdispatch.warm_start import WARM_STARTS
+
+SHARES_NAME = "shares"  # the paper's warm start, the only one for modes without limits
+
+X0_CHOICES = ("uniform", "capacity")
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """What to run: dynamics, mode, communication graph, initial state, constants, integrator,
+    warm start between minutes (``None``: the mode's default; see :mod:`popdispatch.warm_start`).
+
+    Construction validates the combination without touching any data, so a command line can
+    check its options before loading a feeder: bad values or combinations raise
+    :class:`~popdispatch.errors.OptionError` with a one-line message naming them and the option
+    to change (see :meth:`validate`).
+    """
+
+    dynamics: str = "smith"
+    mode: str = "paper"
+    graph: str | nx.Graph = "complete"
+    x0: str | dict[str, float] = "uniform"
+    fitness: FitnessParameters = field(default_factory=FitnessParameters)
+    integrator: Integrator | None = None  # None: the mode's default
+    warm_start: str | None = None
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise :class:`OptionError` for an unknown name or a combination that cannot run or
+        would silently be ignored:
+
+        - unknown ``dynamics`` (``--dynamics``), ``mode`` (``--mode``), ``graph``
+          (``--graph``), ``x0`` name (``--x0``) or ``warm_start`` (``--warm-start``);
+        - exact mode with imitative dynamics (replicator, local replicator): a generator at
+          zero share stays there (extinction), so the DC-OPF is out of reach (``--mode``);
+        - a graph other than ``complete`` with dynamics that ignore it (smith, replicator:
+          paper eqs. 9 and 13 compare every pair) (``--graph``);
+        - the ``setpoints`` warm start in a mode without generator limits in its revision rule
+          (paper mode continues the shares, eq. 10's ``x``; ``--warm-start``).
+        """
+        dynamics = _lookup(get_dynamics, self.dynamics, "--dynamics")
+        mode = _lookup(get_mode, self.mode, "--mode")
+        if mode.bounded and dynamics.bounded_field is None:
+            raise OptionError(
+                f"{mode.name} mode cannot run {dynamics.name} dynamics: they are imitative, so a "
+                "generator at zero share stays at zero (extinction) and the DC-OPF is out of "
+                "reach whenever it uses one; use smith or distributed-smith",
+                "--mode",
+            )
+        graph = self.graph if isinstance(self.graph, str) else "custom"
+        if isinstance(self.graph, str) and self.graph not in GRAPHS:
+            raise OptionError(
+                f"unknown communication graph {graph!r} (known: {', '.join(GRAPHS)})", "--graph"
+            )
+        if graph != "complete" and not dynamics.uses_graph:
+            users = " or ".join(d.name for d in DYNAMICS.values() if d.uses_graph)
+            raise OptionError(
+                f"graph {graph!r} has no effect on {dynamics.name} dynamics, which compare every "
+                f"pair of generators; use it with {users}, or leave the graph complete",
+                "--graph",
+            )
+        if isinstance(self.x0, str) and self.x0 not in X0_CHOICES:
+            raise OptionError(
+                f"unknown initial state {self.x0!r} (known: {', '.join(X0_CHOICES)}, or "
+                "shares per generator)",
+                "--x0",
+            )
+        self._validate_warm_start(mode)
+
+    def _validate_warm_start(self, mode) -> None:
+        if self.warm_start is None:
+            return
+        if self.warm_start not in WARM_STARTS:
+            raise OptionError(
+                f"unknown warm start {self.warm_start!r} (known: {', '.join(WARM_STARTS)})",
+                "--warm-start",
+            )
+        if self.warm_start != SHARES_NAME and not mode.bounded:
+            raise OptionError(
+                f"warm start {self.warm_start!r} needs a mode with generator limits in its "
+                f"revision rule (exact); {mode.name} mode continues the shares",
+                "--warm-start",
+            )
+
+    @property
+    def stepping(self) -> Integrator:
+        """The integrator in force: the given one, else the mode's default."""
+        return self.integrator or get_mode(self.mode).integrator
+
+    @property
+    def warm_start_policy(self) -> str:
+        """The warm start in force: the given one, else the mode's default."""
+        return self.warm_start or get_mode(self.mode).warm_start
+
+    def x0_label(self) -> str:
+        if isinstance(self.x0, str):
+            return self.x0
+        return ",".join(f"{k}={v:g}" for k, v in self.x0.items())
+
+
+
+def _lookup(get: Callable, name: str, option: str):
+    """``get(name)``, its ``ValueError`` (unknown name) re-raised as :class:`OptionError`."""
+    try:
+        return get(name)
+    except ValueError as error:
+        raise OptionError(str(error), option) from None
+
+
+def initial_shares(problem: DispatchProblem, x0: str | dict[str, float], minute: int) -> np.ndarray:
+    """Initial shares over the generators online at ``minute``.
+
+    ``"uniform"``: equal shares; ``"capacity"``: proportional to Pmax; a mapping
+    ``{generator: share}``: given shares (missing ones 0), normalised to sum 1.
+    """
+    online = problem.online[minute - 1]
+    if isinstance(x0, dict):
+        unknown = set(x0) - set(problem.generators)
+        if unknown:
+            raise ValueError(f"initial share given for unknown generator {sorted(unknown)[0]!r}")
+        x = np.array([float(x0.get(g, 0.0)) for g in problem.generators])
+        if (x < 0).any() or not np.isfinite(x).all():
+            raise ValueError("initial shares must be finite and non-negative")
+    elif x0 == "uniform":
+        x = np.ones(problem.n_generators)
+    elif x0 == "capacity":
+        x = problem.pmax.copy()
+    else:
+        raise ValueError(f"unknown initial state {x0!r} (known: {', '.join(X0_CHOICES)})")
+    x = np.where(online, x, 0.0)
+    if x.sum() <= 0:
+        raise ValueError("initial shares are all zero on the online generators")
+    return x / x.sum()
+

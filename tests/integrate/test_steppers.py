@@ -1,0 +1,143 @@
+"""The steppers' flux-limited stages on their own (popdispatch.integrate.steppers): the limited
+Euler stage and the Heun combination on hand-made states, against plain numpy in the test,
+called with the named records the engine passes (:class:`Workspace`, :class:`Term`)."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from popdispatch.dynamics.fields import Field
+from popdispatch.integrate import Term, workspace
+from popdispatch.integrate.steppers import heun_combination, limited_stage
+from popdispatch.modes import ModeCode
+
+EMPTY = np.zeros(0, dtype=np.int64)
+#: The term of a complete graph (field and mode are not read by the stages).
+RULES = Term.of(Field.SMITH, ModeCode.PAPER, True, EMPTY, EMPTY)
+
+
+# --- flux-limited stages on hand-made states -------------------------------------------------
+
+
+def _numpy_flows(f, w, v):
+    """inflow_i = w_i sum_j [f_i - f_j]_+ v_j, outflow_j = v_j sum_i [f_i - f_j]_+ w_i"""
+    gap = np.maximum(f[:, None] - f[None, :], 0.0)  # gap[i, j] = [f_i - f_j]_+
+    return w * (gap @ v), v * (gap.T @ w)
+
+
+def _state(rng, n):
+    """Shares on the simplex with box limits, the capacity-Smith weights, fitness, raw flows."""
+    x = rng.dirichlet(np.ones(n))
+    lo = x * rng.uniform(0.0, 1.0, n)
+    hi = x + rng.uniform(0.0, 1.0, n)
+    at_lo, at_hi = rng.random(n) < 0.25, rng.random(n) < 0.25
+    lo[at_lo] = x[at_lo]  # some strategies rest at a limit
+    hi[at_hi & ~at_lo] = x[at_hi & ~at_lo]
+    room = np.maximum(hi - x, 0.0)
+    w = (room > 0).astype(float)
+    v = np.maximum(x - lo, 0.0)
+    f = rng.normal(0, 1, n)
+    return x, lo, hi, f, w, v, room
+
+
+def _fill(ws, point, f, w, v, room):
+    stage = ws.first if point == 0 else ws.second
+    inflow, outflow = _numpy_flows(f, w, v)
+    for name, row in zip(("f", "w", "v", "room", "inflow", "outflow"),
+                         (f, w, v, room, inflow, outflow), strict=True):  # fmt: skip
+        getattr(stage, name)[:] = row
+    stage.order[:] = np.argsort(f, kind="mergesort")
+    return inflow, outflow
+
+
+def _check_domain(x_out, x, lo, hi):
+    n = len(x)
+    assert abs(x_out.sum() - x.sum()) <= 8 * n * np.finfo(float).eps
+    assert np.all(x_out >= lo - 4 * np.finfo(float).eps)
+    assert np.all(x_out <= hi + 4 * np.finfo(float).eps)
+
+
+@settings(deadline=None)  # the first example compiles the kernel
+@given(st.integers(2, 12), st.integers(0, 2**32 - 1), st.floats(1e-4, 50.0))
+def test_limited_euler_stage_matches_numpy_and_stays_in_the_domain(n, seed, h):
+    rng = np.random.default_rng(seed)
+    x, lo, hi, f, w, v, room = _state(rng, n)
+    ws = workspace(n, 0, 0, 1)
+    inflow, outflow = _fill(ws, 0, f, w, v, room)
+    x_out, z, z_out = np.empty(n), np.zeros(0), np.zeros(0)
+    limited_stage(ws.first, ws.first_limited, h, x.copy(), z, RULES, x_out, z_out)
+    # plain numpy: scale senders that would overdraw, receivers that would overfill
+    v2 = np.where(h * outflow > v, v * v / np.where(outflow > 0, h * outflow, 1.0), v)
+    w2 = np.where(h * inflow > room, w * room / np.where(inflow > 0, h * inflow, 1.0), w)
+    in2, out2 = _numpy_flows(f, w2, v2)
+    expected = x + h * (in2 - out2)
+    scale = h * (np.abs(in2) + np.abs(out2)).max(initial=0.0) + 1.0
+    np.testing.assert_allclose(x_out, expected, rtol=0, atol=64 * n * np.finfo(float).eps * scale)
+    _check_domain(x_out, x, lo, hi)
+
+
+def test_limited_euler_stage_is_plain_euler_away_from_the_limits():
+    f = np.array([0.0, 1.0, 2.0])
+    x, lo, hi = np.full(3, 1 / 3), np.zeros(3), np.ones(3)
+    w, v, room = np.ones(3), x - lo, hi - x
+    ws = workspace(3, 0, 0, 1)
+    inflow, outflow = _fill(ws, 0, f, w, v, room)
+    x_out = np.empty(3)
+    limited_stage(ws.first, ws.first_limited, 0.01, x, np.zeros(0), RULES, x_out, np.zeros(0))
+    # by hand: inflow = (0, 1/3, 2/3 + 1/3), outflow = (1/3 * (1 + 2), 1/3 * 1, 0)
+    np.testing.assert_allclose(inflow, [0, 1 / 3, 1.0], rtol=1e-15)
+    np.testing.assert_allclose(outflow, [1.0, 1 / 3, 0], rtol=1e-15)
+    np.testing.assert_allclose(x_out, x + 0.01 * np.array([-1.0, 0.0, 1.0]), rtol=0, atol=1e-16)
+
+
+def test_limited_euler_stage_empties_a_sender_exactly_and_keeps_prices_non_negative():
+    f = np.array([0.0, 1.0])
+    x, lo, hi = np.array([0.2, 0.8]), np.zeros(2), np.array([1.0, 10.0])
+    ws = workspace(2, 0, 2, 1)
+    ws.first.z_rate[:] = [-5.0, 3.0]  # price rates of point 0
+    _fill(ws, 0, f, np.ones(2), x - lo, hi - x)  # outflow of 0: 0.2 per s
+    x_out, z_out = np.empty(2), np.empty(2)
+    limited_stage(ws.first, ws.first_limited, 5.0, x, np.array([1.0, 1.0]), RULES, x_out, z_out)
+    # 5 s would move 1.0 out of a sender holding 0.2: it is scaled to empty exactly
+    np.testing.assert_allclose(x_out, [0.0, 1.0], rtol=0, atol=4 * np.finfo(float).eps)
+    np.testing.assert_array_equal(z_out, [0.0, 16.0])  # 1 - 25 projected to 0; 1 + 15
+
+
+def test_limited_euler_stage_with_both_ends_limited_stays_inside():
+    """Sender and receiver both limited: both weights scale, the pair's flow is the product of
+    both scalings, so the stage lands inside the domain, short of both limits."""
+    f = np.array([0.0, 1.0])
+    x, lo, hi = np.array([0.2, 0.8]), np.zeros(2), np.ones(2)
+    ws = workspace(2, 0, 0, 1)
+    _fill(ws, 0, f, np.ones(2), x - lo, hi - x)
+    x_out = np.empty(2)
+    limited_stage(ws.first, ws.first_limited, 100.0, x, np.zeros(0), RULES, x_out, np.zeros(0))
+    moved = 100.0 * (0.2 * 0.2 / 20.0) * (1.0 * 0.2 / 20.0)  # h * v2 * w2 * gap
+    np.testing.assert_allclose(x_out, [0.2 - moved, 0.8 + moved], rtol=1e-14)
+    _check_domain(x_out, x, lo, hi)
+
+
+@settings(deadline=None)  # the first example compiles the kernel
+@given(st.integers(2, 12), st.integers(0, 2**32 - 1), st.floats(1e-4, 50.0))
+def test_heun_combination_matches_numpy_and_stays_in_the_domain(n, seed, h):
+    rng = np.random.default_rng(seed)
+    x, lo, hi, f1, w1, v1, room1 = _state(rng, n)
+    ws = workspace(n, 0, 0, 1)
+    in1, out1 = _fill(ws, 0, f1, w1, v1, room1)
+    x1 = x + 0.1 * (rng.dirichlet(np.ones(n)) - x)  # some second evaluation point
+    f2, w2, v2 = rng.normal(0, 1, n), (rng.random(n) < 0.8).astype(float), np.maximum(x1 - lo, 0)
+    in2, out2 = _fill(ws, 1, f2, w2, v2, np.maximum(hi - x1, 0.0))
+    x_out = np.empty(n)
+    heun_combination(h, x.copy(), np.zeros(0), RULES, ws, x_out, np.zeros(0))
+    half = 0.5 * h
+    out, into = half * (out1 + out2), half * (in1 + in2)
+    alpha = np.where(out > v1, v1 / np.where(out > 0, out, 1.0), 1.0)
+    beta = np.where(into > room1, room1 / np.where(into > 0, into, 1.0), 1.0)
+    s_in1, s_out1 = _numpy_flows(f1, beta * w1, alpha * v1)
+    s_in2, s_out2 = _numpy_flows(f2, beta * w2, alpha * v2)
+    expected = x + half * (s_in1 - s_out1 + s_in2 - s_out2)
+    scale = half * np.abs(np.concatenate([s_in1, s_out1, s_in2, s_out2])).max() + 1.0
+    np.testing.assert_allclose(x_out, expected, rtol=0, atol=64 * n * np.finfo(float).eps * scale)
+    _check_domain(x_out, x, lo, hi)
