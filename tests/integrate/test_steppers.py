@@ -42,6 +42,14 @@ def _state(rng, n):
     return x, lo, hi, f, w, v, room
 
 
+def _limited(ws, h, x, z, x_out, z_out):
+    """limited_stage on the first stage of ``ws``, its arrays by name."""
+    one, lim = ws.first, ws.first_limited
+    limited_stage(h, x, z, one.f, one.w, one.v, one.room, one.inflow, one.outflow, one.z_rate,
+                  one.order, lim.w, lim.v, lim.inflow, lim.outflow, RULES.complete,
+                  RULES.indptr, RULES.indices, x_out, z_out)  # fmt: skip
+
+
 def _fill(ws, point, f, w, v, room):
     stage = ws.first if point == 0 else ws.second
     inflow, outflow = _numpy_flows(f, w, v)
@@ -67,7 +75,7 @@ def test_limited_euler_stage_matches_numpy_and_stays_in_the_domain(n, seed, h):
     ws = workspace(n, 0, 0, 1)
     inflow, outflow = _fill(ws, 0, f, w, v, room)
     x_out, z, z_out = np.empty(n), np.zeros(0), np.zeros(0)
-    limited_stage(ws.first, ws.first_limited, h, x.copy(), z, RULES, x_out, z_out)
+    _limited(ws, h, x.copy(), z, x_out, z_out)
     # plain numpy: scale senders that would overdraw, receivers that would overfill
     v2 = np.where(h * outflow > v, v * v / np.where(outflow > 0, h * outflow, 1.0), v)
     w2 = np.where(h * inflow > room, w * room / np.where(inflow > 0, h * inflow, 1.0), w)
@@ -85,7 +93,7 @@ def test_limited_euler_stage_is_plain_euler_away_from_the_limits():
     ws = workspace(3, 0, 0, 1)
     inflow, outflow = _fill(ws, 0, f, w, v, room)
     x_out = np.empty(3)
-    limited_stage(ws.first, ws.first_limited, 0.01, x, np.zeros(0), RULES, x_out, np.zeros(0))
+    _limited(ws, 0.01, x, np.zeros(0), x_out, np.zeros(0))
     # by hand: inflow = (0, 1/3, 2/3 + 1/3), outflow = (1/3 * (1 + 2), 1/3 * 1, 0)
     np.testing.assert_allclose(inflow, [0, 1 / 3, 1.0], rtol=1e-15)
     np.testing.assert_allclose(outflow, [1.0, 1 / 3, 0], rtol=1e-15)
@@ -99,7 +107,7 @@ def test_limited_euler_stage_empties_a_sender_exactly_and_keeps_prices_non_negat
     ws.first.z_rate[:] = [-5.0, 3.0]  # price rates of point 0
     _fill(ws, 0, f, np.ones(2), x - lo, hi - x)  # outflow of 0: 0.2 per s
     x_out, z_out = np.empty(2), np.empty(2)
-    limited_stage(ws.first, ws.first_limited, 5.0, x, np.array([1.0, 1.0]), RULES, x_out, z_out)
+    _limited(ws, 5.0, x, np.array([1.0, 1.0]), x_out, z_out)
     # 5 s would move 1.0 out of a sender holding 0.2: it is scaled to empty exactly
     np.testing.assert_allclose(x_out, [0.0, 1.0], rtol=0, atol=4 * np.finfo(float).eps)
     np.testing.assert_array_equal(z_out, [0.0, 16.0])  # 1 - 25 projected to 0; 1 + 15
@@ -113,7 +121,7 @@ def test_limited_euler_stage_with_both_ends_limited_stays_inside():
     ws = workspace(2, 0, 0, 1)
     _fill(ws, 0, f, np.ones(2), x - lo, hi - x)
     x_out = np.empty(2)
-    limited_stage(ws.first, ws.first_limited, 100.0, x, np.zeros(0), RULES, x_out, np.zeros(0))
+    _limited(ws, 100.0, x, np.zeros(0), x_out, np.zeros(0))
     moved = 100.0 * (0.2 * 0.2 / 20.0) * (1.0 * 0.2 / 20.0)  # h * v2 * w2 * gap
     np.testing.assert_allclose(x_out, [0.2 - moved, 0.8 + moved], rtol=1e-14)
     _check_domain(x_out, x, lo, hi)
@@ -130,7 +138,8 @@ def test_heun_combination_matches_numpy_and_stays_in_the_domain(n, seed, h):
     f2, w2, v2 = rng.normal(0, 1, n), (rng.random(n) < 0.8).astype(float), np.maximum(x1 - lo, 0)
     in2, out2 = _fill(ws, 1, f2, w2, v2, np.maximum(hi - x1, 0.0))
     x_out = np.empty(n)
-    heun_combination(h, x.copy(), np.zeros(0), RULES, ws, x_out, np.zeros(0))
+    heun_combination(h, x.copy(), np.zeros(0), RULES, ws.first, ws.second, ws.first_limited,
+                     ws.second_limited, x_out, np.zeros(0))  # fmt: skip
     half = 0.5 * h
     out, into = half * (out1 + out2), half * (in1 + in2)
     alpha = np.where(out > v1, v1 / np.where(out > 0, out, 1.0), 1.0)

@@ -33,7 +33,8 @@ def test_one_evaluation_equals_the_reference(problem, mode, dynamics, graph):
     z = rng.uniform(0.0, 20.0, len(engine.z))
     stage = Stage.empty(len(x), len(z))
     work = GameWork.empty(len(problem.limit))
-    evaluate(stage, x, z, engine.term, engine.params, minute, work)
+    evaluate(x, z, stage.p, stage.f, stage.w, stage.v, stage.room, stage.inflow, stage.outflow,
+             stage.z_rate, stage.order, engine.term, engine.params, minute, work)  # fmt: skip
     reference = ReferenceMinute(problem, settings, PEAK_MINUTE)
     (f, w, v, room, inflow, outflow, z_rate), _, _ = reference.evaluate(x, z)
     np.testing.assert_array_equal(stage.p, x * minute.demand)

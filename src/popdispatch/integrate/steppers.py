@@ -19,7 +19,10 @@ stays large.)
   iteration, capped by a stiffness estimate (exact mode).
 
 Controller states ``z`` are integrated alongside and kept non-negative. Everything here is
-compiled and allocation-free; the workspace's records are unpacked once per step.
+compiled and allocation-free. The records (:class:`Workspace`, :class:`Stage`, ...) are taken
+apart once per iteration and the per-substep kernels take their arrays: numba reference-counts
+every array of a record each time the record is handed to an inlined function, which made the
+paper-mode minute 1.5x slower when the records went down to the innermost loop.
 """
 
 from __future__ import annotations
@@ -113,26 +116,27 @@ def workspace(n: int, n_lines: int, n_states: int, window: int) -> Workspace:
 
 
 @nb.njit(cache=True, inline="always")
-def limited_stage(stage, limited, h, x, z, term, x_out, z_out):
-    """``x_out = x + h * (inflow - outflow)`` of ``stage`` with the flux limiter (scratch
-    ``limited``); ``z_out = max(z + h z_rate, 0)``. ``x_out`` may be ``x``."""
-    f, w, v, room = stage.f, stage.w, stage.v, stage.room
-    inflow, outflow, z_rate = stage.inflow, stage.outflow, stage.z_rate
-    w2, v2, in2, out2 = limited.w, limited.v, limited.inflow, limited.outflow
+def limited_stage(h, x, z, f, w, v, room, inflow, outflow, z_rate, order, limited_w, limited_v,
+                  limited_in, limited_out, complete, indptr, indices, x_out, z_out):  # fmt: skip
+    """``x_out = x + h * (inflow - outflow)`` of one :class:`Stage` (its arrays ``f`` ..
+    ``order``) with the flux limiter (scratch: the arrays of a :class:`Limited`);
+    ``z_out = max(z + h z_rate, 0)``. ``x_out`` may be ``x``. Arrays, not records, for the
+    reason given at :func:`popdispatch.integrate.term.evaluate`."""
     limited_any = False
     for i in range(x.shape[0]):
-        w2[i] = w[i]
-        v2[i] = v[i]
+        limited_w[i] = w[i]
+        limited_v[i] = v[i]
         if h * outflow[i] > v[i]:
-            v2[i] = v[i] * (v[i] / (h * outflow[i]))
+            limited_v[i] = v[i] * (v[i] / (h * outflow[i]))
             limited_any = True
         if h * inflow[i] > room[i]:
-            w2[i] = w[i] * (room[i] / (h * inflow[i]))
+            limited_w[i] = w[i] * (room[i] / (h * inflow[i]))
             limited_any = True
     if limited_any:
-        pairwise_flows(f, w2, v2, term.complete, term.indptr, term.indices, stage.order, in2, out2)
+        pairwise_flows(f, limited_w, limited_v, complete, indptr, indices, order, limited_in,
+                       limited_out)  # fmt: skip
         for i in range(x.shape[0]):
-            x_out[i] = x[i] + h * (in2[i] - out2[i])
+            x_out[i] = x[i] + h * (limited_in[i] - limited_out[i])
     else:
         for i in range(x.shape[0]):
             x_out[i] = x[i] + h * (inflow[i] - outflow[i])
@@ -154,28 +158,34 @@ def error_norm(x_high, x_low, z_high, z_low, rtol, atol, price_atol):
 @nb.njit(cache=True)
 def advance_euler(x, z, term, params, minute, ws, stepper):
     """One iteration of ``substeps`` limited Euler steps; ``(congested, residual)``."""
-    first, limited, work, evaluations = ws.first, ws.first_limited, ws.game, ws.counters.evaluations
+    one, lim, work, evaluations = ws.first, ws.first_limited, ws.game, ws.counters.evaluations
+    p, f, w, v, room = one.p, one.f, one.w, one.v, one.room
+    inflow, outflow, z_rate, order = one.inflow, one.outflow, one.z_rate, one.order
+    lim_w, lim_v, lim_in, lim_out = lim.w, lim.v, lim.inflow, lim.outflow
+    complete, indptr, indices = term.complete, term.indptr, term.indices
     congested = 0.0
     residual = 0.0
     h = stepper.dt / stepper.substeps
     for _ in range(stepper.substeps):
         evaluations[0] += 1
-        congestion, residual = evaluate(first, x, z, term, params, minute, work)
+        congestion, residual = evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate, order,
+                                        term, params, minute, work)  # fmt: skip
         congested = max(congested, congestion)
-        limited_stage(first, limited, h, x, z, term, x, z)
+        limited_stage(h, x, z, f, w, v, room, inflow, outflow, z_rate, order, lim_w, lim_v,
+                      lim_in, lim_out, complete, indptr, indices, x, z)  # fmt: skip
     return congested, residual
 
 
 @nb.njit(cache=True, inline="always")
-def heun_combination(h, x, z, term, ws, x_out, z_out):
+def heun_combination(h, x, z, term, one, two, lim1, lim2, x_out, z_out):
     """``x_out = x + h/2 (k1 + k2)`` from the raw flows at both points, flux-limited as one step.
 
     Where the combined step would carry a strategy past its movable mass or its room, the
     senders' (receivers') weights at both points are scaled down together so that it lands
     exactly on its limit; a strategy driven into a limit thus reaches it, instead of halving
-    its distance each step as a convex combination of limited stages would.
+    its distance each step as a convex combination of limited stages would. ``one``, ``two``:
+    the :class:`Stage` of each point; ``lim1``, ``lim2``: scratch :class:`Limited`.
     """
-    one, two, lim1, lim2 = ws.first, ws.second, ws.first_limited, ws.second_limited
     f1, w1, v1, room1, in1, out1 = one.f, one.w, one.v, one.room, one.inflow, one.outflow
     f2, w2, v2, in2, out2 = two.f, two.w, two.v, two.inflow, two.outflow
     sw1, sv1, sin1, sout1 = lim1.w, lim1.v, lim1.inflow, lim1.outflow
@@ -209,7 +219,7 @@ def heun_combination(h, x, z, term, ws, x_out, z_out):
 
 
 @nb.njit(cache=True, inline="always")
-def stiffness(h, x, z, ws, rtol, atol, price_atol):
+def stiffness(h, x, z, one, two, rtol, atol, price_atol):
     """Largest rate the last step saw, ``||k2 - k1|| / ||x1 - x||`` (1/s), in the error norm's
     scaling, over the components the limiter left alone.
 
@@ -219,7 +229,6 @@ def stiffness(h, x, z, ws, rtol, atol, price_atol):
     Capping the step by this estimate keeps Heun inside its stability region. Strategies that
     the limiter stopped at a limit are left out: their fast approach is absorbed exactly.
     """
-    one, two = ws.first, ws.second
     v1, room1, in1, out1 = one.v, one.room, one.inflow, one.outflow
     in2, out2, zr1, zr2 = two.inflow, two.outflow, one.z_rate, two.z_rate
     moved = 0.0
@@ -249,8 +258,14 @@ def stiffness(h, x, z, ws, rtol, atol, price_atol):
 def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
     """One iteration of adaptive Heun steps; ``(congested, largest residual, next h_try)``."""
     rtol, atol, price_atol, dt = stepper.rtol, stepper.atol, stepper.price_atol, stepper.dt
-    first, second, work, counters = ws.first, ws.second, ws.game, ws.counters
+    one, two, lim1, lim2 = ws.first, ws.second, ws.first_limited, ws.second_limited
+    work, counters = ws.game, ws.counters
     x1, x2, z1, z2 = ws.x_euler, ws.x_heun, ws.z_euler, ws.z_heun
+    p1, f1, w1, v1, room1 = one.p, one.f, one.w, one.v, one.room
+    in1, out1, zr1, order1 = one.inflow, one.outflow, one.z_rate, one.order
+    p2, f2, w2, v2, room2 = two.p, two.f, two.w, two.v, two.room
+    in2, out2, zr2, order2 = two.inflow, two.outflow, two.z_rate, two.order
+    complete, indptr, indices = term.complete, term.indptr, term.indices
     remaining = dt
     congested = 0.0
     residual = 0.0
@@ -260,17 +275,20 @@ def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
             # residual: the largest at the start of any step, the iteration's first sample
             # included (the last step's alone missed a period-3 price oscillation)
             counters.evaluations[0] += 1
-            congestion, step_residual = evaluate(first, x, z, term, params, minute, work)
+            congestion, step_residual = evaluate(x, z, p1, f1, w1, v1, room1, in1, out1, zr1,
+                                                 order1, term, params, minute, work)  # fmt: skip
             congested = max(congested, congestion)
             residual = max(residual, step_residual)
             fresh = True
         h = min(h_try, remaining)
-        limited_stage(first, ws.first_limited, h, x, z, term, x1, z1)
+        limited_stage(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, lim1.w, lim1.v,
+                      lim1.inflow, lim1.outflow, complete, indptr, indices, x1, z1)  # fmt: skip
         counters.evaluations[0] += 1
-        evaluate(second, x1, z1, term, params, minute, work)
-        heun_combination(h, x, z, term, ws, x2, z2)
+        evaluate(x1, z1, p2, f2, w2, v2, room2, in2, out2, zr2, order2, term, params, minute,
+                 work)  # fmt: skip
+        heun_combination(h, x, z, term, one, two, lim1, lim2, x2, z2)
         err = error_norm(x2, x1, z2, z1, rtol, atol, price_atol)
-        rate = stiffness(h, x, z, ws, rtol, atol, price_atol)
+        rate = stiffness(h, x, z, one, two, rtol, atol, price_atol)
         if err <= 1.0:
             x[:] = x2
             z[:] = z2

@@ -62,22 +62,24 @@ class Stage(NamedTuple):
 
 
 @nb.njit(cache=True, inline="always")
-def evaluate(stage, x, z, term, params, minute, work):
-    """Fitness, weights and raw pairwise flows at ``(x, z)`` into ``stage``.
+def evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, params, minute, work):
+    """Fitness, weights and raw pairwise flows at ``(x, z)`` into the arrays of one
+    :class:`Stage` (``p`` .. ``order``, its fields by name; the steppers take them out of the
+    record once per iteration, since numba reference-counts every array of a record each time
+    the record is handed to an inlined function).
 
-    ``params``: :class:`~popdispatch.game.parameters.GameParameters`; ``minute``:
-    :class:`~popdispatch.game.parameters.MinuteInputs`; ``work``: the game's scratch
-    (:class:`~popdispatch.game.parameters.GameWork`). Returns ``(congestion, residual)`` of
-    the game.
+    ``term``: :class:`Term`; ``params``: :class:`~popdispatch.game.parameters.GameParameters`;
+    ``minute``: :class:`~popdispatch.game.parameters.MinuteInputs`; ``work``: the game's
+    scratch (:class:`~popdispatch.game.parameters.GameWork`). Returns ``(congestion,
+    residual)`` of the game.
     """
-    p, f, w, v, room = stage.p, stage.f, stage.w, stage.v, stage.room
     demand = minute.demand
     for i in range(x.shape[0]):
         p[i] = x[i] * demand
-    congestion, residual = payoff(term.mode, p, z, params, minute, work, f, stage.z_rate)
+    congestion, residual = payoff(term.mode, p, z, params, minute, work, f, z_rate)
     field_weights(term.field, x, minute.lo, minute.hi, minute.active, w, v, room)
-    if term.complete:
-        sort_by_fitness(f, stage.order)
-    pairwise_flows(f, w, v, term.complete, term.indptr, term.indices, stage.order,
-                   stage.inflow, stage.outflow)  # fmt: skip
+    complete = term.complete
+    if complete:
+        sort_by_fitness(f, order)
+    pairwise_flows(f, w, v, complete, term.indptr, term.indices, order, inflow, outflow)
     return congestion, residual
