@@ -11,7 +11,7 @@ import pytest
 from popdispatch.game.controllers import broadcast_signals
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
 from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs
-from popdispatch.modes import MODES, ModeCode, payoff
+from popdispatch.modes import MODES, ModeCode
 from popdispatch.reference import game
 from popdispatch.scenarios import CONGESTION_PATH, PEAK_MINUTE, elv_problem
 
@@ -34,7 +34,8 @@ def _payoff(problem, mode, p, z, fp):
     minute = MinuteInputs.of(problem, PEAK_MINUTE)
     fitness, z_rate = np.empty(len(p)), np.empty(len(z))
     work = GameWork.empty(len(problem.limit))
-    congestion, residual = payoff(mode.code, p, z, params, minute, work, fitness, z_rate)
+    payoff = importlib.import_module(f"popdispatch.modes.{mode.name}").payoff
+    congestion, residual = payoff(p, z, params, minute, work, fitness, z_rate)
     return fitness, z_rate, congestion, residual
 
 

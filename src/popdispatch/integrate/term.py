@@ -1,8 +1,9 @@
 """The ODE term: evaluation of the vector field at a state (game + weights + pairwise flows).
 
 ``x' = inflow - outflow`` of the pairwise flows (:mod:`popdispatch.dynamics.pairwise`) whose
-fitness is the mode's payoff map (:func:`popdispatch.modes.payoff`) and whose weights are the
-dynamic's (:func:`popdispatch.dynamics.fields.field_weights`); ``z' = z_rate``, the mode's
+fitness is the mode's payoff map (``payoff`` of the mode's module in :mod:`popdispatch.modes`,
+reached by its :class:`~popdispatch.modes.ModeCode`) and whose weights are the dynamic's
+(:func:`popdispatch.dynamics.fields.field_weights`); ``z' = z_rate``, the mode's
 controller-state map. One evaluation fills a :class:`Stage`; the steppers combine stages.
 """
 
@@ -15,7 +16,9 @@ import numpy as np
 
 from popdispatch.dynamics.fields import Field, field_weights
 from popdispatch.dynamics.pairwise import pairwise_flows, sort_by_fitness
-from popdispatch.modes import ModeCode, payoff
+from popdispatch.modes import ModeCode
+from popdispatch.modes.exact import payoff as exact_payoff
+from popdispatch.modes.paper import payoff as paper_payoff
 
 
 class Term(NamedTuple):
@@ -76,7 +79,13 @@ def evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, param
     demand = minute.demand
     for i in range(x.shape[0]):
         p[i] = x[i] * demand
-    congestion, residual = payoff(term.mode, p, z, params, minute, work, f, z_rate)
+    # the mode's payoff map by static dispatch (numba caches it on disk, unlike a function
+    # argument), straight to the mode's kernel: a dispatching layer between would hand the
+    # records on once more, and numba reference-counts their arrays at every inlined call
+    if term.mode == ModeCode.PAPER:
+        congestion, residual = paper_payoff(p, z, params, minute, work, f, z_rate)
+    else:
+        congestion, residual = exact_payoff(p, z, params, minute, work, f, z_rate)
     field_weights(term.field, x, minute.lo, minute.hi, minute.active, w, v, room)
     complete = term.complete
     if complete:
