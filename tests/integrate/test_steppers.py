@@ -9,8 +9,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from popdispatch.dynamics.fields import Field
+from popdispatch.game.parameters import GameParameters, MinuteInputs
 from popdispatch.integrate import Term, workspace
-from popdispatch.integrate.steppers import heun_combination, limited_stage
+from popdispatch.integrate.steppers import euler_steps, heun_combination
 from popdispatch.modes import ModeCode
 
 EMPTY = np.zeros(0, dtype=np.int64)
@@ -43,11 +44,17 @@ def _state(rng, n):
 
 
 def _limited(ws, h, x, z, x_out, z_out):
-    """limited_stage on the first stage of ``ws``, its arrays by name."""
-    one, lim = ws.first, ws.first_limited
-    limited_stage(h, x, z, one.f, one.w, one.v, one.room, one.inflow, one.outflow, one.z_rate,
-                  one.order, lim.w, lim.v, lim.inflow, lim.outflow, RULES.complete,
-                  RULES.indptr, RULES.indices, x_out, z_out)  # fmt: skip
+    """One limited Euler step (euler_steps without an evaluation) on the first stage of
+    ``ws``, which holds the field at ``x`` already; the game (no lines) is not evaluated."""
+    n = len(x)
+    vector, lines = np.zeros(n), np.zeros(0)
+    params = GameParameters(b=vector, c=vector, pmin=vector, pmax=vector, B=0.0, m=0.0, C=0.0,
+                            gain=1.0, price_rate=0.0, limit=lines, generator_line=EMPTY,
+                            line_up=EMPTY, line_preorder=EMPTY)  # fmt: skip
+    minute = MinuteInputs(demand=1.0, load_flow=lines, lo=vector, hi=vector,
+                          active=np.ones(n, dtype=bool))  # fmt: skip
+    euler_steps(1, False, h, x, z, RULES, params, minute, ws.first, ws.first_limited, ws.game,
+                ws.counters.evaluations, x_out, z_out)  # fmt: skip
 
 
 def _fill(ws, point, f, w, v, room):
