@@ -111,7 +111,9 @@ class Engine:
         x = np.array(x, dtype=float)
         minute_inputs = MinuteInputs.of(self.problem, minute)
         weight = np.empty_like(x)
-        warm_start(SHARES, self.mode.bounded, x, 0.0, minute_inputs.demand, self.params.pmin,
+        # the policy as its integer: numba types an IntEnum member slowly (about 40 us a call,
+        # a fifth of an exact-mode minute)
+        warm_start(int(SHARES), self.mode.bounded, x, 0.0, minute_inputs.demand, self.params.pmin,
                    self.params.pmax, minute_inputs.active, weight)  # fmt: skip
         integrator = self.settings.stepping
         if max_iterations is not None:
