@@ -321,6 +321,19 @@ def _open_switched(net, et: str) -> set:
     return set(switch.element[opened].astype(np.int64).tolist())
 
 
+def _kept_branches(net, table, from_col: str, to_col: str, switch_et: str, position, bus_ok):
+    """``(rows, a, b)``: the rows of a branch table that are in service, end on kept buses and
+    are not opened by a switch of element type ``switch_et``, with their end positions."""
+    a = position.get_indexer(table[from_col])
+    b = position.get_indexer(table[to_col])
+    ok = _in_service(table) & (a >= 0) & (b >= 0)
+    ok[ok] &= bus_ok[a[ok]] & bus_ok[b[ok]]
+    opened = _open_switched(net, switch_et)
+    if opened:
+        ok &= ~table.index.isin(list(opened))
+    return table[ok], a[ok], b[ok]
+
+
 def _branches(net, position: pd.Index, bus_ok: np.ndarray) -> pd.DataFrame:
     """In-service lines and transformers: end positions ``a``, ``b`` (``a`` is the HV side of
     a transformer: ``hv_first``), nominal kV ``v_kv`` of the impedances, ohm, limit kW."""
@@ -328,15 +341,7 @@ def _branches(net, position: pd.Index, bus_ok: np.ndarray) -> pd.DataFrame:
     parts = []
     line = _table(net, "line")
     if line is not None:
-        a = position.get_indexer(line.from_bus)
-        b = position.get_indexer(line.to_bus)
-        ok = _in_service(line) & (a >= 0) & (b >= 0)
-        ok[ok] &= bus_ok[a[ok]] & bus_ok[b[ok]]
-        opened = _open_switched(net, "l")
-        if opened:
-            ok &= ~line.index.isin(list(opened))
-        line = line[ok]
-        a, b = a[ok], b[ok]
+        line, a, b = _kept_branches(net, line, "from_bus", "to_bus", "l", position, bus_ok)
         parallel = _finite(line, "parallel", 1.0)
         length = line.length_km.to_numpy(float)
         i_ka = _finite(line, "max_i_ka", np.nan) * _finite(line, "df", 1.0) * parallel
@@ -362,15 +367,7 @@ def _branches(net, position: pd.Index, bus_ok: np.ndarray) -> pd.DataFrame:
         )
     trafo = _table(net, "trafo")
     if trafo is not None:
-        a = position.get_indexer(trafo.hv_bus)
-        b = position.get_indexer(trafo.lv_bus)
-        ok = _in_service(trafo) & (a >= 0) & (b >= 0)
-        ok[ok] &= bus_ok[a[ok]] & bus_ok[b[ok]]
-        opened = _open_switched(net, "t")
-        if opened:
-            ok &= ~trafo.index.isin(list(opened))
-        trafo = trafo[ok]
-        a, b = a[ok], b[ok]
+        trafo, a, b = _kept_branches(net, trafo, "hv_bus", "lv_bus", "t", position, bus_ok)
         parallel = _finite(trafo, "parallel", 1.0)
         sn = trafo.sn_mva.to_numpy(float)
         z = trafo.vk_percent.to_numpy(float) / 100.0
