@@ -1,6 +1,7 @@
 """The steppers' flux-limited stages on their own (popdispatch.integrate.steppers): the limited
 Euler stage and the Heun combination on hand-made states, against plain numpy in the test,
-called with the named records the engine passes (:class:`Workspace`, :class:`Term`)."""
+called with the arrays the steppers take out of the named records (:class:`Workspace`,
+:class:`Term`)."""
 
 from __future__ import annotations
 
@@ -53,7 +54,8 @@ def _limited(ws, h, x, z, x_out, z_out):
                             line_up=EMPTY, line_preorder=EMPTY)  # fmt: skip
     minute = MinuteInputs(demand=1.0, load_flow=lines, lo=vector, hi=vector,
                           active=np.ones(n, dtype=bool))  # fmt: skip
-    euler_steps(1, False, h, x, z, RULES, params, minute, ws.first, ws.first_limited, ws.game,
+    one = ws.first
+    euler_steps(1, False, h, x, z, RULES, params, minute, *one, ws.first_limited, ws.game,
                 ws.counters.evaluations, x_out, z_out)  # fmt: skip
 
 
@@ -145,8 +147,10 @@ def test_heun_combination_matches_numpy_and_stays_in_the_domain(n, seed, h):
     f2, w2, v2 = rng.normal(0, 1, n), (rng.random(n) < 0.8).astype(float), np.maximum(x1 - lo, 0)
     in2, out2 = _fill(ws, 1, f2, w2, v2, np.maximum(hi - x1, 0.0))
     x_out = np.empty(n)
-    heun_combination(h, x.copy(), np.zeros(0), RULES, ws.first, ws.second, ws.first_limited,
-                     ws.second_limited, x_out, np.zeros(0))  # fmt: skip
+    one, two = ws.first, ws.second
+    heun_combination(h, x.copy(), np.zeros(0), *one[1:], two.f, two.w, two.v,
+                     two.inflow, two.outflow, two.z_rate, two.order, ws.first_limited,
+                     ws.second_limited, *RULES[2:], x_out, np.zeros(0))  # fmt: skip
     half = 0.5 * h
     out, into = half * (out1 + out2), half * (in1 + in2)
     alpha = np.where(out > v1, v1 / np.where(out > 0, out, 1.0), 1.0)

@@ -116,12 +116,14 @@ def workspace(n: int, n_lines: int, n_states: int, window: int) -> Workspace:
 
 
 @nb.njit(cache=True, inline="always")
-def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, one, lim, work, evaluations,
-                x_out, z_out):  # fmt: skip
+def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v, room, inflow,
+                outflow, z_rate, order, lim, work, evaluations, x_out, z_out):  # fmt: skip
     """``steps`` limited Euler steps of length ``h`` from ``(x, z)`` to ``(x_out, z_out)``
-    (which may be ``x``, ``z``), each evaluating the field into the :class:`Stage` ``one``
-    first (the first one only with ``evaluate_first``: else ``one`` holds the field at ``x``
-    already); ``(largest congestion, last residual)`` of the evaluations (0 without any).
+    (which may be ``x``, ``z``), each evaluating the field into the arrays ``p`` .. ``order``
+    of one :class:`Stage` first (the first one only with ``evaluate_first``: else they hold
+    the field at ``x`` already); ``(largest congestion, last residual)`` of the evaluations
+    (0 without any). The caller takes the stage apart once per iteration: Heun calls this in
+    its step loop, where numba reference-counts every array of a record handed on.
 
     A step: ``x_out = x + h * (inflow - outflow)`` with the flux limiter (scratch: the
     :class:`Limited` ``lim``), ``z_out = max(z + h z_rate, 0)``. The records are taken apart
@@ -129,8 +131,6 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, one, lim, 
     array handed to an inlined function at each call, which cost paper mode (its minute is
     about 1400 steps on 6 generators) a quarter of its time when the limiter was a function.
     """
-    p, f, w, v, room = one.p, one.f, one.w, one.v, one.room
-    inflow, outflow, z_rate, order = one.inflow, one.outflow, one.z_rate, one.order
     lim_w, lim_v, lim_in, lim_out = lim.w, lim.v, lim.inflow, lim.outflow
     complete, indptr, indices = term.complete, term.indptr, term.indices
     congested = 0.0
@@ -178,26 +178,30 @@ def error_norm(x_high, x_low, z_high, z_low, rtol, atol, price_atol):
 @nb.njit(cache=True)
 def advance_euler(x, z, term, params, minute, ws, stepper):
     """One iteration of ``substeps`` limited Euler steps; ``(congested, residual)``."""
+    one = ws.first
     return euler_steps(stepper.substeps, True, stepper.dt / stepper.substeps, x, z, term, params,
-                       minute, ws.first, ws.first_limited, ws.game, ws.counters.evaluations, x,
-                       z)  # fmt: skip
+                       minute, one.p, one.f, one.w, one.v, one.room, one.inflow, one.outflow,
+                       one.z_rate, one.order, ws.first_limited, ws.game, ws.counters.evaluations,
+                       x, z)  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
-def heun_combination(h, x, z, term, one, two, lim1, lim2, x_out, z_out):
+def heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2, v2, in2, out2,
+                     zr2, order2, lim1, lim2, complete, indptr, indices, x_out, z_out):  # fmt: skip
     """``x_out = x + h/2 (k1 + k2)`` from the raw flows at both points, flux-limited as one step.
 
     Where the combined step would carry a strategy past its movable mass or its room, the
     senders' (receivers') weights at both points are scaled down together so that it lands
     exactly on its limit; a strategy driven into a limit thus reaches it, instead of halving
-    its distance each step as a convex combination of limited stages would. ``one``, ``two``:
-    the :class:`Stage` of each point; ``lim1``, ``lim2``: scratch :class:`Limited`.
+    its distance each step as a convex combination of limited stages would. ``f1`` ..
+    ``order1``, ``f2`` .. ``order2``: the arrays of the :class:`Stage` of each point that are
+    read (taken apart once per iteration by :func:`advance_heun`: numba reference-counts
+    every array of a record handed to an inlined function, at every step); ``lim1``,
+    ``lim2``: scratch :class:`Limited`; ``complete``, ``indptr``, ``indices``: the
+    :class:`~popdispatch.integrate.term.Term`'s graph.
     """
-    f1, w1, v1, room1, in1, out1 = one.f, one.w, one.v, one.room, one.inflow, one.outflow
-    f2, w2, v2, in2, out2 = two.f, two.w, two.v, two.inflow, two.outflow
     sw1, sv1, sin1, sout1 = lim1.w, lim1.v, lim1.inflow, lim1.outflow
     sw2, sv2, sin2, sout2 = lim2.w, lim2.v, lim2.inflow, lim2.outflow
-    complete, indptr, indices = term.complete, term.indptr, term.indices
     half = 0.5 * h
     limited = False
     for i in range(x.shape[0]):
@@ -213,20 +217,19 @@ def heun_combination(h, x, z, term, one, two, lim1, lim2, x_out, z_out):
             limited = True
         sw1[i], sv1[i], sw2[i], sv2[i] = beta * w1[i], alpha * v1[i], beta * w2[i], alpha * v2[i]
     if limited:
-        pairwise_flows(f1, sw1, sv1, complete, indptr, indices, one.order, sin1, sout1)
-        pairwise_flows(f2, sw2, sv2, complete, indptr, indices, two.order, sin2, sout2)
+        pairwise_flows(f1, sw1, sv1, complete, indptr, indices, order1, sin1, sout1)
+        pairwise_flows(f2, sw2, sv2, complete, indptr, indices, order2, sin2, sout2)
         for i in range(x.shape[0]):
             x_out[i] = x[i] + half * (sin1[i] - sout1[i] + sin2[i] - sout2[i])
     else:
         for i in range(x.shape[0]):
             x_out[i] = x[i] + half * (in1[i] - out1[i] + in2[i] - out2[i])
-    zr1, zr2 = one.z_rate, two.z_rate
     for k in range(z.shape[0]):
         z_out[k] = max(z[k] + half * (zr1[k] + zr2[k]), 0.0)
 
 
 @nb.njit(cache=True, inline="always")
-def stiffness(h, x, z, one, two, rtol, atol, price_atol):
+def stiffness(h, x, z, v1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol, price_atol):
     """Largest rate the last step saw, ``||k2 - k1|| / ||x1 - x||`` (1/s), in the error norm's
     scaling, over the components the limiter left alone.
 
@@ -235,9 +238,8 @@ def stiffness(h, x, z, one, two, rtol, atol, price_atol):
     oscillation of the size of the error tolerance, far above the convergence tolerance.
     Capping the step by this estimate keeps Heun inside its stability region. Strategies that
     the limiter stopped at a limit are left out: their fast approach is absorbed exactly.
+    Takes the arrays of the two stages it reads (``1``: first point, ``2``: second).
     """
-    v1, room1, in1, out1 = one.v, one.room, one.inflow, one.outflow
-    in2, out2, zr1, zr2 = two.inflow, two.outflow, one.z_rate, two.z_rate
     moved = 0.0
     turned = 0.0
     for i in range(x.shape[0]):
@@ -268,8 +270,11 @@ def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
     one, two, lim1, lim2 = ws.first, ws.second, ws.first_limited, ws.second_limited
     work, counters = ws.game, ws.counters
     x1, x2, z1, z2 = ws.x_euler, ws.x_heun, ws.z_euler, ws.z_heun
+    p1, f1, w1, v1, room1, in1, out1 = one.p, one.f, one.w, one.v, one.room, one.inflow, one.outflow
+    zr1, order1 = one.z_rate, one.order
     p2, f2, w2, v2, room2 = two.p, two.f, two.w, two.v, two.room
     in2, out2, zr2, order2 = two.inflow, two.outflow, two.z_rate, two.order
+    complete, indptr, indices = term.complete, term.indptr, term.indices
     remaining = dt
     congested = 0.0
     residual = 0.0
@@ -280,7 +285,8 @@ def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
         # included (the last step's alone missed a period-3 price oscillation); a rejected
         # step's first evaluation is reused
         congestion, step_residual = euler_steps(1, not fresh, h, x, z, term, params, minute,
-                                                one, lim1, work, counters.evaluations, x1,
+                                                p1, f1, w1, v1, room1, in1, out1, zr1, order1,
+                                                lim1, work, counters.evaluations, x1,
                                                 z1)  # fmt: skip
         congested = max(congested, congestion)
         residual = max(residual, step_residual)
@@ -288,9 +294,12 @@ def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
         counters.evaluations[0] += 1
         evaluate(x1, z1, p2, f2, w2, v2, room2, in2, out2, zr2, order2, term, params, minute,
                  work)  # fmt: skip
-        heun_combination(h, x, z, term, one, two, lim1, lim2, x2, z2)
+        heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2, v2, in2,
+                         out2, zr2, order2, lim1, lim2, complete, indptr, indices, x2,
+                         z2)  # fmt: skip
         err = error_norm(x2, x1, z2, z1, rtol, atol, price_atol)
-        rate = stiffness(h, x, z, one, two, rtol, atol, price_atol)
+        rate = stiffness(h, x, z, v1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,
+                         price_atol)  # fmt: skip
         if err <= 1.0:
             x[:] = x2
             z[:] = z2
