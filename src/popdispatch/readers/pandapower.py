@@ -467,16 +467,22 @@ def _pick_root(sources, component, root_pos, bus_ids) -> int:
     )
 
 
+def _on_kept_buses(table, position: pd.Index, bus_ok: np.ndarray):
+    """``(rows, positions)``: the in-service rows of a bus-attached element table whose bus is
+    kept, with their bus positions."""
+    pos = position.get_indexer(table.bus)
+    ok = _in_service(table) & (pos >= 0)
+    ok[ok] &= bus_ok[pos[ok]]
+    return table[ok], pos[ok]
+
+
 def _loads(net, position: pd.Index, bus_ok: np.ndarray, rep: np.ndarray) -> pd.DataFrame:
     parts = []
     for key in ("load", "asymmetric_load"):
         table = _table(net, key)
         if table is None:
             continue
-        pos = position.get_indexer(table.bus)
-        ok = _in_service(table) & (pos >= 0)
-        ok[ok] &= bus_ok[pos[ok]]
-        table, pos = table[ok], pos[ok]
+        table, pos = _on_kept_buses(table, position, bus_ok)
         scaling = _finite(table, "scaling", 1.0)
         if key == "load":
             p = table.p_mw.to_numpy(float)
@@ -602,11 +608,9 @@ def _fleet(net, position, bus_ok, rep, keep, ext, root_pos, substation) -> pd.Da
         table = _table(net, et)
         if table is None:
             continue
-        pos = position.get_indexer(table.bus)
-        ok = _in_service(table) & (pos >= 0)
-        ok[ok] &= bus_ok[pos[ok]]
-        ok[ok] &= keep[rep[pos[ok]]]
-        table, pos = table[ok], pos[ok]
+        table, pos = _on_kept_buses(table, position, bus_ok)
+        kept = keep[rep[pos]]
+        table, pos = table[kept], pos[kept]
         sn = _finite(table, "sn_mva", np.nan)
         p = _finite(table, "p_mw", np.nan)
         lo, hi = _finite(table, "min_p_mw", np.nan), _finite(table, "max_p_mw", np.nan)
