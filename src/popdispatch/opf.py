@@ -10,6 +10,7 @@ are returned in kW. An infeasible problem is reported as infeasible, never as a 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import clarabel
@@ -119,8 +120,11 @@ def solve_opf(problem: DispatchProblem, minute: int) -> OpfResult:
     return OpfSolver(problem).solve(minute)
 
 
-def solve_opf_day(problem: DispatchProblem, minutes: np.ndarray | None = None) -> list[OpfResult]:
-    """Solve the DC-OPF of every minute (default 1..1440) with one solver built once."""
+def solve_opf_day(
+    problem: DispatchProblem, minutes: Iterable[int] | None = None
+) -> list[OpfResult]:
+    """Solve the DC-OPF of every minute (any iterable of 1-based minutes, e.g. one that drives
+    a progress bar; default 1..1440) with one solver built once."""
     minutes = np.arange(1, len(problem.demand) + 1) if minutes is None else minutes
     solver = OpfSolver(problem)
     return [solver.solve(int(m)) for m in minutes]

@@ -21,7 +21,7 @@ from popdispatch.feeder.profiles import LoadProfiles, single_minute_profiles
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.game.problem import DispatchProblem, build_problem
 from popdispatch.online import DayResult, RunSettings, SnapshotResult, run_day, run_snapshot
-from popdispatch.opf import OpfResult, OpfSolver, solve_opf
+from popdispatch.opf import OpfResult, solve_opf, solve_opf_day
 from popdispatch.report.progress import Progress
 
 PEAK_MINUTE = 566
@@ -120,9 +120,9 @@ def day_vs_opf(
 ) -> DayComparison:
     """Run the online day and solve the DC-OPF of each minute (with ``progress`` bars).
 
-    One DC-OPF solver serves the whole day (only its bounds change from minute to minute), as
-    in :func:`popdispatch.opf.solve_opf_day`: building a solver per minute cost about 2 ms
-    each, i.e. seconds per day, for the same results.
+    One DC-OPF solver serves the whole day (:func:`popdispatch.opf.solve_opf_day`: only its
+    bounds change from minute to minute); building a solver per minute cost about 2 ms each,
+    i.e. seconds per day, for the same results.
     """
     settings = settings or RunSettings()
     progress = progress or Progress(quiet=True)
@@ -130,12 +130,8 @@ def day_vs_opf(
     total = len(problem.demand) if minutes is None else len(minutes)
     with progress.counter(label, total) as advance:
         run = run_day(problem, settings, minutes, progress=advance)
-    solver = OpfSolver(problem)
-    opf = [
-        solver.solve(int(m))
-        for m in progress.iterate(run.minutes, "DC-OPF per minute", len(run.minutes))
-    ]
-    return DayComparison(run, opf)
+    minutes_bar = progress.iterate(run.minutes, "DC-OPF per minute", len(run.minutes))
+    return DayComparison(run, solve_opf_day(problem, minutes_bar))
 
 
 def base_day(profiles: LoadProfiles, settings: RunSettings | None = None) -> DayComparison:
