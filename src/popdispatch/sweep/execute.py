@@ -164,6 +164,19 @@ def _take(iterator: Iterator, n: int) -> list:
     return [item for _, item in zip(range(n), iterator, strict=False)]
 
 
+def check_profiles(scenarios: Sequence[Scenario], profiles) -> None:
+    """:class:`OptionError` (``--profiles``) before any work when random profile assignments
+    have no official profile folder to draw from."""
+    from popdispatch.errors import OptionError
+
+    if profiles is None and any(s.assignment.seed is not None for s in scenarios):
+        raise OptionError(
+            "random profile assignments need the official profiles: give --profiles DIR or "
+            "set POPDISPATCH_PROFILES",
+            "--profiles",
+        )
+
+
 def run_sweep(
     scenarios: Sequence[Scenario],
     out: str | Path,
@@ -184,6 +197,7 @@ def run_sweep(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     profiles = profiles or os.environ.get("POPDISPATCH_PROFILES", "").strip() or None
+    check_profiles(scenarios, profiles)
     context = Context(str(out.resolve()), str(Path(profiles).resolve()) if profiles else None)
     todo = pending(scenarios, out, retry_failed)
     result = SweepResult(total=len(scenarios), skipped=len(scenarios) - len(todo))

@@ -148,6 +148,10 @@ def read_summary(out: Path):
     spec's order."""
     import pandas as pd
 
+    from popdispatch.errors import OptionError
+
+    if not any((Path(out) / SUMMARY).glob(f"{PARTITION}=*/{PART}")):
+        raise OptionError(f"no sweep results in {out} ({SUMMARY} missing or empty)", "DIR")
     table = pd.read_parquet(Path(out) / SUMMARY)
     table[PARTITION] = table[PARTITION].astype(str)
     return table.sort_values("scenario_index", kind="stable").reset_index(drop=True)
