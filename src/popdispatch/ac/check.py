@@ -1,0 +1,450 @@
+"""The AC check of a dispatch: one power-grid-model power flow per time step, in one batch.
+
+Public functions:
+
+- :func:`power_flow`: the raw AC power flow of a built network (:mod:`popdispatch.ac.network`)
+  for per-step loads and generator set points (kW) -> :class:`ACFlows` (per step and bus or
+  line, people's units);
+- :func:`check_setpoints`: a feeder, loads and set points (kW, any number of steps) ->
+  :class:`ACDay`;
+- :func:`check_snapshot` / :func:`check_day`: what the ``snapshot`` / ``day`` commands hold
+  (the problem, the load profiles and the run or its comparison with the DC-OPF) ->
+  :class:`ACSnapshot` / :class:`ACDay`, each with a JSON-ready ``summary()``.
+
+Units: kW, kvar, A, p.u. of the nominal voltage, degrees. The source bus is an ideal voltage
+source; what it supplies beyond the dispatched generators (``source_extra_kw``) is the losses
+plus whatever the dispatch leaves unbalanced (``dc_mismatch_kw``, load minus dispatched
+generation, 0 for a balanced dispatch).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+
+from popdispatch.ac.network import (
+    W_PER_KW,
+    ACModel,
+    ACNetwork,
+    build_network,
+    check_step_arrays,
+    power_grid_model,
+    update_data,
+)
+from popdispatch.errors import InfeasibleError, OptionError, ProfileError
+from popdispatch.feeder.model import Feeder
+
+if TYPE_CHECKING:  # the engine's modules are not needed to check a dispatch
+    from popdispatch.feeder.profiles import LoadProfiles
+    from popdispatch.game.problem import DispatchProblem
+
+#: Per-step columns of :attr:`ACDay.steps` (units in the names).
+STEP_COLUMNS = [
+    "losses_kw", "v_min_pu", "v_min_bus", "v_max_pu", "v_max_bus", "max_loading_percent",
+    "max_loading_line", "max_current_a", "source_extra_kw", "source_kvar", "load_kw",
+    "generation_kw",
+]  # fmt: skip
+#: Default power-flow tolerance: largest voltage change between iterations, p.u.
+TOLERANCE_PU = 1e-10
+
+
+@dataclass(frozen=True)
+class ACFlows:
+    """AC power-flow results of several time steps (rows), feeder order of buses and lines.
+
+    Attributes
+    ----------
+    v_pu, angle_deg : (steps, buses) voltage magnitude (p.u.) and angle (degrees).
+    p_from_kw, q_from_kvar, p_to_kw, q_to_kvar : (steps, lines) power entering each line at
+        its ``from_bus`` / ``to_bus`` end, kW / kvar (``p_from + p_to`` is the line's loss).
+    current_a : (steps, lines) the larger of the line's two end currents, A.
+    source_kw, source_kvar : (steps,) what the ideal source supplies, kW / kvar.
+    """
+
+    v_pu: np.ndarray
+    angle_deg: np.ndarray
+    p_from_kw: np.ndarray
+    q_from_kvar: np.ndarray
+    p_to_kw: np.ndarray
+    q_to_kvar: np.ndarray
+    current_a: np.ndarray
+    source_kw: np.ndarray
+    source_kvar: np.ndarray
+
+    @property
+    def loss_kw(self) -> np.ndarray:
+        """(steps, lines) each line's active-power loss, kW."""
+        return self.p_from_kw + self.p_to_kw
+
+
+_BRANCH_OUTPUT = ["p_from", "q_from", "p_to", "q_to", "i_from", "i_to"]
+
+
+def power_flow(
+    network: ACNetwork,
+    load_kw: np.ndarray,
+    generator_kw: np.ndarray,
+    *,
+    tolerance_pu: float = TOLERANCE_PU,
+    steps: np.ndarray | None = None,
+) -> ACFlows:
+    """AC power flow of every step in one power-grid-model batch calculation.
+
+    ``load_kw``: (steps, loads), feeder load order, kW; ``generator_kw``: (steps, generators),
+    feeder fleet order, kW; ``steps``: labels of the steps for error messages (e.g. minutes).
+    Method: power-grid-model's iterative current (fixed-point on the factorised admittance
+    matrix; the same solution as Newton-Raphson, to the tolerance, and faster on radial
+    feeders), until no voltage changes by more than ``tolerance_pu`` p.u.
+    Raises :class:`InfeasibleError` naming the first step whose power flow does not converge.
+    """
+    pgm = power_grid_model()
+    load_kw, generator_kw = check_step_arrays(network, load_kw, generator_kw)
+    if len(load_kw) != len(generator_kw):
+        raise OptionError(f"{len(load_kw)} steps of loads but {len(generator_kw)} of set points")
+    outputs = {"node": ["u_pu", "u_angle"], "line": _BRANCH_OUTPUT, "source": ["p", "q"]}
+    if len(network.link_rows):
+        outputs["link"] = _BRANCH_OUTPUT
+    model = pgm.PowerGridModel(network.input_data)
+    try:
+        out = model.calculate_power_flow(
+            update_data=update_data(network, load_kw, generator_kw),
+            calculation_method=pgm.CalculationMethod.iterative_current,
+            error_tolerance=tolerance_pu,
+            max_iterations=100,
+            output_component_types=outputs,
+        )
+    except pgm.errors.PowerGridError as exc:
+        raise InfeasibleError(_divergence_message(exc, steps)) from exc
+    return _flows(network, out, len(load_kw))
+
+
+def _divergence_message(exc: Exception, steps: np.ndarray | None) -> str:
+    """One line naming the first step that failed (power-grid-model's batch error)."""
+    failed = getattr(exc, "failed_scenarios", None)
+    first = int(failed[0]) if failed is not None and len(failed) else None
+    label = steps[first] if steps is not None and first is not None else first
+    where = f" at step {label}" if label is not None else ""
+    reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return f"AC power flow did not converge{where} (voltage collapse?): {reason}"
+
+
+def _flows(network: ACNetwork, out: dict, n_steps: int) -> ACFlows:
+    """power-grid-model output (SI, its id order) -> :class:`ACFlows` (kW, feeder order)."""
+    if not len(network.link_rows):  # every line has impedance: pgm's order is the feeder's
+        branch = out["line"]
+    else:
+        n_lines = len(network.feeder.lines)
+        branch = {name: np.zeros((n_steps, n_lines)) for name in _BRANCH_OUTPUT}
+        for kind, rows in (("line", network.line_rows), ("link", network.link_rows)):
+            for name in _BRANCH_OUTPUT:
+                branch[name][:, rows] = out[kind][name]
+    source = out["source"]
+    return ACFlows(
+        v_pu=out["node"]["u_pu"],
+        angle_deg=np.degrees(out["node"]["u_angle"]),
+        p_from_kw=branch["p_from"] / W_PER_KW,
+        q_from_kvar=branch["q_from"] / W_PER_KW,
+        p_to_kw=branch["p_to"] / W_PER_KW,
+        q_to_kvar=branch["q_to"] / W_PER_KW,
+        current_a=np.maximum(branch["i_from"], branch["i_to"]),
+        source_kw=source["p"][:, 0] / W_PER_KW,
+        source_kvar=source["q"][:, 0] / W_PER_KW,
+    )
+
+
+def loading_percent(network: ACNetwork, flows: ACFlows) -> np.ndarray:
+    """(steps, lines) each line's current in percent of its rated current (NaN: no rating)."""
+    return 100.0 * flows.current_a / network.rated_a
+
+
+def step_table(
+    network: ACNetwork,
+    flows: ACFlows,
+    load_kw: np.ndarray,
+    generator_kw: np.ndarray,
+    index: pd.Index,
+) -> pd.DataFrame:
+    """Per step: losses, voltage extremes with their buses, the most loaded rated line, what
+    the source supplied (columns :data:`STEP_COLUMNS`)."""
+    buses, lines = network.feeder.buses.index, network.feeder.lines.index
+    rows = np.arange(len(index))
+    low, high = flows.v_pu.argmin(axis=1), flows.v_pu.argmax(axis=1)
+    loading = loading_percent(network, flows)
+    rated = np.isfinite(network.rated_a)
+    if rated.any():
+        worst = np.flatnonzero(rated)[loading[:, rated].argmax(axis=1)]
+        worst_loading, worst_line = loading[rows, worst], lines[worst]
+    else:
+        worst_loading, worst_line = np.full(len(index), np.nan), [None] * len(index)
+    return pd.DataFrame(
+        {
+            "losses_kw": flows.loss_kw.sum(axis=1),
+            "v_min_pu": flows.v_pu[rows, low],
+            "v_min_bus": buses[low],
+            "v_max_pu": flows.v_pu[rows, high],
+            "v_max_bus": buses[high],
+            "max_loading_percent": worst_loading,
+            "max_loading_line": worst_line,
+            "max_current_a": flows.current_a.max(axis=1),
+            "source_extra_kw": flows.source_kw,
+            "source_kvar": flows.source_kvar,
+            "load_kw": load_kw.sum(axis=1),
+            "generation_kw": generator_kw.sum(axis=1),
+        },
+        index=index,
+    )
+
+
+def _json(value: Any) -> Any:
+    """numpy scalars and NaN as JSON values (NaN -> None)."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+@dataclass(frozen=True)
+class ACDay:
+    """The AC check of several time steps (a day, or any minutes).
+
+    Attributes
+    ----------
+    network : the power-grid-model network (rules in ``network.model``).
+    steps : index ``minute``; columns :data:`STEP_COLUMNS` (kW, kvar, p.u., A, percent).
+    flows : the full results per step, bus and line (:class:`ACFlows`).
+    """
+
+    network: ACNetwork
+    steps: pd.DataFrame
+    flows: ACFlows
+
+    @property
+    def model(self) -> ACModel:
+        return self.network.model
+
+    def v_pu(self) -> pd.DataFrame:
+        """Voltage (p.u.) per step (rows) and bus (columns)."""
+        return pd.DataFrame(self.flows.v_pu, self.steps.index, self.network.feeder.buses.index)
+
+    def loading_percent(self) -> pd.DataFrame:
+        """Loading (percent of the rated current) per step and rated line."""
+        rated = np.isfinite(self.network.rated_a)
+        table = loading_percent(self.network, self.flows)[:, rated]
+        return pd.DataFrame(table, self.steps.index, self.network.feeder.lines.index[rated])
+
+    def summary(self) -> dict:
+        """The extremes over the steps, each with its step (minute), bus or line; energies over
+        the steps taken as one minute each (kWh = sum of kW / 60)."""
+        s = self.steps
+        out: dict[str, Any] = {"steps": len(s)}
+        out["losses_kwh"] = float(s.losses_kw.sum() / 60.0)
+        out["source_extra_kwh"] = float(s.source_extra_kw.sum() / 60.0)
+        for key, column, pick in (
+            ("max_losses", "losses_kw", "idxmax"),
+            ("v_min", "v_min_pu", "idxmin"),
+            ("v_max", "v_max_pu", "idxmax"),
+            ("max_loading", "max_loading_percent", "idxmax"),
+            ("max_source_extra", "source_extra_kw", "idxmax"),
+        ):
+            values = s[column]
+            if values.notna().any():
+                at = getattr(values, pick)()
+                out[f"{key}_{column.rsplit('_', 1)[-1]}"] = _json(values[at])
+                out[f"{key}_minute"] = _json(at)
+                if key in ("v_min", "v_max"):
+                    out[f"{key}_bus"] = _json(s.at[at, f"{key}_bus"])
+                if key == "max_loading":
+                    out["max_loading_line"] = _json(s.at[at, "max_loading_line"])
+            else:
+                out[f"{key}_{column.rsplit('_', 1)[-1]}"] = None
+                out[f"{key}_minute"] = None
+                if key == "max_loading":
+                    out["max_loading_line"] = None
+        out["model"] = self.model.as_dict()
+        return out
+
+
+@dataclass(frozen=True)
+class ACSnapshot:
+    """The AC check of one time step.
+
+    Attributes
+    ----------
+    minute : the step (1-based minute), or None.
+    network : the power-grid-model network (rules in ``network.model``).
+    buses : index ``bus``; columns ``v_pu``, ``angle_deg``.
+    lines : index line name; columns ``from_bus``, ``to_bus``, ``p_from_kw``, ``q_from_kvar``,
+        ``p_to_kw``, ``q_to_kvar``, ``loss_kw``, ``current_a``, ``rated_a``, ``limit_kw``,
+        ``loading_percent`` (NaN where the line has no rating).
+    totals : the step's row of :data:`STEP_COLUMNS`.
+    """
+
+    minute: int | None
+    network: ACNetwork
+    buses: pd.DataFrame
+    lines: pd.DataFrame
+    totals: pd.Series
+
+    @property
+    def model(self) -> ACModel:
+        return self.network.model
+
+    def summary(self) -> dict:
+        """The ``ac`` JSON object: ``losses_kw``, ``v_min_pu``/``v_min_bus``,
+        ``v_max_pu``/``v_max_bus``, ``max_loading_percent``/``max_loading_line`` (None when no
+        line has a rating), ``max_current_a``, ``source_extra_kw`` (what the source supplied
+        beyond the dispatched generators), ``source_kvar``, ``load_kw``, ``generation_kw``,
+        ``dc_mismatch_kw`` (load minus dispatched generation) and the model's rules."""
+        out = {"minute": self.minute}
+        out.update({key: _json(value) for key, value in self.totals.items()})
+        out["dc_mismatch_kw"] = out["load_kw"] - out["generation_kw"]
+        out["model"] = self.model.as_dict()
+        return out
+
+
+def check_setpoints(
+    feeder: Feeder | ACNetwork,
+    load_kw: np.ndarray,
+    setpoints_kw: np.ndarray,
+    minutes: np.ndarray | None = None,
+    *,
+    tolerance_pu: float = TOLERANCE_PU,
+    **model_options: Any,
+) -> ACDay:
+    """AC check of set points on a feeder, any number of steps, in one batch.
+
+    Parameters
+    ----------
+    feeder : the full feeder, or a network already built from it (:func:`build_network`).
+    load_kw : (steps, loads) per-load demand in the feeder's load order, kW.
+    setpoints_kw : (steps, generators) set points in the feeder's fleet order, kW.
+    minutes : step labels (default 1..steps).
+    tolerance_pu : power-flow tolerance, p.u.
+    model_options : ``vn_kv``, ``source_pu``, ``load_pf``, ``generator_pf`` of
+        :func:`popdispatch.ac.network.build_network`.
+    """
+    network = feeder if isinstance(feeder, ACNetwork) else build_network(feeder, **model_options)
+    load_kw, setpoints_kw = check_step_arrays(network, load_kw, setpoints_kw)
+    steps = np.arange(1, len(load_kw) + 1) if minutes is None else np.asarray(minutes)
+    flows = power_flow(network, load_kw, setpoints_kw, tolerance_pu=tolerance_pu, steps=steps)
+    index = pd.Index(steps, name="minute")
+    return ACDay(network, step_table(network, flows, load_kw, setpoints_kw, index), flows)
+
+
+def snapshot_of(day: ACDay, row: int = 0) -> ACSnapshot:
+    """One step of an :class:`ACDay` as an :class:`ACSnapshot` (bus and line tables)."""
+    network, flows = day.network, day.flows
+    feeder = network.feeder
+    lines = feeder.lines
+    buses = pd.DataFrame(
+        {"v_pu": flows.v_pu[row], "angle_deg": flows.angle_deg[row]}, index=feeder.buses.index
+    )
+    line_table = pd.DataFrame(
+        {
+            "from_bus": lines["from_bus"],
+            "to_bus": lines["to_bus"],
+            "p_from_kw": flows.p_from_kw[row],
+            "q_from_kvar": flows.q_from_kvar[row],
+            "p_to_kw": flows.p_to_kw[row],
+            "q_to_kvar": flows.q_to_kvar[row],
+            "loss_kw": flows.loss_kw[row],
+            "current_a": flows.current_a[row],
+            "rated_a": network.rated_a,
+            "limit_kw": lines["limit_kw"],
+            "loading_percent": loading_percent(network, flows)[row],
+        },
+        index=lines.index,
+    )
+    minute = int(day.steps.index[row])
+    return ACSnapshot(minute, network, buses, line_table, day.steps.iloc[row])
+
+
+def fleet_setpoints(feeder: Feeder, generators: pd.Index, setpoints_kw: np.ndarray) -> np.ndarray:
+    """Set points (steps, generators) in ``generators`` order -> the feeder's fleet order."""
+    missing = feeder.generators.index.difference(generators)
+    if len(missing):
+        raise OptionError(f"no set point for generator {missing[0]!r} of feeder {feeder.name!r}")
+    order = pd.Index(generators).get_indexer(feeder.generators.index)
+    return np.atleast_2d(np.asarray(setpoints_kw, dtype=float))[:, order]
+
+
+def minute_loads(feeder: Feeder, profiles: LoadProfiles | None, minutes: np.ndarray) -> np.ndarray:
+    """(minutes, loads) per-load demand, kW, from ``profiles`` or, without them, the network's
+    own loads (``p_kw`` column) at every minute."""
+    if profiles is not None:
+        table = profiles.for_loads(feeder.loads.index).kw
+        return table.loc[np.asarray(minutes)].to_numpy(float)
+    if "p_kw" not in feeder.loads.columns:
+        raise ProfileError(f"feeder {feeder.name} has no load values (p_kw) and no profiles")
+    return np.tile(feeder.loads["p_kw"].to_numpy(float), (len(minutes), 1))
+
+
+def _run_of(result: Any) -> Any:
+    """The run of a comparison with the DC-OPF (``.run``), or the run itself."""
+    return getattr(result, "run", result)
+
+
+def check_snapshot(
+    problem: DispatchProblem,
+    profiles: LoadProfiles | None,
+    result: Any,
+    *,
+    tolerance_pu: float = TOLERANCE_PU,
+    **model_options: Any,
+) -> ACSnapshot:
+    """AC check of a snapshot run's set points on the full feeder of ``problem``.
+
+    Parameters
+    ----------
+    problem : the run's :class:`~popdispatch.game.problem.DispatchProblem` (its
+        ``feeder.original`` is the full feeder, path limits included).
+    profiles : the run's load profiles (``runs.load_run``'s second value); ``None``: the
+        network's own loads.
+    result : a :class:`~popdispatch.scenarios.SnapshotComparison` or
+        :class:`~popdispatch.online.SnapshotResult` (its ``minute``, ``generators``,
+        ``setpoints_kw``).
+    model_options : see :func:`check_setpoints`.
+    """
+    run = _run_of(result)
+    feeder = problem.feeder.original
+    minutes = np.array([int(run.minute)])
+    day = check_setpoints(
+        feeder,
+        minute_loads(feeder, profiles, minutes),
+        fleet_setpoints(feeder, run.generators, run.setpoints_kw),
+        minutes,
+        tolerance_pu=tolerance_pu,
+        **model_options,
+    )
+    return snapshot_of(day)
+
+
+def check_day(
+    problem: DispatchProblem,
+    profiles: LoadProfiles | None,
+    result: Any,
+    *,
+    tolerance_pu: float = TOLERANCE_PU,
+    **model_options: Any,
+) -> ACDay:
+    """AC check of every simulated minute of a day run, in one batch calculation.
+
+    ``result``: a :class:`~popdispatch.scenarios.DayComparison` or
+    :class:`~popdispatch.online.DayResult` (its ``minutes``, ``generators``, ``setpoints_kw``);
+    the other parameters as in :func:`check_snapshot`.
+    """
+    run = _run_of(result)
+    feeder = problem.feeder.original
+    minutes = np.asarray(run.minutes)
+    return check_setpoints(
+        feeder,
+        minute_loads(feeder, profiles, minutes),
+        fleet_setpoints(feeder, run.generators, run.setpoints_kw),
+        minutes,
+        tolerance_pu=tolerance_pu,
+        **model_options,
+    )
