@@ -1,0 +1,214 @@
+"""Interactive HTML reports of a day or a snapshot: one self-contained offline file (plotly.js
+embedded) with the feeder map over time and linked panels (needs the ``html`` extra).
+
+- :func:`write_day_html` / :func:`day_report_html`: an online day against the DC-OPF, a map
+  frame per kept minute (a time slider and a play button), panels over every minute;
+- :func:`write_snapshot_html` / :func:`snapshot_report_html`: one minute, a map frame per kept
+  iteration of its trajectory.
+
+Powers in kW, prices in EUR/MWh, voltages in p.u. See docs/report.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from popdispatch.feeder.profiles import LoadProfiles
+from popdispatch.game.problem import DispatchProblem
+from popdispatch.report.interactive.steps import (
+    Steps,
+    day_steps,
+    default_every,
+    frame_rows,
+    snapshot_steps,
+)
+from popdispatch.scenarios import DayComparison, SnapshotComparison
+
+#: About this many regular map frames (a full day: every 5th minute, 288 frames).
+TARGET_FRAMES = 288
+#: The map's frames take at most about this much of the page (plotly.js itself is ~4.8 MB).
+FRAMES_BUDGET_BYTES = 4_500_000
+EXTRA = 'pip install "popdispatch[html]"'
+
+
+def require_plotly():
+    """``plotly.io``, or an ImportError naming the extra to install."""
+    try:
+        import plotly.io as pio
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError(f"the HTML report needs plotly: {EXTRA} ({exc})") from exc
+    return pio
+
+
+def within_budget(steps: Steps, problem: DispatchProblem, every: int) -> tuple[np.ndarray, int]:
+    """``(rows, every)``: the map frames of :func:`frame_rows`, with ``every`` doubled until
+    they fit :data:`FRAMES_BUDGET_BYTES` (events past that are thinned evenly)."""
+    from popdispatch.report.interactive.feeder_map import frame_bytes
+
+    limit = max(int(FRAMES_BUDGET_BYTES // frame_bytes(problem, steps)), 2)
+    rows = frame_rows(steps, problem, every)
+    while len(rows) > limit and every < len(steps.values):
+        every *= 2
+        rows = frame_rows(steps, problem, every)
+    if len(rows) > limit:
+        rows = np.unique(np.concatenate([rows[:: int(np.ceil(len(rows) / limit))], rows[-1:]]))
+    return rows, every
+
+
+def _steps_info(steps: Steps, comparison) -> dict:
+    run = comparison.run
+    info = {
+        "case": None, "mode": run.settings.mode, "dynamics": run.settings.dynamics,
+        "profile_source": run.profile_source,
+    }  # fmt: skip
+    if steps.kind == "minute":
+        info.update(first_minute=int(steps.values[0]), last_minute=int(steps.values[-1]))
+    else:
+        info.update(minute=run.minute, demand_kw=run.demand_kw, iterations=run.iterations)
+    return info
+
+
+def _run_info(run_info: Mapping | None, problem: DispatchProblem, steps: Steps, comparison):
+    info = _steps_info(steps, comparison)
+    info["case"] = problem.feeder.original.name
+    return dict(run_info) if run_info is not None else info
+
+
+def day_report_html(
+    comparison: DayComparison,
+    problem: DispatchProblem,
+    profiles: LoadProfiles,
+    *,
+    run_info: Mapping | None = None,
+    voltages_pu: pd.DataFrame | None = None,
+    every_minutes: int | None = None,
+) -> str:
+    """The day report as HTML text.
+
+    ``comparison``: the day and its DC-OPFs; ``problem`` and ``profiles``: the ones it ran on
+    (the loads of each minute give the flows of every line); ``run_info``: the run's summary
+    (the ``day`` command's ``--json`` object; header); ``voltages_pu``: optional bus voltages
+    (index minute, columns original bus ids, p.u.), e.g. from an AC check; ``every_minutes``:
+    minutes between regular map frames (default: about :data:`TARGET_FRAMES` frames).
+    """
+    from popdispatch.report.interactive.feeder_map import map_figure
+    from popdispatch.report.interactive.page import frame_count_note, header_html, page_html
+    from popdispatch.report.interactive.panels import clock, panel_figure
+
+    require_plotly()
+    steps = day_steps(comparison, problem, profiles, voltages_pu)
+    every = every_minutes or default_every(steps, TARGET_FRAMES)
+    rows, every = within_budget(steps, problem, every)
+    states = steps.line_states(problem)
+    error = steps.abs_error_kw
+    titles = [
+        f"minute {m} ({clock(m)}): demand {steps.demand_kw[r]:.2f} kW, max |error| to the "
+        f"DC-OPF {_kw(error[r])}, {int((states[r] > 0).sum())} limited lines at their limit"
+        for r, m in ((int(r), int(steps.values[r])) for r in rows)
+    ]
+    info = _run_info(run_info, problem, steps, comparison)
+    title = f"popdispatch day: {info.get('case')}, {info.get('mode')} mode"
+    notes = [frame_count_note("minute", rows, len(steps.values), every), *NOTES]
+    return page_html(
+        title,
+        header_html(title, info, notes),
+        map_figure(problem, steps, rows, titles),
+        panel_figure(problem, steps, int(steps.values[rows[-1]])),
+    )
+
+
+def snapshot_report_html(
+    comparison: SnapshotComparison,
+    problem: DispatchProblem,
+    profiles: LoadProfiles,
+    *,
+    run_info: Mapping | None = None,
+    voltages_pu: pd.Series | None = None,
+    max_frames: int = 200,
+) -> str:
+    """The snapshot report as HTML text: map frames over the iterations of the trajectory
+    (about ``max_frames``, plus the iterations of detection, convergence or rest and of every
+    change of a limited line's state). ``voltages_pu``: bus -> p.u. at the final set points.
+    Other arguments as in :func:`day_report_html` (``run_info``: the ``snapshot`` summary)."""
+    from popdispatch.report.interactive.feeder_map import map_figure
+    from popdispatch.report.interactive.page import frame_count_note, header_html, page_html
+    from popdispatch.report.interactive.panels import panel_figure
+
+    require_plotly()
+    run = comparison.run
+    steps = snapshot_steps(comparison, problem, profiles, voltages_pu)
+    rows, every = within_budget(steps, problem, default_every(steps, max_frames))
+    marks = [i for i in (run.first_congestion, run.converged_at, run.rest_at) if i is not None]
+    rows = np.union1d(rows, np.asarray(marks, dtype=np.int64))
+    states = steps.line_states(problem)
+    error = steps.abs_error_kw
+    dt = run.settings.stepping.dt
+    titles = [
+        f"minute {run.minute}, iteration {r} ({r * dt:.2f} s): max |error| to the DC-OPF "
+        f"{_kw(error[r])}, {int((states[r] > 0).sum())} limited lines at their limit"
+        for r in (int(r) for r in rows)
+    ]
+    info = _run_info(run_info, problem, steps, comparison)
+    mode = run.settings.mode
+    title = f"popdispatch snapshot: {info.get('case')}, minute {run.minute}, {mode} mode"
+    notes = [frame_count_note("iteration", rows, len(steps.values), every), *NOTES]
+    if voltages_pu is not None:
+        notes.append("Bus voltages are those of the final set points.")
+    return page_html(
+        title,
+        header_html(title, info, notes),
+        map_figure(problem, steps, rows, titles),
+        panel_figure(problem, steps, int(rows[-1])),
+    )
+
+
+NOTES = [
+    "Map: lines coloured and widened by |flow| (kW, radial DC flows of the set points and the "
+    "loads); limited lines under a grey band, their node controllers as squares (white: idle, "
+    "orange: at the limit, red: overloaded); generators sized by set point (grey: offline). "
+    "Hover for values. Line prices: the DC-OPF's duals, and the eq.-8 signal the dynamics' "
+    "flows would make a paper-mode controller send (exact mode's own integrated prices are "
+    "not kept by the engine)."
+]
+
+
+def _kw(value: float) -> str:
+    return f"{value:.3g} kW" if np.isfinite(value) else "n/a (no DC-OPF)"
+
+
+def write_day_html(
+    path: str | Path,
+    comparison: DayComparison,
+    problem: DispatchProblem,
+    profiles: LoadProfiles,
+    **options,
+) -> Path:
+    """Write :func:`day_report_html` to ``path`` atomically (never a partial file)."""
+    from popdispatch.report.output import atomic_write_text
+
+    text = day_report_html(comparison, problem, profiles, **options)
+    return atomic_write_text(path, text)
+
+
+def write_snapshot_html(
+    path: str | Path,
+    comparison: SnapshotComparison,
+    problem: DispatchProblem,
+    profiles: LoadProfiles,
+    **options,
+) -> Path:
+    """Write :func:`snapshot_report_html` to ``path`` atomically (never a partial file)."""
+    from popdispatch.report.output import atomic_write_text
+
+    text = snapshot_report_html(comparison, problem, profiles, **options)
+    return atomic_write_text(path, text)
+
+
+__all__ = [
+    "day_report_html", "require_plotly", "snapshot_report_html", "write_day_html",
+    "write_snapshot_html",
+]  # fmt: skip
