@@ -101,6 +101,8 @@ def power_flow(
     Raises :class:`InfeasibleError` naming the first step whose power flow does not converge.
     """
     pgm = power_grid_model()
+    from power_grid_model.errors import PowerGridError
+
     load_kw, generator_kw = check_step_arrays(network, load_kw, generator_kw)
     if len(load_kw) != len(generator_kw):
         raise OptionError(f"{len(load_kw)} steps of loads but {len(generator_kw)} of set points")
@@ -116,7 +118,7 @@ def power_flow(
             max_iterations=100,
             output_component_types=outputs,
         )
-    except pgm.errors.PowerGridError as exc:
+    except PowerGridError as exc:
         raise InfeasibleError(_divergence_message(exc, steps)) from exc
     return _flows(network, out, len(load_kw))
 
@@ -126,8 +128,10 @@ def _divergence_message(exc: Exception, steps: np.ndarray | None) -> str:
     failed = getattr(exc, "failed_scenarios", None)
     first = int(failed[0]) if failed is not None and len(failed) else None
     label = steps[first] if steps is not None and first is not None else first
-    where = f" at step {label}" if label is not None else ""
-    reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    where = f" at minute {label}" if label is not None else ""
+    errors = getattr(exc, "errors", None)
+    detail = errors[0] if errors is not None and len(errors) else exc
+    reason = " ".join(str(detail).split()) or type(exc).__name__
     return f"AC power flow did not converge{where} (voltage collapse?): {reason}"
 
 
