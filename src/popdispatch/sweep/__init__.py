@@ -18,12 +18,15 @@ from pathlib import Path
 from popdispatch.sweep.spec import Scenario, StepRange, SweepSpec, load_spec, parse_spec
 
 
-def run(spec: str | Path | dict | SweepSpec, out: str | Path, **options):
-    """Run a sweep: ``spec`` a TOML file, a dict (its table) or a parsed :class:`SweepSpec`;
+def run(spec: str | Path | dict | SweepSpec | list[Scenario], out: str | Path, **options):
+    """Run a sweep: ``spec`` a TOML file, a dict (its table), a parsed :class:`SweepSpec` or
+    a list of its scenarios;
     results in ``out``. ``options`` as :func:`popdispatch.sweep.execute.run_sweep`
     (``profiles``, ``scheduler``, ``workers``, ``quiet``). Returns its ``SweepResult``."""
     from popdispatch.sweep.execute import run_sweep
 
+    if isinstance(spec, list):
+        return run_sweep(spec, out, **options)
     if isinstance(spec, dict):
         spec = parse_spec(spec)
     elif not isinstance(spec, SweepSpec):

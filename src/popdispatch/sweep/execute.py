@@ -33,7 +33,8 @@ WINDOW = 4
 @dataclass
 class SweepResult:
     """What a sweep did: scenarios expanded, skipped (already in ``out``), run, failed (their
-    ids and messages), and the time the scenarios took (s, cluster start excluded)."""
+    ids and messages), the time the scenarios took (s; cluster start and warm-up excluded) and
+    each worker's :func:`warm_up` (its seconds, numba cache hits and misses)."""
 
     total: int
     skipped: int
@@ -41,7 +42,7 @@ class SweepResult:
     failed: dict[str, str] = field(default_factory=dict)
     seconds: float = 0.0
     workers: int = 0
-    warm_up_seconds: dict[str, float] = field(default_factory=dict)
+    warm_up: dict[str, dict] = field(default_factory=dict)
 
 
 def _require_dask():
@@ -205,8 +206,7 @@ def run_sweep(
         return result
     with client_for(scheduler, workers, processes) as client:
         result.workers = len(client.nthreads())
-        warm = client.run(warm_up)
-        result.warm_up_seconds = {w: info["seconds"] for w, info in warm.items()}
+        result.warm_up = client.run(warm_up)
         start = time.perf_counter()
         with _bar(result, quiet) as advance:
             submit_all(client, todo, context, advance)

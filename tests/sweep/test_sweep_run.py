@@ -1,0 +1,77 @@
+"""Sweeps on a Dask LocalCluster: failures recorded, resume, workers loading the cached
+kernels (no official data needed: the ELV runs on the profiles the environment gives)."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from popdispatch.sweep import parse_spec, run
+from popdispatch.sweep.execute import warm_up
+from popdispatch.sweep.store import STEPS, read_summary
+
+#: Every generator of the paper's fleet (Table I) off from minute 600: the run raises.
+ALL_OFF = [f"{bus}:off@600" for bus in (1, 114, 578, 739, 817, 835)]
+#: Bus 34 (LOAD1) cut off: no dispatch serves it, the DC-OPF is infeasible at every step.
+CUT_OFF = ["1:34=0"]
+
+SPEC = {"steps": "600-605", "mode": "exact", "limits": [[], CUT_OFF], "events": [[], ALL_OFF]}
+
+
+@pytest.fixture(scope="module")
+def failing_sweep(tmp_path_factory):
+    """Four scenarios on one worker process: one fine, one infeasible, two raising."""
+    warm_up()  # the kernels are in numba's disk cache before the worker starts
+    out = tmp_path_factory.mktemp("sweep")
+    spec = parse_spec(SPEC)
+    return spec, out, run(spec, out, workers=1, quiet=True)
+
+
+def test_raising_scenarios_are_recorded_and_the_rest_complete(failing_sweep):
+    spec, out, result = failing_sweep
+    assert result.ran == 4 and len(result.failed) == 2
+    summary = read_summary(out).set_index(["limits", "events"])
+    fine = summary.loc[("none", "none")]
+    assert fine.status == "converged" and fine.max_abs_error_kw < 1e-3 and pd.isna(fine.error)
+    assert fine.compared_minutes == 6
+    infeasible = summary.loc[("1:34=0", "none")]
+    assert infeasible.status == "infeasible" and list(infeasible.infeasible_minutes) == list(
+        range(600, 606)
+    )
+    assert infeasible.error.startswith("the DC-OPF is infeasible at 6 of 6 minutes")
+    for limits in ("none", "1:34=0"):
+        failed = summary.loc[(limits, ";".join(ALL_OFF))]
+        assert failed.status == "failed" and failed.error.startswith("InfeasibleError: ")
+        assert "online" in failed.error
+    steps = pd.read_parquet(out / STEPS)
+    by_scenario = steps.groupby(steps.scenario_id.astype(str), observed=True).size()
+    ids = set(summary.scenario_id[summary.status != "failed"])
+    assert set(by_scenario.index) == ids and (by_scenario == 6 * 6).all()
+
+
+def test_workers_load_the_kernels_from_the_disk_cache(failing_sweep):
+    _, _, result = failing_sweep
+    (info,) = result.warm_up.values()
+    assert info["cache_misses"] == 0 and info["cache_hits"] >= 3
+
+
+def test_resume_runs_only_the_missing_scenarios(tmp_path):
+    spec = parse_spec({"steps": "600-603", "modes": ["exact"], "limits": [[], ["505:666=28"]],
+                       "events": [[], ["114:off@601"]]})  # fmt: skip
+    first = run(spec.scenarios[:2], tmp_path, workers=1, quiet=True, processes=False)
+    assert (first.ran, first.skipped) == (2, 0)
+    before = read_summary(tmp_path).set_index("scenario_id").finished_at
+    rest = run(spec, tmp_path, workers=1, quiet=True, processes=False)
+    assert (rest.total, rest.ran, rest.skipped) == (4, 2, 2)
+    after = read_summary(tmp_path).set_index("scenario_id").finished_at
+    assert len(after) == 4 and (after[before.index] == before).all()
+    again = run(spec, tmp_path, workers=1, quiet=True, processes=False)
+    assert (again.ran, again.skipped) == (0, 4)
+
+
+def test_failed_scenarios_run_again_on_resume(tmp_path):
+    spec = parse_spec({"steps": "600-601", "events": [[], ALL_OFF]})
+    first = run(spec, tmp_path, workers=1, quiet=True, processes=False)
+    assert (first.ran, len(first.failed)) == (2, 1)
+    rerun = run(spec, tmp_path, workers=1, quiet=True, processes=False)
+    assert (rerun.ran, rerun.skipped, list(rerun.failed)) == (1, 1, list(first.failed))
