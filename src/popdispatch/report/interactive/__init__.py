@@ -31,7 +31,7 @@ from popdispatch.scenarios import DayComparison, SnapshotComparison
 #: About this many regular map frames (a full day: every 5th minute, 288 frames).
 TARGET_FRAMES = 288
 #: The map's frames take at most about this much of the page (plotly.js itself is ~4.8 MB).
-FRAMES_BUDGET_BYTES = 4_500_000
+FRAMES_BUDGET_BYTES = 4_000_000
 EXTRA = 'pip install "popdispatch[html]"'
 
 

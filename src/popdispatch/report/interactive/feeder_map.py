@@ -62,6 +62,16 @@ def bus_coordinates(feeder: Feeder) -> pd.DataFrame:
     return pd.DataFrame({"x": depth, "y": -y}, index=feeder.buses.index)
 
 
+def shown_voltages(voltages: pd.DataFrame | None, key_buses: pd.Series) -> pd.DataFrame | None:
+    """The voltages the map shows: those of key-node buses (loads, generators, branching points,
+    the source) when the table has any, else all it has. A full-feeder AC check gives every
+    bus (906 on the ELV); the buses along a chain between two key nodes add bytes, not news."""
+    if voltages is None:
+        return None
+    key = [bus for bus in voltages.columns if bus in set(key_buses)]
+    return voltages[key] if key else voltages
+
+
 def _segments(xy: pd.DataFrame, from_bus, to_bus) -> tuple[list, list]:
     """x and y lists of line segments separated by None (one plotly trace for all of them)."""
     start, end = xy.loc[from_bus].to_numpy(), xy.loc[to_bus].to_numpy()
@@ -85,6 +95,7 @@ class MapBuilder:
         self.limited_kw = steps.limited_flows_kw(problem)
         self.loading = 100.0 * steps.loading(problem)
         self.states = steps.line_states(problem)
+        self.voltages = shown_voltages(steps.voltages_pu, self.reduced.nodes.bus)
         self.traces: list[dict] = []
         self.dynamic: dict[str, list[int]] = {}
 
@@ -155,7 +166,7 @@ class MapBuilder:
         }  # fmt: skip
 
     def _add_buses(self) -> None:
-        voltages = self.steps.voltages_pu
+        voltages = self.voltages
         nodes = self.reduced.nodes
         if voltages is None:
             xy = self.xy.loc[nodes.bus]
@@ -292,7 +303,7 @@ class MapBuilder:
         }  # fmt: skip
 
     def _voltage_update(self, row: int) -> dict:
-        table = self.steps.voltages_pu
+        table = self.voltages
         step = int(self.steps.values[row])
         if step in table.index:
             values = table.loc[step].to_numpy(float)
