@@ -89,7 +89,8 @@ def summary_row(summary: dict, result) -> dict:
 
 def steps_table(result, problem) -> pd.DataFrame:
     """The day's per-minute table (:func:`popdispatch.report.summaries.day_table`) in long
-    form: one row per minute and generator, with each minute's status."""
+    form: one row per minute and generator (minute-major, generators in the problem's order),
+    with each minute's status."""
     from popdispatch.report.summaries import day_table, generator_buses
 
     wide = day_table(result, problem)
@@ -99,16 +100,17 @@ def steps_table(result, problem) -> pd.DataFrame:
         status[run.stalled] = "stalled"
     status[~result.feasible] = "infeasible"
     wide["status"] = status
-    shared = [c for c in wide.columns if not c.startswith(tuple(f"{g}_" for g in run.generators))]
-    parts = []
-    for name, bus in zip(run.generators, generator_buses(problem), strict=True):
-        part = wide[shared].copy()
-        part["generator"], part["bus"] = name, bus
-        part["setpoint_kw"] = wide[f"{name}_setpoint_kw"]
-        part["opf_kw"] = wide[f"{name}_opf_kw"]
-        part["abs_error_kw"] = (part.setpoint_kw - part.opf_kw).abs()
-        parts.append(part)
-    return pd.concat(parts, ignore_index=True).sort_values(["minute", "bus"], kind="stable")
+    names = list(run.generators)
+    own = [f"{g}_{kind}_kw" for kind in ("setpoint", "opf") for g in names]
+    shared = wide.drop(columns=own)
+    n = len(names)
+    table = pd.DataFrame({c: np.repeat(shared[c].to_numpy(), n) for c in shared.columns})
+    table["generator"] = np.tile(np.array(names, dtype=object), len(wide))
+    table["bus"] = np.tile(generator_buses(problem), len(wide))
+    table["setpoint_kw"] = run.setpoints_kw.ravel()  # minutes x generators, row-major
+    table["opf_kw"] = result.opf_kw.ravel()
+    table["abs_error_kw"] = result.abs_error_kw.ravel()
+    return table
 
 
 def run_scenario(scenario: Scenario, context: Context) -> tuple[dict, pd.DataFrame]:
