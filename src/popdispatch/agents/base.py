@@ -1,0 +1,61 @@
+"""What every agent of the dispatch shares: a tick each clock second, an outbox, a crash switch.
+
+An agent acts at whole ticks (:mod:`popdispatch.agents.schedule`) on what its inbox has
+brought so far, and queues what it says in an outbox that is sent at the end of the tick
+through mango (``Agent.send_message``), to the addresses the builder gave it. A crashed agent
+neither acts nor hears (its process is gone); a restarted one resumes with what it kept.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from mango import Agent, AgentAddress
+
+from popdispatch.agents.schedule import Phase, tick_of
+
+#: Clock seconds per tick.
+TICK_S = 1.0
+
+
+class RoundAgent(Agent):
+    """Base of the plant, controller and generator agents (see the module docstring).
+
+    ``network``: the simulated network's :class:`~popdispatch.agents.network.LossyNetwork`
+    (its ``copies`` decides duplicates), ``None`` on a real network.
+    """
+
+    def __init__(self, network=None):
+        super().__init__()
+        self.network = network
+        self.addresses: dict[str, AgentAddress] = {}
+        self.outbox: list[tuple[Any, str]] = []
+        self.crashed = False
+
+    def on_ready(self) -> None:
+        self.schedule_periodic_task(self._tick, delay=TICK_S)
+
+    async def _tick(self) -> None:
+        if self.crashed:
+            return
+        rnd, phase = tick_of(self.context.current_timestamp / TICK_S)
+        self.act(rnd, phase)
+        outbox, self.outbox = self.outbox, []
+        for content, aid in outbox:
+            copies = self.network.copies() if self.network is not None else 1
+            for _ in range(copies):
+                await self.send_message(content, receiver_addr=self.addresses[aid])
+
+    def send(self, content: Any, aid: str) -> None:
+        """Queue ``content`` for agent ``aid`` (sent at the end of this tick)."""
+        self.outbox.append((content, aid))
+
+    def handle_message(self, content: Any, meta: dict) -> None:
+        if not self.crashed:
+            self.receive(content, meta.get("sender_id"))
+
+    def act(self, rnd: int, phase: Phase) -> None:
+        """What the agent does at tick ``phase`` of round ``rnd``."""
+
+    def receive(self, content: Any, sender: str | None) -> None:
+        """What the agent does with a message as it arrives."""

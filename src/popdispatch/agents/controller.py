@@ -1,0 +1,111 @@
+"""Node controllers as agents (paper section II-B): measure their lines, price them, broadcast.
+
+One agent per key node at an end of a limited line (the rows of
+:class:`popdispatch.game.controllers.NodeControllers`). For each line it ends, the controller
+keeps the latest measured flow and, at its tick, sends its value to the generators on its
+side of the line:
+
+- paper mode: eq. 8, :func:`popdispatch.game.controllers.overflow_signal` of the flow as seen
+  from its node (the parent end sees ``flow``, the child end ``-flow``);
+- exact mode: the line's integrated prices (modes/exact.py): with ``z_up``, ``z_down`` and the
+  excesses ``e_up = flow - U``, ``e_down = -flow - U``, the net price
+  ``nu = max(0, z_up + C e_up) - max(0, z_down + C e_down)`` goes as ``+nu / 2`` to the child
+  side and ``-nu / 2`` to the parent side; then ``z <- max(z + h * price_rate * e, 0)``
+  (one Euler step of the controller-state map). Each end integrates its own copy of the two
+  prices from its own measurements: with perfect sensors and links the copies are equal;
+  otherwise only the sum of the two half prices matters for the generators' comparisons.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from popdispatch.agents.base import RoundAgent
+from popdispatch.agents.messages import Measurement, Signals
+from popdispatch.agents.schedule import Phase
+from popdispatch.game.controllers import overflow_signal
+
+
+@dataclass
+class LineEnd:
+    """One limited line as one of its end controllers sees it.
+
+    ``line``: index among the limited lines; ``orientation``: +1 at the parent end (a positive
+    flow leaves this node), -1 at the child end; ``limit_mw``: U; ``receivers``: generator
+    agent ids on this end's side; ``z_up``, ``z_down``: exact-mode prices, EUR/MW.
+    """
+
+    line: int
+    orientation: int
+    limit_mw: float
+    receivers: list[str]
+    flow_mw: float | None = None
+    flow_round: int = -1
+    z_up: float = 0.0
+    z_down: float = 0.0
+
+
+class ControllerAgent(RoundAgent):
+    """The node controller of one key node (see the module docstring).
+
+    ``exact``: the exact mode's prices instead of eq. 8; ``C``: EUR/MW^2 (eq. 8's gain, or the
+    proportional part of the price); ``price_rate``: EUR/MW per MW per s; ``step_s``: the
+    round's Euler step ``h``, s.
+    """
+
+    def __init__(self, ends: list[LineEnd], exact: bool, C: float, price_rate: float,
+                 step_s: float, network=None):  # fmt: skip
+        super().__init__(network)
+        self.ends = ends
+        self.exact = exact
+        self.C = C
+        self.price_rate = price_rate
+        self.step_s = step_s
+        self.by_line = {}
+        for end in ends:
+            self.by_line.setdefault(end.line, []).append(end)
+
+    def receive(self, content, sender) -> None:
+        if isinstance(content, Measurement):
+            for end in self.by_line.get(content.line, ()):
+                if content.round > end.flow_round:
+                    end.flow_mw, end.flow_round = content.flow_mw, content.round
+
+    def act(self, rnd: int, phase: Phase) -> None:
+        if phase != Phase.SIGNAL:
+            return
+        values: dict[str, dict[str, float]] = {}
+        for end in self.ends:
+            if end.flow_mw is None:
+                continue  # nothing measured yet: nothing to say
+            value = self._price(end) if self.exact else self._overflow(end)
+            for aid in end.receivers:
+                values.setdefault(aid, {})[str(end.line)] = value
+        for aid, by_line in values.items():
+            self.send(Signals(rnd, by_line), aid)
+
+    def _overflow(self, end: LineEnd) -> float:
+        """Paper eq. 8 as seen from this node."""
+        return overflow_signal(end.orientation * end.flow_mw, end.limit_mw, self.C)
+
+    def _price(self, end: LineEnd) -> float:
+        """Exact mode: this end's half of the net price, then one Euler step of the prices."""
+        excess_up = end.flow_mw - end.limit_mw
+        excess_down = -end.flow_mw - end.limit_mw
+        nu = max(0.0, end.z_up + self.C * excess_up) - max(0.0, end.z_down + self.C * excess_down)
+        h, rate = self.step_s, self.price_rate
+        end.z_up = max(end.z_up + h * (rate * excess_up), 0.0)
+        end.z_down = max(end.z_down + h * (rate * excess_down), 0.0)
+        return -0.5 * nu if end.orientation > 0 else 0.5 * nu
+
+    def residual_mw(self) -> float:
+        """Largest distance from complementary slackness over this controller's lines, MW
+        (as modes/exact.py: any overflow, and any slack while a price is positive)."""
+        worst = 0.0
+        for end in self.ends:
+            if end.flow_mw is None:
+                continue
+            for excess, price in ((end.flow_mw - end.limit_mw, end.z_up),
+                                  (-end.flow_mw - end.limit_mw, end.z_down)):  # fmt: skip
+                worst = max(worst, abs(excess) if price > 0.0 else max(excess, 0.0))
+        return worst

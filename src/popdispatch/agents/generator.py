@@ -1,0 +1,244 @@
+"""A distributed generator as an agent: its own cost, limits and set point, the revision rule.
+
+Each round (:mod:`popdispatch.agents.schedule`) the generator
+
+1. (tick 2) computes its fitness from its own set point and the latest signal of every
+   limited line (the engine's kernel :func:`popdispatch.game.fitness.fitness_into`, eqs.
+   5-7) and its weights (:func:`popdispatch.dynamics.fields.field_weights`: receiver weight
+   ``w``, movable mass ``v``, room), and sends ``(f, w, v)`` to its neighbours in the
+   communication graph;
+2. (tick 3) from the latest statuses of its neighbours, sums its pairwise in- and outflow
+   (:func:`popdispatch.dynamics.pairwise.graph_flows` on its own star of edges, eqs. 13-14)
+   and applies the steppers' flux limiter to its own side: a sender whose outflow over the
+   step ``h`` would exceed its movable mass scales its ``v`` so that it exactly empties, a
+   receiver whose inflow would exceed its room scales its ``w`` (integrate/steppers.py). It
+   offers each better neighbour ``h * D * w_i * v_j^lim * (f_i - f_j)`` MW;
+3. (tick 4) accepts this round's offers scaled by its own receiver factor (never more than
+   the room it has left, counting what it has reserved), reserving the amount;
+4. (tick 5) commits the offers accepted in time (lowering its own set point by the amount:
+   the transaction's decision point) and aborts the others, then sends every decision not
+   yet acknowledged (again each round until the receiver acknowledges).
+
+A receiver applies a commit once (by transaction id) and acknowledges every copy; an abort
+frees the reservation. Power thus only moves in pairwise transactions: once every decision
+has reached its receiver, the set points sum to what they summed to before. With no loss
+and no delay every round's transactions are decided within the round and the set points
+follow the engine's limited Euler step exactly (``x_out = x + h (inflow - outflow)`` with the
+limited weights).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from popdispatch.agents.base import RoundAgent
+from popdispatch.agents.messages import Accept, Ack, Decision, Offer, Signals, Status
+from popdispatch.agents.plant import Inverters
+from popdispatch.agents.schedule import Phase
+from popdispatch.dynamics.fields import field_weights
+from popdispatch.dynamics.pairwise import graph_flows
+from popdispatch.game.fitness import fitness_into
+from popdispatch.game.parameters import share_bounds
+
+
+@dataclass(frozen=True)
+class GeneratorRule:
+    """What one generator knows of the game: its cost ``b`` (EUR/MWh), ``c`` (EUR/(MW^2 h)),
+    limits ``pmin``/``pmax`` (MW), the fitness constants ``B``, ``m`` (EUR/MW, EUR/MW^2) and
+    revision ``gain``, whether the barrier applies (paper mode), the dynamic's field code
+    (:class:`~popdispatch.dynamics.fields.Field`), the demand ``demand_mw`` (MW) and the
+    Euler step ``step_s`` (s)."""
+
+    b: float
+    c: float
+    pmin: float
+    pmax: float
+    B: float
+    m: float
+    gain: float
+    barrier: bool
+    field: int
+    demand_mw: float
+    step_s: float
+
+
+class GeneratorAgent(RoundAgent):
+    """One DG (see the module docstring). ``index``: its entry in ``inverters``;
+    ``neighbours``: agent ids of its neighbours in the communication graph; ``timeout``:
+    rounds an offer stays open (accepted up to its last round's tick 4, decided at the
+    latest at its last round's tick 5; 1 = within its own round)."""
+
+    def __init__(self, rule: GeneratorRule, index: int, inverters: Inverters,
+                 neighbours: list[str], timeout: int = 1, network=None):  # fmt: skip
+        super().__init__(network)
+        self.rule = rule
+        self.timeout = int(timeout)
+        self.index = index
+        self.inverters = inverters
+        self.neighbours = list(neighbours)
+        self.quiet = False  # no new offers (drain)
+        self.signals: dict[str, tuple[int, float]] = {}
+        self.statuses: dict[str, Status] = {}
+        self.own: tuple[float, float, float, float] | None = None  # f, w, v, room
+        self.receiver_scale = 1.0
+        self.offers_in: list[tuple[str, Offer]] = []
+        self.open_offers: dict[str, tuple[str, int, float]] = {}  # txid: receiver, round, MW
+        self.accepted: dict[str, float] = {}  # txid: MW, as the receiver accepted
+        self.undelivered: dict[str, tuple[str, Decision]] = {}  # decided, not acknowledged
+        self.committed: dict[str, float] = {}  # every commit this sender decided, MW
+        self.reserved: dict[str, float] = {}  # receiver: txid: MW accepted, undecided
+        self.answered: set[str] = set()  # receiver: offers accepted or refused
+        self.applied: set[str] = set()  # receiver: decisions applied
+
+    @property
+    def p(self) -> float:
+        """The set point this generator's inverter holds, MW."""
+        return float(self.inverters.p[self.index])
+
+    def _set(self, p_mw: float) -> None:
+        self.inverters.p[self.index] = p_mw
+
+    # -- messages as they arrive -------------------------------------------------------------
+
+    def receive(self, content, sender) -> None:
+        if isinstance(content, Signals):
+            for line, value in content.values.items():
+                if content.round >= self.signals.get(line, (-1, 0.0))[0]:
+                    self.signals[line] = (content.round, value)
+        elif isinstance(content, Status):
+            old = self.statuses.get(sender)
+            if old is None or content.round >= old.round:
+                self.statuses[sender] = content
+        elif isinstance(content, Offer):
+            if content.txid not in self.answered:
+                self.offers_in.append((sender, content))
+        elif isinstance(content, Accept):
+            if content.txid in self.open_offers:
+                self.accepted[content.txid] = content.amount_mw
+        elif isinstance(content, Decision):
+            self._apply(content, sender)
+        elif isinstance(content, Ack):
+            self.undelivered.pop(content.txid, None)
+
+    def _apply(self, decision: Decision, sender: str) -> None:
+        """A sender's decision: applied once by id, acknowledged every time."""
+        if decision.txid not in self.applied:
+            self.applied.add(decision.txid)
+            self.reserved.pop(decision.txid, None)
+            if decision.commit:
+                self._set(self.p + decision.amount_mw)
+        self.send(Ack(decision.txid), sender)
+
+    # -- the round ---------------------------------------------------------------------------
+
+    def act(self, rnd: int, phase: Phase) -> None:
+        if phase == Phase.STATUS:
+            self._status(rnd)
+        elif phase == Phase.OFFER:
+            self._offer(rnd)
+        elif phase == Phase.ACCEPT:
+            self._accept(rnd)
+        elif phase == Phase.COMMIT:
+            self._commit(rnd)
+
+    def _status(self, rnd: int) -> None:
+        """Fitness and weights at the own set point; status to the neighbours."""
+        r = self.rule
+        one = np.ones(1)
+        p = np.array([self.p])
+        signal = np.array(
+            [sum(value for _, value in (self.signals[k] for k in sorted(self.signals, key=int)))]
+        )
+        f = np.empty(1)
+        fitness_into(p, r.b * one, r.c * one, r.pmin * one, r.pmax * one, r.B, r.m, r.gain,
+                     signal, r.barrier, f)  # fmt: skip
+        lo, hi = np.empty(1), np.empty(1)
+        active = np.ones(1, dtype=np.bool_)
+        share_bounds(r.pmin * one, r.pmax * one, active, r.demand_mw, lo, hi)
+        w, v, room = np.empty(1), np.empty(1), np.empty(1)
+        field_weights(r.field, p / r.demand_mw, lo, hi, active, w, v, room)
+        self.own = (float(f[0]), float(w[0]), float(v[0]), float(room[0]))
+        status = Status(rnd, *self.own[:3])
+        for aid in self.neighbours:
+            self.send(status, aid)
+
+    def _offer(self, rnd: int) -> None:
+        """Own pairwise in/outflow, the limiter's factors, offers to better neighbours."""
+        if self.own is None:
+            return
+        f0, w0, v0, room0 = self.own
+        known = [self.statuses[aid] for aid in self.neighbours if aid in self.statuses]
+        names = [aid for aid in self.neighbours if aid in self.statuses]
+        n = len(known) + 1
+        f = np.array([f0] + [s.f for s in known])
+        w = np.array([w0] + [s.w for s in known])
+        v = np.array([v0] + [s.v for s in known])
+        # the own star: node 0 joined to every known neighbour
+        indptr = np.array([0, n - 1] + list(range(n, 2 * n - 1)), dtype=np.int64)
+        indices = np.array(list(range(1, n)) + [0] * (n - 1), dtype=np.int64)
+        inflow, outflow = np.zeros(n), np.zeros(n)
+        graph_flows(f, w, v, indptr, indices, inflow, outflow)
+        h = self.rule.step_s
+        # the flux limiter of integrate/steppers.py (euler_steps), own side only
+        lim_v = v0 * (v0 / (h * outflow[0])) if h * outflow[0] > v0 else v0
+        self.receiver_scale = room0 / (h * inflow[0]) if h * inflow[0] > room0 else 1.0
+        if self.quiet:
+            return
+        demand = self.rule.demand_mw
+        amounts = {}
+        for t, aid in enumerate(names, start=1):
+            gap = f[t] - f0
+            if gap > 0.0 and w[t] > 0.0 and lim_v > 0.0:
+                amounts[aid] = h * (gap * w[t] * lim_v) * demand
+        # what is still offered from earlier rounds is not movable again
+        movable = v0 * demand - sum(amount for _, _, amount in self.open_offers.values())
+        total = sum(amounts.values())
+        scale = max(movable, 0.0) / total if total > movable else 1.0
+        for aid, amount in amounts.items():
+            if amount * scale > 0.0:
+                txid = f"{self.aid}/{rnd}/{aid}"
+                self.open_offers[txid] = (aid, rnd, amount * scale)
+                self.send(Offer(rnd, txid, amount * scale), aid)
+
+    def _accept(self, rnd: int) -> None:
+        """Accept this round's offers, scaled by the own limiter, within the room left."""
+        offers, self.offers_in = self.offers_in, []
+        room = self.rule.pmax - self.p - sum(self.reserved.values())
+        if self.rule.barrier:  # paper mode: no upper limit in the revision rule
+            room = np.inf
+        for sender, offer in offers:
+            if offer.txid in self.answered:
+                continue
+            self.answered.add(offer.txid)
+            if rnd >= offer.round + self.timeout:
+                continue  # expired: refused (the sender aborts it)
+            amount = min(offer.amount_mw * self.receiver_scale, max(room, 0.0))
+            if amount <= 0.0:
+                continue
+            room -= amount
+            self.reserved[offer.txid] = amount
+            self.send(Accept(offer.txid, amount), sender)
+
+    def _commit(self, rnd: int) -> None:
+        """Commit the accepted offers, abort the expired ones; (re)send every decision not yet
+        acknowledged."""
+        for txid, (aid, offered_round, _) in list(self.open_offers.items()):
+            amount = self.accepted.pop(txid, None)
+            if amount is None and rnd < offered_round + self.timeout - 1:
+                continue  # still open
+            del self.open_offers[txid]
+            if amount is not None:
+                self._set(self.p - amount)
+                self.committed[txid] = amount
+                self.undelivered[txid] = (aid, Decision(txid, True, amount))
+            else:
+                self.undelivered[txid] = (aid, Decision(txid, False, 0.0))
+        for aid, decision in self.undelivered.values():
+            self.send(decision, aid)
+
+    @property
+    def busy(self) -> bool:
+        """Whether a transaction of this generator is still open or unacknowledged."""
+        return bool(self.open_offers or self.undelivered or self.reserved)

@@ -1,0 +1,87 @@
+"""What the agents say to each other: one small record per message kind. Powers in MW.
+
+Every record is ``json_serializable`` (mango's JSON codec), so the same messages cross a TCP
+connection between processes; in mango's simulated world they are handed over as objects.
+``round`` is the revision round the message belongs to (one Euler step of the dynamics);
+``txid`` names a pairwise transaction (``"<sender>/<round>/<receiver>"``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from mango import json_serializable
+
+
+@json_serializable
+@dataclass(frozen=True)
+class Measurement:
+    """Plant -> node controller: the flow of limited line ``line`` (index among the limited
+    lines), MW, positive away from the source, as measured at the start of ``round``."""
+
+    round: int
+    line: int
+    flow_mw: float
+
+
+@json_serializable
+@dataclass(frozen=True)
+class Signals:
+    """Node controller -> generator: the controller's value for each of its lines whose side
+    the generator is on (``{line: EUR/MW}``; paper eq. 8 or the exact mode's half price)."""
+
+    round: int
+    values: dict
+
+
+@json_serializable
+@dataclass(frozen=True)
+class Status:
+    """Generator -> neighbour: fitness ``f`` (EUR/MW), receiver weight ``w`` and movable mass
+    ``v`` (shares) at the start of ``round`` (the pairwise-flow inputs, dynamics/pairwise.py)."""
+
+    round: int
+    f: float
+    w: float
+    v: float
+
+
+@json_serializable
+@dataclass(frozen=True)
+class Offer:
+    """Sender -> better neighbour: move ``amount_mw`` to it (before the receiver's limiter)."""
+
+    round: int
+    txid: str
+    amount_mw: float
+
+
+@json_serializable
+@dataclass(frozen=True)
+class Accept:
+    """Receiver -> sender: ``amount_mw`` (at most the offer) is reserved for ``txid``."""
+
+    txid: str
+    amount_mw: float
+
+
+@json_serializable
+@dataclass(frozen=True)
+class Decision:
+    """Sender -> receiver: ``txid`` is committed with ``amount_mw`` (the sender has already
+    lowered its output by it) or aborted (``amount_mw`` 0). Repeated until acknowledged."""
+
+    txid: str
+    commit: bool
+    amount_mw: float
+
+
+@json_serializable
+@dataclass(frozen=True)
+class Ack:
+    """Receiver -> sender: the decision on ``txid`` is applied (idempotent)."""
+
+    txid: str
+
+
+ALL_MESSAGES = (Measurement, Signals, Status, Offer, Accept, Decision, Ack)

@@ -1,0 +1,89 @@
+"""The simulated network: loss, delay and duplication, seeded (a mango communication simulation).
+
+mango's :class:`~mango.simulation.SimulationWorld` asks its communication simulation, for every
+message sent, whether it arrives and after how long; this module answers with a seeded
+:class:`random.Random`, so a run is repeatable. Time is counted in *ticks* (1 s of simulated
+clock each): a revision round has :data:`popdispatch.agents.schedule.TICKS_PER_ROUND` ticks and
+agents act on whole ticks, so every message takes half a tick (it is in the receiver's inbox
+before the receiver's next tick) plus a random whole number of ticks up to ``delay_max``
+rounds. Duplication is decided by the sender's outbox (:meth:`LossyNetwork.copies`): mango's
+package result is one delivery per send, so a duplicated packet is sent twice, each copy with
+its own loss and delay draw (hence also reordered).
+"""
+
+from __future__ import annotations
+
+import random
+from dataclasses import dataclass
+
+from mango import CommunicationSimulation, CommunicationSimulationResult, PackageResult
+
+from popdispatch.agents.schedule import HOP_TICKS, TICKS_PER_ROUND
+from popdispatch.errors import OptionError
+
+
+@dataclass(frozen=True)
+class Faults:
+    """Communication faults of a simulated run.
+
+    Attributes
+    ----------
+    loss : probability that a message is lost, 0-1 (each message independently).
+    delay_max : largest extra delay, in rounds (each message: a whole number of ticks drawn
+        uniformly from 0 to ``delay_max`` rounds).
+    duplicate : probability that a message is delivered twice (each copy delayed on its own).
+    noise_kw : standard deviation of the flow measurement noise, kW (plant sensors).
+    seed : seed of every random draw of the run.
+    """
+
+    loss: float = 0.0
+    delay_max: int = 0
+    duplicate: float = 0.0
+    noise_kw: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name, option in (("loss", "--loss"), ("duplicate", "--duplicate")):
+            value = getattr(self, name)
+            if not 0.0 <= value < 1.0:
+                raise OptionError(f"{name} must be in [0, 1), got {value}", option)
+        if int(self.delay_max) != self.delay_max or self.delay_max < 0:
+            raise OptionError(
+                f"delay_max must be a whole number of rounds >= 0, got {self.delay_max}",
+                "--delay-max",
+            )
+        if not self.noise_kw >= 0.0:
+            raise OptionError(f"noise must be >= 0 kW, got {self.noise_kw}", "--noise-kw")
+
+    @property
+    def perfect(self) -> bool:
+        """No loss, no extra delay, no duplicates, no noise."""
+        return not (self.loss or self.delay_max or self.duplicate or self.noise_kw)
+
+
+class LossyNetwork(CommunicationSimulation):
+    """mango communication simulation of :class:`Faults` (seeded loss and whole-tick delays),
+    counting what it was asked to carry."""
+
+    def __init__(self, faults: Faults):
+        self.faults = faults
+        self.rng = random.Random(faults.seed)
+        self.sent = 0
+        self.lost = 0
+
+    def calculate_communication(self, current_time, messages) -> CommunicationSimulationResult:
+        results = []
+        extra_max = int(self.faults.delay_max) * TICKS_PER_ROUND
+        for _ in messages:
+            self.sent += 1
+            reached = self.rng.random() >= self.faults.loss
+            self.lost += not reached
+            extra = self.rng.randint(0, extra_max) if extra_max else 0
+            results.append(PackageResult(reached=reached, delay_s=HOP_TICKS + extra))
+        return CommunicationSimulationResult(package_results=results)
+
+    def copies(self) -> int:
+        """How many copies of the next message the network delivers attempts for (1 or 2)."""
+        if self.faults.duplicate and self.rng.random() < self.faults.duplicate:
+            return 2
+        return 1

@@ -1,0 +1,324 @@
+"""The dispatch as a system of agents in mango's simulated world, and its result.
+
+:func:`run_agents` builds one agent per generator, one per node controller and the plant
+(:func:`build_agents`), registers them in a mango :class:`~mango.SimulationWorld` whose
+communication simulation is the seeded :class:`~popdispatch.agents.network.LossyNetwork`,
+places the generators on the communication graph as a mango topology, and steps the clock
+round by round until the set points come to rest (or ``max_rounds``). Then no new offers are
+made and the clock runs on until every transaction is decided and acknowledged (the drain),
+and the run is compared with nothing: callers compare it with the DC-OPF or the engine.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from dataclasses import dataclass, field
+
+import networkx as nx
+import numpy as np
+
+from popdispatch.agents.controller import ControllerAgent, LineEnd
+from popdispatch.agents.generator import GeneratorAgent, GeneratorRule
+from popdispatch.agents.network import Faults, LossyNetwork
+from popdispatch.agents.plant import Inverters, PlantAgent
+from popdispatch.agents.schedule import TICKS_PER_ROUND
+from popdispatch.constants import KW_PER_MW
+from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.errors import OptionError
+from popdispatch.game.controllers import NodeControllers
+from popdispatch.game.parameters import MinuteInputs
+from popdispatch.game.problem import DispatchProblem
+from popdispatch.modes import get_mode
+from popdispatch.online.settings import RunSettings, initial_shares
+from popdispatch.warm_start import SHARES, warm_start
+
+#: Watts per MW.
+W_PER_MW = 1.0e6
+
+
+@dataclass(frozen=True)
+class AgentSettings:
+    """How the agents run, beyond the dynamics' :class:`~popdispatch.online.RunSettings`.
+
+    Attributes
+    ----------
+    step_s : the round's Euler step ``h``, s (the engine's ``dt / substeps``; exact mode is
+        stable on the congestion minute at 0.005 s, paper mode's barrier wants 1e-4 s).
+    max_rounds : horizon, rounds.
+    window : rounds over which the set points must move less than ``tol_kw`` to be at rest.
+    tol_kw : rest tolerance, kW.
+    drain_rounds : most rounds after rest to decide and acknowledge every transaction.
+    timeout : rounds an offer stays open (None: ``2 * delay_max + 1`` of the faults, so that
+        an offer and its acceptance can both arrive as late as the network delays them).
+    """
+
+    step_s: float | None = None
+    max_rounds: int = 4000
+    window: int = 10
+    tol_kw: float = 1e-4
+    drain_rounds: int = 200
+    timeout: int | None = None
+
+    def timeout_for(self, faults: Faults) -> int:
+        """Rounds an offer stays open (see the attribute)."""
+        return self.timeout if self.timeout is not None else 2 * int(faults.delay_max) + 1
+
+    def rest_window(self, faults: Faults) -> int:
+        """Rounds of rest required: ``window`` times ``1 + delay_max`` (a late network can
+        hold every transaction up for ``delay_max`` rounds)."""
+        return self.window * (1 + int(faults.delay_max))
+
+    def step_for(self, mode: str) -> float:
+        """The Euler step in force: the given one, else the mode's stable default."""
+        return self.step_s if self.step_s is not None else DEFAULT_STEP_S[mode]
+
+
+#: Default Euler step per mode, s (the engine's dt 0.01 s over 2 or 100 substeps).
+DEFAULT_STEP_S = {"exact": 0.005, "paper": 1.0e-4}
+
+
+@dataclass
+class AgentSystem:
+    """The agents of one run and what they share: the plant, the controllers by id, the
+    generators in the problem's order, the inverters and the simulated network."""
+
+    plant: PlantAgent
+    controllers: dict[str, ControllerAgent]
+    generators: list[GeneratorAgent]
+    inverters: Inverters
+    network: LossyNetwork
+    graph: nx.Graph
+    demand_mw: float
+
+    @property
+    def agents(self) -> list:
+        return [self.plant, *self.controllers.values(), *self.generators]
+
+    def committed_imbalance_mw(self) -> float:
+        """Supply minus demand of the committed state: every set point, plus each committed
+        transaction whose receiver has not applied it yet (in flight). Zero up to rounding
+        if every transaction is applied exactly once at each end."""
+        applied = set().union(*(g.applied for g in self.generators))
+        in_flight = sum(
+            amount for g in self.generators for txid, amount in g.committed.items()
+            if txid not in applied
+        )  # fmt: skip
+        return float(self.inverters.p.sum() + in_flight - self.demand_mw)
+
+    def physical_imbalance_mw(self) -> float:
+        """Supply minus demand of the set points as they are: what the source bus takes up."""
+        return float(self.inverters.p.sum() - self.demand_mw)
+
+
+@dataclass(frozen=True)
+class AgentRun:
+    """A run of the agents. Powers in kW, imbalances in W.
+
+    ``trajectory_kw``: set points at the start of every round (rows), as the plant saw them;
+    ``setpoints_kw``: after the drain; ``rest_round``: the round the set points came to rest
+    (None if never); ``messages``: every message sent (lost ones and duplicate copies
+    included); ``lost``: of them lost; ``max_imbalance_w``: largest |supply - demand| of the
+    committed state at any round; ``max_transient_w``: largest |supply - demand| of the
+    inverters as they were at a measurement (taken up by the source bus while a commit is in
+    flight); ``final_imbalance_w``: of the inverters after the drain; ``open_transactions``:
+    undecided or unacknowledged transactions left after the drain; ``prices``: exact mode,
+    each controller's ``(line, z_up, z_down)`` EUR/MW.
+    """
+
+    generators: list[str]
+    trajectory_kw: np.ndarray
+    setpoints_kw: np.ndarray
+    rounds: int
+    rest_round: int | None
+    messages: int
+    lost: int
+    max_imbalance_w: float
+    max_transient_w: float
+    final_imbalance_w: float
+    open_transactions: int
+    residual_kw: float
+    wall_seconds: float
+    agents: int
+    prices: dict = field(default_factory=dict)
+
+    @property
+    def status(self) -> str:
+        return "converged" if self.rest_round is not None else "not_converged"
+
+    @property
+    def messages_per_agent_round(self) -> float:
+        return self.messages / max(self.agents * max(self.rounds, 1), 1)
+
+
+def initial_setpoints(problem: DispatchProblem, settings: RunSettings, minute: int) -> np.ndarray:
+    """Initial set points (MW) as :meth:`popdispatch.online.Engine.run_minute` starts: the
+    initial shares, projected onto the limits in bounded modes, times the demand."""
+    inputs = MinuteInputs.of(problem, minute)
+    x = initial_shares(problem, settings.x0, minute)
+    weight = np.empty_like(x)
+    warm_start(int(SHARES), get_mode(settings.mode).bounded, x, 0.0, inputs.demand,
+               problem.pmin, problem.pmax, inputs.active, weight)  # fmt: skip
+    return x * inputs.demand
+
+
+def generator_graph(problem: DispatchProblem, settings: RunSettings) -> nx.Graph:
+    """The communication graph over generator names (complete for dynamics without one)."""
+    names = list(problem.generators)
+    dynamics = get_dynamics(settings.dynamics)
+    kind = settings.graph if dynamics.uses_graph else "complete"
+    adjacency = communication_graph(kind, names)
+    return nx.relabel_nodes(nx.from_numpy_array(adjacency), dict(enumerate(names)))
+
+
+def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
+                 step_s: float, faults: Faults, timeout: int = 1) -> AgentSystem:  # fmt: skip
+    """The agents of one minute (not yet registered anywhere); ``timeout``: rounds an offer
+    stays open."""
+    if not problem.online[minute - 1].all():
+        off = ", ".join(problem.generators[~problem.online[minute - 1]])
+        raise OptionError(f"the agents run with every generator online (offline: {off})")
+    mode = get_mode(settings.mode)
+    dynamics = get_dynamics(settings.dynamics)
+    field_code = dynamics.bounded_field if mode.bounded else dynamics.field
+    fp = settings.fitness
+    demand = float(problem.demand[minute - 1])
+    network = LossyNetwork(faults)
+    inverters = Inverters(initial_setpoints(problem, settings, minute))
+    graph = generator_graph(problem, settings)
+    names = list(problem.generators)
+    generators = []
+    for i, name in enumerate(names):
+        rule = GeneratorRule(
+            float(problem.b[i]), float(problem.c[i]), float(problem.pmin[i]),
+            float(problem.pmax[i]), float(fp.B), float(fp.m),
+            float(fp.gain) if mode.bounded else 1.0, not mode.bounded, int(field_code),
+            demand, step_s,
+        )  # fmt: skip
+        neighbours = [n for n in names if graph.has_edge(name, n)]
+        generators.append(GeneratorAgent(rule, i, inverters, neighbours, timeout, network))
+    controllers, line_ends = _controllers(problem, mode.bounded, fp, step_s, network)
+    plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
+                       network)  # fmt: skip
+    return AgentSystem(plant, controllers, generators, inverters, network, graph, demand)
+
+
+def controller_id(bus) -> str:
+    """Agent id of the node controller at original bus ``bus``."""
+    return f"C{bus}"
+
+
+def _controllers(problem, exact: bool, fp, step_s: float, network):
+    """``({id: controller}, line_ends)`` from the problem's controller table."""
+    table = NodeControllers.from_problem(problem).table
+    position = {line: k for k, line in enumerate(problem.lines)}
+    ends: dict[str, list[LineEnd]] = {}
+    line_ends: list[list[str]] = [[] for _ in problem.lines]
+    for row in table.itertuples():
+        aid = controller_id(row.bus)
+        k = position[row.line]
+        ends.setdefault(aid, []).append(
+            LineEnd(k, int(row.orientation), float(row.limit_kw) / KW_PER_MW, list(row.receivers))
+        )
+        line_ends[k].append(aid)
+    controllers = {
+        aid: ControllerAgent(own, exact, float(fp.C), float(fp.price_rate), step_s, network)
+        for aid, own in ends.items()
+    }
+    return controllers, [tuple(e) for e in line_ends]
+
+
+def run_agents(
+    problem: DispatchProblem,
+    minute: int,
+    settings: RunSettings | None = None,
+    faults: Faults | None = None,
+    agent_settings: AgentSettings | None = None,
+    on_round=None,
+) -> AgentRun:
+    """One minute of dispatch by the agents in mango's simulated world (module docstring).
+
+    ``on_round(system, rnd)``: called after every round's measurement (fault injection,
+    probes); it may crash, restart or trip agents of ``system``.
+    """
+    settings = settings or RunSettings()
+    faults = faults or Faults()
+    agent_settings = agent_settings or AgentSettings()
+    step_s = agent_settings.step_for(settings.mode)
+    system = build_agents(problem, minute, settings, step_s, faults,
+                          agent_settings.timeout_for(faults))  # fmt: skip
+    window = agent_settings.rest_window(faults)
+    return asyncio.run(_simulate(system, agent_settings, window, on_round))
+
+
+async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_round) -> AgentRun:
+    from mango import AgentAddress, create_world, graph_topology, per_node
+
+    world = create_world(communication_sim=system.network, record_messages=False)
+    world.register(system.plant, suggested_aid="plant")
+    for aid, agent in system.controllers.items():
+        world.register(agent, suggested_aid=aid)
+    for gen, name in zip(system.generators, system.graph.nodes, strict=True):
+        world.register(gen, suggested_aid=name)
+    topology = graph_topology(system.graph.copy())
+    for name, node in zip(system.graph.nodes, per_node(topology), strict=True):
+        node.add(world.agents[name])
+    addresses = {aid: AgentAddress(world.addr, aid) for aid in world.agents}
+    for agent in system.agents:
+        agent.addresses = addresses
+    start = time.perf_counter()
+    tol = opts.tol_kw / KW_PER_MW
+    rest_round = None
+    max_imbalance = max_transient = 0.0
+    async with world:
+        rnd, quiet = 0, False
+        while True:
+            max_imbalance = max(max_imbalance, abs(system.committed_imbalance_mw()))
+            max_transient = max(max_transient, abs(system.physical_imbalance_mw()))
+            if on_round is not None:
+                on_round(system, rnd)
+            if not quiet and _at_rest(system.plant.history, window, tol):
+                rest_round = len(system.plant.history) - 1
+            if not quiet and (rest_round is not None or rnd >= opts.max_rounds):
+                quiet = True  # the drain: no new offers, open transactions decided
+                for gen in system.generators:
+                    gen.quiet = True
+            busy = any(g.busy for g in system.generators)
+            if (quiet and not busy) or rnd >= opts.max_rounds + opts.drain_rounds:
+                break
+            await world.step_until(TICKS_PER_ROUND)
+            rnd += 1
+    wall = time.perf_counter() - start
+    prices = {
+        aid: [(end.line, end.z_up, end.z_down) for end in c.ends]
+        for aid, c in system.controllers.items()
+    }
+    residual = max((c.residual_mw() for c in system.controllers.values()), default=0.0)
+    trajectory = np.array(system.plant.history) * KW_PER_MW
+    return AgentRun(
+        generators=list(system.graph.nodes),
+        trajectory_kw=trajectory,
+        setpoints_kw=system.inverters.p * KW_PER_MW,
+        rounds=len(trajectory) - 1,
+        rest_round=rest_round,
+        messages=system.network.sent,
+        lost=system.network.lost,
+        max_imbalance_w=max_imbalance * W_PER_MW,
+        max_transient_w=max_transient * W_PER_MW,
+        final_imbalance_w=system.physical_imbalance_mw() * W_PER_MW,
+        open_transactions=sum(
+            len(g.open_offers) + len(g.undelivered) + len(g.reserved) for g in system.generators
+        ),
+        residual_kw=residual * KW_PER_MW,
+        wall_seconds=wall,
+        agents=len(system.agents),
+        prices=prices,
+    )
+
+
+def _at_rest(history: list[np.ndarray], window: int, tol_mw: float) -> bool:
+    """Whether the set points moved less than ``tol_mw`` over the last ``window`` rounds."""
+    if len(history) <= window:
+        return False
+    recent = np.array(history[-window - 1 :])
+    return bool(np.abs(recent - recent[-1]).max() <= tol_mw)
