@@ -22,6 +22,7 @@ from popdispatch.feeder.generators import make_fleet  # noqa: E402
 from popdispatch.feeder.model import Feeder  # noqa: E402
 
 VN_KV = 0.4
+TIGHT_PU = 1e-12  # power-flow tolerance here: the model, not the default tolerance, is tested
 S_BASE_KW = 1.0  # p.u. base of the yardsticks: 1 kW, 0.4 kV -> Z_base = 160 ohm
 
 
@@ -60,7 +61,13 @@ def test_two_bus_line_matches_the_closed_form(source_pu):
     q_kvar = p_kw * math.tan(math.acos(pf))
     feeder = chain_feeder(2, r, x, gen_bus=2, limit_kw=50.0)
     day = check_setpoints(
-        feeder, [[p_kw]], [[0.0, 0.0]], vn_kv=VN_KV, load_pf=pf, source_pu=source_pu
+        feeder,
+        [[p_kw]],
+        [[0.0, 0.0]],
+        vn_kv=VN_KV,
+        load_pf=pf,
+        source_pu=source_pu,
+        tolerance_pu=TIGHT_PU,
     )
     # closed form, p.u. on 1 kW / 0.4 kV
     rr, xx = r / z_base_ohm(), x / z_base_ohm()
@@ -122,7 +129,14 @@ def test_three_bus_feeder_matches_a_numpy_power_flow(gen_kw):
     load_kw = np.array([12.0, 18.0])
     gen_pf, load_pf = 0.9, 0.95
     day = check_setpoints(
-        feeder, [load_kw], [[0.0, gen_kw]], vn_kv=VN_KV, load_pf=load_pf, generator_pf=gen_pf
+        feeder,
+        [load_kw],
+        [[0.0, gen_kw]],
+        vn_kv=VN_KV,
+        load_pf=load_pf,
+        generator_pf=gen_pf,
+        tolerance_pu=TIGHT_PU,
+        detail=True,
     )
     s_net = np.zeros(3, dtype=complex)
     s_net[1:] -= load_kw * (1 + 1j * math.tan(math.acos(load_pf)))

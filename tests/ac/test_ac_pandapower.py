@@ -216,7 +216,7 @@ def test_case33bw_matches_pandapower(dg_kw):
     # also supplies what our generator at the source bus, G1, is dispatched to)
     extra_oracle = net.res_ext_grid.p_mw.iloc[0] * 1000 - setpoints[0][0]
     assert abs(step.source_extra_kw - extra_oracle) < LOSS_TOL_KW
-    assert abs(step.source_extra_kw - step.losses_kw) < 1e-6
+    assert abs(step.source_extra_kw - step.losses_kw) < LOSS_TOL_KW
     assert abs(step.source_kvar - net.res_ext_grid.q_mvar.iloc[0] * 1000) < LOSS_TOL_KW
     assert day.model.load_q_rule.startswith("each load's own q_kvar")
     if dg_kw == 0.0:
