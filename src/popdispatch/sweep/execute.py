@@ -195,10 +195,10 @@ def run_sweep(
     this process (for tests; the GIL then serialises them). A progress bar on stderr shows
     scenarios done, failures, rate and ETA unless ``quiet``.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     profiles = profiles or os.environ.get("POPDISPATCH_PROFILES", "").strip() or None
     check_profiles(scenarios, profiles)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
     context = Context(str(out.resolve()), str(Path(profiles).resolve()) if profiles else None)
     todo = pending(scenarios, out, retry_failed)
     result = SweepResult(total=len(scenarios), skipped=len(scenarios) - len(todo))
