@@ -38,6 +38,7 @@ from popdispatch.report.interactive import (  # noqa: E402
     write_day_html,
 )
 from popdispatch.report.interactive.feeder_map import (  # noqa: E402
+    STATE_COLORS,
     MapBuilder,
     bus_coordinates,
     map_figure,
@@ -49,6 +50,7 @@ from popdispatch.report.interactive.steps import (  # noqa: E402
     eq8_signals,
     frame_rows,
 )
+from popdispatch.report.summaries import day_summary  # noqa: E402
 from popdispatch.runs import FeederSource, load_run, run_day_vs_opf, run_snapshot_vs_opf  # noqa: E402
 from popdispatch.scenarios import CONGESTION_PATH  # noqa: E402
 
@@ -192,6 +194,25 @@ def test_frames_carry_the_days_setpoints_and_dc_opf(small) -> None:
         np.testing.assert_allclose([d[0] for d in data], comparison.run.setpoints_kw[row],
                                    atol=5e-4)  # fmt: skip
         np.testing.assert_allclose([d[1] for d in data], comparison.opf_kw[row], atol=5e-4)
+
+
+def test_controllers_show_the_state_of_the_line_they_measure(small) -> None:
+    """L34's two controllers (buses 3 and 4) turn orange exactly where the DC-OPF's dual of
+    L34 is nonzero (the dynamics hold the line at its limit) and say what they measure."""
+    problem, profiles, comparison = small
+    steps = day_steps(comparison, problem, profiles)
+    builder = MapBuilder(problem, steps)
+    builder.build_traces(0)
+    index = builder.dynamic["controllers"][0]
+    assert list(builder.ends) == [3, 4]
+    for row, opf in enumerate(comparison.opf):
+        update = builder.updates(row)[index]
+        binding = abs(opf.line_price[0]) > 1e-6
+        expected = STATE_COLORS[BINDING] if binding else STATE_COLORS[0]
+        assert update["marker"]["color"] == [expected, expected]
+        flow = steps.limited_flows_kw(problem)[row, 0]
+        assert f"{flow:+.3f} kW" in update["customdata"][0]  # parent end: + leaves bus 3
+        assert f"{-flow:+.3f} kW" in update["customdata"][1]
 
 
 def test_the_page_is_self_contained_and_names_the_run(small) -> None:
@@ -391,17 +412,15 @@ def test_docs_screenshot(browser, elv_day, tmp_path) -> None:
     """The README's screenshot: the ELV around the peak with the map at minute 566. Written to
     ``$POPDISPATCH_REPORT_SCREENSHOT`` when set (docs/img/report.png), else to a tmp path."""
     problem, profiles, comparison = elv_day
-    path = write_day_html(tmp_path / "elv.html", comparison, problem, profiles,
-                          run_info={"case": "ieee-elv", "mode": "exact",
-                                    "limits": [{"from_bus": 505, "to_bus": 666, "limit_kw": 28.0}],
-                                    "profile_source": comparison.run.profile_source})  # fmt: skip
+    summary = day_summary(problem, comparison, [CONGESTION_PATH])
+    path = write_day_html(tmp_path / "elv.html", comparison, problem, profiles, run_info=summary)
     page = open_report(browser, path)
     page.evaluate("Plotly.animate('popdispatch-map', ['566'], {mode: 'immediate',"
                   " frame: {duration: 0, redraw: true}, transition: {duration: 0}})")  # fmt: skip
     page.wait_for_timeout(500)
     assert page.evaluate(MAP_STATE)["cursor"] == 566
     target = Path(os.environ.get("POPDISPATCH_REPORT_SCREENSHOT") or tmp_path / "shot.png")
-    page.set_viewport_size({"width": 1400, "height": 1250})
+    page.set_viewport_size({"width": 1400, "height": 1500})
     page.screenshot(path=str(target))
     assert target.stat().st_size > 50_000
     assert page.errors == []

@@ -107,7 +107,7 @@ def day_report_html(
     error = steps.abs_error_kw
     titles = [
         f"minute {m} ({clock(m)}): demand {steps.demand_kw[r]:.2f} kW, max |error| to the "
-        f"DC-OPF {_kw(error[r])}, {int((states[r] > 0).sum())} limited lines at their limit"
+        f"DC-OPF {_kw(error[r])}, {_at_limit(states[r])}"
         for r, m in ((int(r), int(steps.values[r])) for r in rows)
     ]
     info = _run_info(run_info, problem, steps, comparison)
@@ -149,7 +149,7 @@ def snapshot_report_html(
     dt = run.settings.stepping.dt
     titles = [
         f"minute {run.minute}, iteration {r} ({r * dt:.2f} s): max |error| to the DC-OPF "
-        f"{_kw(error[r])}, {int((states[r] > 0).sum())} limited lines at their limit"
+        f"{_kw(error[r])}, {_at_limit(states[r])}"
         for r in (int(r) for r in rows)
     ]
     info = _run_info(run_info, problem, steps, comparison)
@@ -174,6 +174,11 @@ NOTES = [
     "flows would make a paper-mode controller send (exact mode's own integrated prices are "
     "not kept by the engine)."
 ]
+
+
+def _at_limit(states: np.ndarray) -> str:
+    n = int((states > 0).sum())
+    return f"{n} limited line{'' if n == 1 else 's'} at {'its' if n == 1 else 'their'} limit"
 
 
 def _kw(value: float) -> str:

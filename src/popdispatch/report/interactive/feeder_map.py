@@ -215,24 +215,26 @@ class MapBuilder:
             "hovertemplate": "%{text}<br>voltage %{customdata:.4f} p.u.<extra></extra>",
         }  # fmt: skip
 
-    def _controllers(self) -> dict:
+    def _controller_ends(self) -> dict[int, list[tuple[int, float]]]:
+        """Per key-node bus at an end of a limited line: ``(limited line, sign)`` of each line
+        its controller measures (+1 at the parent end, where a positive flow leaves)."""
         rows = self.reduced.lines.loc[self.problem.lines]
-        xs, ys, text = [], [], []
-        for k, (line, row) in enumerate(rows.iterrows()):
-            for end, bus in (("parent", row.from_bus), ("child", row.to_bus)):
-                xs.append(float(self.xy.loc[bus].x))
-                ys.append(float(self.xy.loc[bus].y))
-                text.append(f"controller at bus {int(bus)}, {end} end of reduced line {line} "
-                            f"(limited line {k}, limit {row.limit_kw:g} kW)")  # fmt: skip
+        ends: dict[int, list[tuple[int, float]]] = {}
+        for k, (a, b) in enumerate(zip(rows.from_bus, rows.to_bus, strict=True)):
+            ends.setdefault(int(a), []).append((k, 1.0))
+            ends.setdefault(int(b), []).append((k, -1.0))
+        return ends
+
+    def _controllers(self) -> dict:
+        self.ends = self._controller_ends()
+        xy = self.xy.loc[list(self.ends)]
         return {
             "type": "scatter", "mode": "markers", "name": "node controllers",
-            "x": xs, "y": ys, "text": text,
-            "marker": {"symbol": "square", "size": 13, "color": ["#ffffff"] * len(xs),
+            "x": xy.x.tolist(), "y": xy.y.tolist(),
+            "text": [f"node controller at bus {bus}" for bus in self.ends],
+            "marker": {"symbol": "square", "size": 13, "color": ["#ffffff"] * len(xy),
                        "line": {"width": 2, "color": "#000000"}},
-            "hovertemplate": "%{text}<br>measured flow %{customdata[0]:.3f} kW "
-            "(+ leaving this bus)<br>loading %{customdata[1]:.1f} %<br>state %{customdata[2]}"
-            "<br>eq.-8 signal sent %{customdata[3]:.2f} EUR/MWh<br>DC-OPF line price "
-            "%{customdata[4]:.2f} EUR/MWh<extra></extra>",
+            "hovertemplate": "%{text}<br>%{customdata}<extra></extra>",
         }  # fmt: skip
 
     def _generators(self) -> dict:
@@ -276,16 +278,22 @@ class MapBuilder:
         return out
 
     def _controller_update(self, row: int) -> dict:
-        steps, problem = self.steps, self.problem
+        """Each controller's colour (the worst state of the lines it measures) and, per line,
+        the flow it measures (+ leaving its bus), loading, state, the eq.-8 signal it sends
+        and the DC-OPF's line price."""
+        steps, rows = self.steps, self.reduced.lines.loc[self.problem.lines]
         flow, loading, states = self.limited_kw[row], self.loading[row], self.states[row]
         signal, price = steps.signal[row], steps.opf_price[row]
         color, data = [], []
-        for k in range(len(problem.lines)):
-            for sign in (1.0, -1.0):  # parent end measures +flow, child end -flow
-                color.append(STATE_COLORS[int(states[k])])
-                data.append([round(sign * float(flow[k]), 3), round(float(loading[k]), 1),
-                             STATE_NAMES[int(states[k])], round(sign * float(signal[k]), 2),
-                             _finite(price[k], 2)])  # fmt: skip
+        for measured in self.ends.values():
+            color.append(STATE_COLORS[max(int(states[k]) for k, _ in measured)])
+            data.append("<br>".join(
+                f"line {int(rows.from_bus.iloc[k])}-{int(rows.to_bus.iloc[k])} "
+                f"(limit {rows.limit_kw.iloc[k]:g} kW): {sign * flow[k]:+.3f} kW, "
+                f"{loading[k]:.1f} %, {STATE_NAMES[int(states[k])]}; eq.-8 signal "
+                f"{sign * signal[k]:+.2f}, DC-OPF price {_price(price[k])} EUR/MWh"
+                for k, sign in measured
+            ))  # fmt: skip
         return {"marker": {"color": color}, "customdata": data}
 
     def _generator_update(self, row: int) -> dict:
@@ -414,6 +422,10 @@ def _sample(scale: str | list, values: np.ndarray) -> list[str]:
 
 def _rounded(values: np.ndarray, digits: int) -> list[float]:
     return np.round(np.asarray(values, dtype=float), digits).tolist()
+
+
+def _price(value: float) -> str:
+    return f"{value:+.2f}" if np.isfinite(value) else "n/a"
 
 
 def _finite(value: float, digits: int) -> float | None:

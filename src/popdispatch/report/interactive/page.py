@@ -35,9 +35,9 @@ STYLE = """
 body { font-family: system-ui, -apple-system, "Segoe UI", sans-serif; margin: 16px 24px;
        color: #222; }
 h1 { font-size: 20px; margin: 0 0 8px 0; }
-table.run { border-collapse: collapse; font-size: 13px; margin-bottom: 6px; }
-table.run th { text-align: left; font-weight: 600; padding: 1px 14px 1px 0; color: #555; }
-table.run td { padding: 1px 28px 1px 0; }
+div.run { display: flex; flex-wrap: wrap; gap: 2px 22px; font-size: 13px; max-width: 1300px;
+          margin-bottom: 6px; }
+div.run span b { font-weight: 600; color: #555; margin-right: 5px; }
 p.note { font-size: 12px; color: #555; max-width: 1100px; margin: 4px 0; }
 details { font-size: 12px; margin: 4px 0 10px 0; }
 .plot { width: 100%; }
@@ -62,15 +62,14 @@ def format_value(key: str, value) -> str:
 def header_html(title: str, run_info: Mapping, notes: list[str]) -> str:
     """The page's header: title, a table of the run's parameters, notes, the whole summary."""
     rows = "".join(
-        f"<tr><th>{html.escape(label)}</th><td>{html.escape(format_value(key, run_info[key]))}"
-        "</td></tr>"
+        f"<span><b>{html.escape(label)}</b>{html.escape(format_value(key, run_info[key]))}</span>"
         for key, label in HEADER_KEYS
         if key in run_info
     )
     paragraphs = "".join(f'<p class="note">{html.escape(n)}</p>' for n in notes)
     summary = html.escape(json.dumps(dict(run_info), indent=1, default=str))
     return (
-        f'<header><h1>{html.escape(title)}</h1><table class="run">{rows}</table>{paragraphs}'
+        f'<header><h1>{html.escape(title)}</h1><div class="run">{rows}</div>{paragraphs}'
         f"<details><summary>all run parameters and results (JSON)</summary><pre>{summary}"
         "</pre></details></header>"
     )
