@@ -13,7 +13,7 @@ from pathlib import Path
 import click
 
 from popdispatch.cli.options import option, profiles_option, quiet_option
-from popdispatch.cli.process import Failure
+from popdispatch.cli.process import EXIT_INTERRUPTED, Failure
 
 #: Columns of ``--dry-run``'s listing.
 LISTED = ("id", "case", "steps", "mode", "dynamics", "graph", "limits", "events", "assignment")
@@ -79,7 +79,15 @@ def sweep(spec, out, dry_run, scheduler, workers, profiles, quiet) -> int:
 def _run(parsed, out, profiles, scheduler, workers, quiet) -> int:
     from popdispatch.sweep.execute import run_sweep
 
-    result = run_sweep(parsed.scenarios, out, profiles, scheduler, workers, quiet)
+    try:
+        result = run_sweep(parsed.scenarios, out, profiles, scheduler, workers, quiet)
+    except KeyboardInterrupt:
+        click.echo(
+            f"popdispatch: sweep interrupted; every finished scenario is in {out}: rerun the "
+            "same command to run the rest",
+            err=True,
+        )
+        raise click.exceptions.Exit(EXIT_INTERRUPTED) from None
     if not result.ran:
         click.echo(f"nothing to run: every scenario is already in {out}", err=True)
         return 0
