@@ -36,7 +36,7 @@ import numpy as np
 from popdispatch.agents.base import RoundAgent
 from popdispatch.agents.messages import Accept, Ack, Decision, Offer, Signals, Status
 from popdispatch.agents.plant import Inverters
-from popdispatch.agents.schedule import Phase
+from popdispatch.agents.schedule import TICKS_PER_ROUND, Phase
 from popdispatch.dynamics.fields import field_weights
 from popdispatch.dynamics.pairwise import graph_flows
 from popdispatch.game.fitness import fitness_into
@@ -68,13 +68,20 @@ class GeneratorAgent(RoundAgent):
     """One DG (see the module docstring). ``index``: its entry in ``inverters``;
     ``neighbours``: agent ids of its neighbours in the communication graph; ``timeout``:
     rounds an offer stays open (accepted up to its last round's tick 4, decided at the
-    latest at its last round's tick 5; 1 = within its own round)."""
+    latest at its last round's tick 5; 1 = within its own round); ``lag``: rounds between a
+    commit and the change of both inverters (0: the sender's at once, the receiver's as the
+    decision arrives), so that a decision lost or late a few times still lands at both ends
+    at the same tick and the source bus never sees the transaction half done."""
 
     def __init__(self, rule: GeneratorRule, index: int, inverters: Inverters,
-                 neighbours: list[str], timeout: int = 1, network=None):  # fmt: skip
+                 neighbours: list[str], timeout: int = 1, lag: int = 0,
+                 network=None):  # fmt: skip
         super().__init__(network)
         self.rule = rule
         self.timeout = int(timeout)
+        self.lag = int(lag)
+        self.pending_out: dict[str, tuple[float, int]] = {}  # committed: MW, effective round
+        self.pending_in: dict[str, tuple[float, int]] = {}  # received: MW, effective round
         self.index = index
         self.inverters = inverters
         self.neighbours = list(neighbours)
@@ -96,6 +103,15 @@ class GeneratorAgent(RoundAgent):
     def p(self) -> float:
         """The set point this generator's inverter holds, MW."""
         return float(self.inverters.p[self.index])
+
+    @property
+    def planned(self) -> float:
+        """The set point with every commit this generator knows of applied, MW (what its
+        revision rule works with)."""
+        later = sum(a for a, _ in self.pending_in.values()) - sum(
+            a for a, _ in self.pending_out.values()
+        )
+        return self.p + later if later else self.p
 
     def _set(self, p_mw: float) -> None:
         self.inverters.p[self.index] = p_mw
@@ -123,12 +139,17 @@ class GeneratorAgent(RoundAgent):
             self.undelivered.pop(content.txid, None)
 
     def _apply(self, decision: Decision, sender: str) -> None:
-        """A sender's decision: applied once by id, acknowledged every time."""
+        """A sender's decision: recorded once by id (applied at its effective round, or now
+        if that has passed), acknowledged every time."""
         if decision.txid not in self.applied:
             self.applied.add(decision.txid)
             self.reserved.pop(decision.txid, None)
             if decision.commit:
-                self._set(self.p + decision.amount_mw)
+                now = int(self.context.current_timestamp // TICKS_PER_ROUND)
+                if now >= decision.effective_round:
+                    self._set(self.p + decision.amount_mw)
+                else:
+                    self.pending_in[decision.txid] = (decision.amount_mw, decision.effective_round)
         self.send(Ack(decision.txid), sender)
 
     # -- the round ---------------------------------------------------------------------------
@@ -147,7 +168,7 @@ class GeneratorAgent(RoundAgent):
         """Fitness and weights at the own set point; status to the neighbours."""
         r = self.rule
         one = np.ones(1)
-        p = np.array([self.p])
+        p = np.array([self.planned])
         signal = np.array(
             [sum(value for _, value in (self.signals[k] for k in sorted(self.signals, key=int)))]
         )
@@ -205,7 +226,7 @@ class GeneratorAgent(RoundAgent):
     def _accept(self, rnd: int) -> None:
         """Accept this round's offers, scaled by the own limiter, within the room left."""
         offers, self.offers_in = self.offers_in, []
-        room = self.rule.pmax - self.p - sum(self.reserved.values())
+        room = self.rule.pmax - self.planned - sum(self.reserved.values())
         if self.rule.barrier:  # paper mode: no upper limit in the revision rule
             room = np.inf
         for sender, offer in offers:
@@ -229,16 +250,29 @@ class GeneratorAgent(RoundAgent):
             if amount is None and rnd < offered_round + self.timeout - 1:
                 continue  # still open
             del self.open_offers[txid]
+            effective = rnd + self.lag
             if amount is not None:
-                self._set(self.p - amount)
+                self.pending_out[txid] = (amount, effective)
                 self.committed[txid] = amount
-                self.undelivered[txid] = (aid, Decision(txid, True, amount))
+                self.undelivered[txid] = (aid, Decision(txid, True, amount, effective))
             else:
-                self.undelivered[txid] = (aid, Decision(txid, False, 0.0))
+                self.undelivered[txid] = (aid, Decision(txid, False, 0.0, effective))
+        self._due(rnd)
         for aid, decision in self.undelivered.values():
             self.send(decision, aid)
+
+    def _due(self, rnd: int) -> None:
+        """Change the inverter by every commit whose effective round has come."""
+        for pending, sign in ((self.pending_out, -1.0), (self.pending_in, 1.0)):
+            for txid, (amount, effective) in list(pending.items()):
+                if effective <= rnd:
+                    del pending[txid]
+                    self._set(self.p + sign * amount)
 
     @property
     def busy(self) -> bool:
         """Whether a transaction of this generator is still open or unacknowledged."""
-        return bool(self.open_offers or self.undelivered or self.reserved)
+        return bool(
+            self.open_offers or self.undelivered or self.reserved or self.pending_out
+            or self.pending_in
+        )  # fmt: skip

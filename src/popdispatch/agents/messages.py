@@ -68,12 +68,14 @@ class Accept:
 @json_serializable
 @dataclass(frozen=True)
 class Decision:
-    """Sender -> receiver: ``txid`` is committed with ``amount_mw`` (the sender has already
-    lowered its output by it) or aborted (``amount_mw`` 0). Repeated until acknowledged."""
+    """Sender -> receiver: ``txid`` is committed with ``amount_mw`` or aborted (``amount_mw``
+    0). Both inverters change at the last tick of round ``effective_round`` (the receiver's
+    on arrival if that is later). Repeated until acknowledged."""
 
     txid: str
     commit: bool
     amount_mw: float
+    effective_round: int
 
 
 @json_serializable

@@ -51,6 +51,7 @@ class AgentSettings:
     drain_rounds : most rounds after rest to decide and acknowledge every transaction.
     timeout : rounds an offer stays open (None: ``2 * delay_max + 1`` of the faults, so that
         an offer and its acceptance can both arrive as late as the network delays them).
+    lag : rounds from a commit to the change of both inverters (see :meth:`lag_for`).
     """
 
     step_s: float | None = None
@@ -59,6 +60,17 @@ class AgentSettings:
     tol_kw: float = 1e-4
     drain_rounds: int = 200
     timeout: int | None = None
+    lag: int | None = None
+
+    def lag_for(self, faults: Faults) -> int:
+        """Rounds from a commit to the inverters' change (None: 0 on a perfect network, else
+        ``delay_max + 2``: a decision delayed as long as the network delays it, or lost
+        once and resent, still reaches its receiver in time)."""
+        if self.lag is not None:
+            return self.lag
+        return 0 if not (faults.loss or faults.delay_max or faults.duplicate) else (
+            int(faults.delay_max) + 2
+        )  # fmt: skip
 
     def timeout_for(self, faults: Faults) -> int:
         """Rounds an offer stays open (see the attribute)."""
@@ -104,7 +116,8 @@ class AgentSystem:
             amount for g in self.generators for txid, amount in g.committed.items()
             if txid not in applied
         )  # fmt: skip
-        return float(self.inverters.p.sum() + in_flight - self.demand_mw)
+        planned = sum(g.planned for g in self.generators)
+        return float(planned + in_flight - self.demand_mw)
 
     def physical_imbalance_mw(self) -> float:
         """Supply minus demand of the set points as they are: what the source bus takes up."""
@@ -123,7 +136,7 @@ class AgentRun:
     inverters as they were at a measurement (taken up by the source bus while a commit is in
     flight); ``final_imbalance_w``: of the inverters after the drain; ``open_transactions``:
     undecided or unacknowledged transactions left after the drain; ``prices``: exact mode,
-    each controller's ``(line, z_up, z_down)`` EUR/MW.
+    each controller's ``(line, z_up, z_down)`` EUR/MW; ``step_s``: the round's Euler step.
     """
 
     generators: list[str]
@@ -140,6 +153,7 @@ class AgentRun:
     residual_kw: float
     wall_seconds: float
     agents: int
+    step_s: float
     prices: dict = field(default_factory=dict)
 
     @property
@@ -172,9 +186,10 @@ def generator_graph(problem: DispatchProblem, settings: RunSettings) -> nx.Graph
 
 
 def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
-                 step_s: float, faults: Faults, timeout: int = 1) -> AgentSystem:  # fmt: skip
+                 step_s: float, faults: Faults, timeout: int = 1,
+                 lag: int = 0) -> AgentSystem:  # fmt: skip
     """The agents of one minute (not yet registered anywhere); ``timeout``: rounds an offer
-    stays open."""
+    stays open; ``lag``: rounds from a commit to the inverters' change."""
     if not problem.online[minute - 1].all():
         off = ", ".join(problem.generators[~problem.online[minute - 1]])
         raise OptionError(f"the agents run with every generator online (offline: {off})")
@@ -196,7 +211,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
             demand, step_s,
         )  # fmt: skip
         neighbours = [n for n in names if graph.has_edge(name, n)]
-        generators.append(GeneratorAgent(rule, i, inverters, neighbours, timeout, network))
+        generators.append(GeneratorAgent(rule, i, inverters, neighbours, timeout, lag, network))
     controllers, line_ends = _controllers(problem, mode.bounded, fp, step_s, network)
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
                        network)  # fmt: skip
@@ -246,7 +261,8 @@ def run_agents(
     agent_settings = agent_settings or AgentSettings()
     step_s = agent_settings.step_for(settings.mode)
     system = build_agents(problem, minute, settings, step_s, faults,
-                          agent_settings.timeout_for(faults))  # fmt: skip
+                          agent_settings.timeout_for(faults),
+                          agent_settings.lag_for(faults))  # fmt: skip
     window = agent_settings.rest_window(faults)
     return asyncio.run(_simulate(system, agent_settings, window, on_round))
 
@@ -312,6 +328,7 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         residual_kw=residual * KW_PER_MW,
         wall_seconds=wall,
         agents=len(system.agents),
+        step_s=system.generators[0].rule.step_s,
         prices=prices,
     )
 

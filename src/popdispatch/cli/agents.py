@@ -1,0 +1,182 @@
+"""``popdispatch agents``: one minute dispatched by agents exchanging messages (mango-agents).
+
+The snapshot's options (minute, limits, dynamics, mode, x0, graph, feeder) plus the simulated
+network's faults (``--loss``, ``--delay-max``, ``--duplicate``, ``--noise-kw``, ``--seed``) and
+the round's Euler step (``--step-s``). The output is the snapshot's (``--json``: the snapshot
+keys, with ``iterations`` counting rounds) plus what the messages did: ``messages``, ``lost``,
+``max_imbalance_w`` (committed state), ``max_transient_w`` (taken up by the source bus),
+``final_imbalance_w``, ``open_transactions``, ``rounds``, ``agents`` and
+``messages_per_agent_round``. Register it in the main group with
+``cli.add_command(agents)`` (:mod:`popdispatch.cli.commands`).
+"""
+
+from __future__ import annotations
+
+import click
+
+from popdispatch.cli.options import (
+    feeder_options,
+    json_option,
+    limit_option,
+    minute_option,
+    option,
+    profiles_option,
+    quiet_option,
+    run_options,
+    settings_from,
+)
+from popdispatch.cli.process import Failure, stamp
+from popdispatch.cli.render import emit
+from popdispatch.report.progress import Progress
+
+
+@click.command(short_help="One minute dispatched by agents over a lossy network (mango).")
+@minute_option
+@limit_option
+@run_options
+@option("--loss", type=click.FloatRange(0.0, 1.0, max_open=True), default=0.0,
+        show_default=True, help="Probability that a message is lost (0-1).")  # fmt: skip
+@option("--delay-max", type=click.IntRange(0), default=0, show_default=True,
+        help="Largest extra message delay, rounds (uniform in whole ticks).")  # fmt: skip
+@option("--duplicate", type=click.FloatRange(0.0, 1.0, max_open=True), default=0.0,
+        show_default=True, help="Probability that a message is delivered twice.")  # fmt: skip
+@option("--noise-kw", type=click.FloatRange(0.0), default=0.0, show_default=True,
+        help="Standard deviation of each line-flow measurement, kW.")  # fmt: skip
+@option("--seed", type=int, default=0, show_default=True, help="Seed of every random draw.")
+@option("--step-s", type=click.FloatRange(0.0, min_open=True), default=None,
+        help="Euler step of one round, s (default: exact 0.005, paper 1e-4).")  # fmt: skip
+@option("--max-rounds", type=click.IntRange(1), default=4000, show_default=True,
+        help="Horizon, rounds.")  # fmt: skip
+@profiles_option
+@feeder_options
+@json_option
+@quiet_option
+def agents(minute, limits, dynamics, mode, x0, graph, loss, delay_max, duplicate, noise_kw,
+           seed, step_s, max_rounds, profiles, source, as_json, quiet) -> int:  # fmt: skip
+    """One minute dispatched by agents: one per generator, one per node controller and the
+    plant, exchanging messages in mango's simulated world with seeded loss, delay and
+    duplication; power moves only in pairwise transactions (offer, accept, commit), compared
+    with the DC-OPF.
+    """
+    progress = Progress(quiet)
+    settings = settings_from(dynamics, mode, x0, graph)
+    faults = _faults(loss, delay_max, duplicate, noise_kw, seed)
+    problem = _problem(source, profiles, minute, limits, progress)
+    with progress.step(f"minute {minute}: {dynamics} dynamics by agents"):
+        summary = agents_summary(problem, minute, settings, faults, step_s, max_rounds, limits)
+    emit(stamp(summary), as_json, agents_text(summary))
+    if summary["status"] == "infeasible":
+        raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given limits")
+    return 0
+
+
+def _faults(loss, delay_max, duplicate, noise_kw, seed):
+    """The run's :class:`~popdispatch.agents.network.Faults` (one-line error without mango)."""
+    try:
+        from popdispatch.agents import require_mango
+
+        require_mango()
+    except ImportError as exc:
+        raise Failure(str(exc)) from None
+    from popdispatch.agents.network import Faults
+
+    return Faults(loss, delay_max, duplicate, noise_kw, seed)
+
+
+def _problem(source, profiles, minute, limits, progress):
+    from popdispatch.errors import OptionError
+    from popdispatch.game.problem import check_online
+    from popdispatch.runs import load_run
+
+    try:
+        problem, _ = load_run(source, profiles, minute, limits, progress)
+    except OptionError as exc:  # a bad --limit reads as click's own usage errors
+        if exc.option != "--limit":
+            raise
+        raise click.BadParameter(str(exc), param_hint="'--limit'") from None
+    check_online(problem, [minute])
+    return problem
+
+
+def agents_summary(problem, minute, settings, faults, step_s, max_rounds, limits) -> dict:
+    """The snapshot summary of the agents' run against the DC-OPF, plus the messages' keys."""
+    import numpy as np
+
+    from popdispatch.agents.system import AgentSettings, run_agents
+    from popdispatch.online import SnapshotResult, limited_flows_mw, overflow_kw
+    from popdispatch.opf import solve_opf
+    from popdispatch.report.summaries import snapshot_summary
+    from popdispatch.runs import check_x0
+    from popdispatch.scenarios import SnapshotComparison
+
+    check_x0(settings.x0, problem.generators)
+    run = run_agents(problem, minute, settings, faults,
+                     AgentSettings(step_s=step_s, max_rounds=max_rounds))  # fmt: skip
+    final_mw = run.setpoints_kw / 1000.0
+    overflow = [overflow_kw(problem, row / 1000.0, minute).max(initial=0.0) > 0.0
+                for row in run.trajectory_kw]  # fmt: skip
+    result = SnapshotResult(
+        minute=minute,
+        demand_kw=float(problem.demand[minute - 1] * 1000.0),
+        settings=settings,
+        generators=problem.generators,
+        trajectory_kw=np.vstack([run.trajectory_kw, run.setpoints_kw]),
+        converged_at=run.rest_round,
+        first_congestion=next((i for i, o in enumerate(overflow) if o), None),
+        overflow_kw=overflow_kw(problem, final_mw, minute),
+        flows_kw=limited_flows_mw(problem, final_mw, minute) * 1000.0,
+        wall_seconds=run.wall_seconds,
+        profile_source=problem.profile_source,
+    )
+    summary = snapshot_summary(problem, SnapshotComparison(result, solve_opf(problem, minute)),
+                               limits)  # fmt: skip
+    summary.update(
+        iterations=run.rounds,
+        rounds=run.rounds,
+        step_s=run.step_s,
+        loss=faults.loss,
+        delay_max=faults.delay_max,
+        duplicate=faults.duplicate,
+        noise_kw=faults.noise_kw,
+        seed=faults.seed,
+        agents=run.agents,
+        messages=run.messages,
+        lost=run.lost,
+        messages_per_agent_round=run.messages_per_agent_round,
+        max_imbalance_w=run.max_imbalance_w,
+        max_transient_w=run.max_transient_w,
+        final_imbalance_w=run.final_imbalance_w,
+        open_transactions=run.open_transactions,
+    )
+    return summary
+
+
+def agents_text(s: dict) -> str:
+    """What people read: set points against the DC-OPF and what the messages did."""
+    lines = [
+        f"minute {s['minute']}, demand {s['demand_kw']:.3f} kW: {s['dynamics']} dynamics, "
+        f"{s['mode']} mode, by {s['agents']} agents ({s['graph']} graph)",
+        f"network: loss {s['loss']:g}, delays up to {s['delay_max']} rounds, duplicates "
+        f"{s['duplicate']:g}, noise {s['noise_kw']:g} kW, seed {s['seed']}",
+        f"status: {s['dynamics_status']} after {s['rounds']} rounds of {s['step_s']:g} s"
+        + (
+            f" (at rest from round {s['converged_iteration']})"
+            if s["converged_iteration"] is not None
+            else ""
+        ),  # fmt: skip
+        f"{'generator':>10} {'setpoint_kw':>12} {'opf_kw':>10}",
+    ]
+    for g in s["generators"]:
+        opf = "null" if g["opf_kw"] is None else f"{g['opf_kw']:.3f}"
+        lines.append(f"{g['name']:>10} {g['setpoint_kw']:>12.3f} {opf:>10}")
+    error = s["max_abs_error_kw"]
+    lines += [
+        "max |error| vs DC-OPF: "
+        + ("null" if error is None else f"{error:.4f} kW")
+        + f", max overflow {s['max_overflow_kw']:.4f} kW",
+        f"messages {s['messages']} ({s['lost']} lost, {s['messages_per_agent_round']:.2f} per "
+        f"agent per round); imbalance: committed max {s['max_imbalance_w']:.3g} W, source bus "
+        f"max {s['max_transient_w']:.3g} W, final {s['final_imbalance_w']:.3g} W, open "
+        f"transactions {s['open_transactions']}",
+    ]
+    return "\n".join(lines) + "\n"
