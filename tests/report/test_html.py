@@ -215,6 +215,28 @@ def test_controllers_show_the_state_of_the_line_they_measure(small) -> None:
         assert f"{-flow:+.3f} kW" in update["customdata"][1]
 
 
+def test_infeasible_minutes_are_shown_without_a_dc_opf(small) -> None:
+    """G1 (the source's 30 kW) offline at minutes 4-7: no DC-OPF exists; the frames keep the
+    dynamics' set points, carry no DC-OPF and their titles say so."""
+    problem, profiles, _ = small
+    outage = problem.with_outage("G1", 4, 8, check=False)
+    comparison = run_day_vs_opf(outage, RunSettings(mode="exact"), np.arange(1, MINUTES + 1))
+    assert comparison.infeasible_minutes == [4, 5, 6, 7]
+    text = day_report_html(comparison, outage, profiles)
+    figure = _figure_json(text, "popdispatch-map")
+    index = generator_trace(figure)
+    for frame in figure["frames"]:
+        data = frame["data"][frame["traces"].index(index)]["customdata"]
+        minute = int(frame["name"])
+        infeasible = minute in comparison.infeasible_minutes
+        assert ("n/a (no DC-OPF)" in frame["layout"]["title"]["text"]) == infeasible
+        assert all((d[1] is None) == infeasible for d in data)
+        assert data[0][2] == ("offline" if 4 <= minute <= 7 else "online")
+        np.testing.assert_allclose(
+            [d[0] for d in data], comparison.run.setpoints_kw[minute - 1], atol=5e-4
+        )
+
+
 def test_the_page_is_self_contained_and_names_the_run(small) -> None:
     problem, profiles, comparison = small
     info = {"case": "small", "mode": "exact", "limits": [{"from_bus": 3, "to_bus": 4,
@@ -240,8 +262,8 @@ def test_snapshot_frames_follow_the_trajectory(small) -> None:
 
 def _figure_json(text: str, div_id: str) -> dict:
     """The figure plotly.io.to_html wrote for ``div_id``: Plotly.newPlot's arguments."""
-    start = text.index(f'Plotly.newPlot(                        "{div_id}",')
-    body = text[start:].split(",", 1)[1]
+    start = re.search(rf'Plotly\.newPlot\(\s*"{div_id}",', text).end()
+    body = text[start:]
     decoder = json.JSONDecoder()
     data, end = decoder.raw_decode(body.lstrip())
     rest = body.lstrip()[end:].lstrip(", \n")
