@@ -237,6 +237,24 @@ def test_infeasible_minutes_are_shown_without_a_dc_opf(small) -> None:
         )
 
 
+def test_a_large_feeder_draws_its_lines_once_and_colours_their_middles(small, monkeypatch):
+    """Above MAX_LINE_TRACES reduced lines the map keeps one grey trace for all lines and shows
+    the flows by the colour of the lines' middle markers (here forced on the small feeder)."""
+    from popdispatch.report.interactive import feeder_map
+
+    problem, profiles, comparison = small
+    monkeypatch.setattr(feeder_map, "MAX_LINE_TRACES", 2)
+    steps = day_steps(comparison, problem, profiles)
+    builder = MapBuilder(problem, steps)
+    traces = builder.build_traces(0)
+    assert "lines" not in builder.dynamic
+    assert sum(t["mode"] == "lines" for t in traces) == 3  # pruned, limited band, all lines
+    middle = builder.dynamic["midpoints"][0]
+    first, last = builder.updates(0)[middle], builder.updates(MINUTES - 1)[middle]
+    np.testing.assert_allclose(first["marker"]["color"], np.abs(steps.flows_kw[0]), atol=5e-3)
+    assert first["marker"]["color"] != last["marker"]["color"]
+
+
 def test_the_page_is_self_contained_and_names_the_run(small) -> None:
     problem, profiles, comparison = small
     info = {"case": "small", "mode": "exact", "limits": [{"from_bus": 3, "to_bus": 4,

@@ -59,23 +59,18 @@ def within_budget(steps: Steps, problem: DispatchProblem, every: int) -> tuple[n
     return rows, every
 
 
-def _steps_info(steps: Steps, comparison) -> dict:
+def _run_info(run_info: Mapping | None, problem: DispatchProblem, steps: Steps, comparison):
+    """The header's data: the run's summary as given, else the little the results say."""
+    if run_info is not None:
+        return dict(run_info)
     run = comparison.run
-    info = {
-        "case": None, "mode": run.settings.mode, "dynamics": run.settings.dynamics,
-        "profile_source": run.profile_source,
-    }  # fmt: skip
+    info = {"case": problem.feeder.original.name, "mode": run.settings.mode,
+            "dynamics": run.settings.dynamics, "profile_source": run.profile_source}  # fmt: skip
     if steps.kind == "minute":
         info.update(first_minute=int(steps.values[0]), last_minute=int(steps.values[-1]))
     else:
         info.update(minute=run.minute, demand_kw=run.demand_kw, iterations=run.iterations)
     return info
-
-
-def _run_info(run_info: Mapping | None, problem: DispatchProblem, steps: Steps, comparison):
-    info = _steps_info(steps, comparison)
-    info["case"] = problem.feeder.original.name
-    return dict(run_info) if run_info is not None else info
 
 
 def day_report_html(
@@ -177,6 +172,8 @@ NOTES = [
 
 
 def _at_limit(states: np.ndarray) -> str:
+    if not len(states):
+        return "no line limits"
     n = int((states > 0).sum())
     return f"{n} limited line{'' if n == 1 else 's'} at {'its' if n == 1 else 'their'} limit"
 
