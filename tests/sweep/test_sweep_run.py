@@ -75,3 +75,58 @@ def test_failed_scenarios_run_again_on_resume(tmp_path):
     assert (first.ran, len(first.failed)) == (2, 1)
     rerun = run(spec, tmp_path, workers=1, quiet=True, processes=False)
     assert (rerun.ran, rerun.skipped, list(rerun.failed)) == (1, 1, list(first.failed))
+
+
+KILLED_SWEEP = """
+import sys
+from popdispatch.sweep import parse_spec, run
+if __name__ == "__main__":
+    spec = parse_spec({"steps": "1-240", "modes": ["exact"], "x0": ["uniform", "capacity"],
+                       "limits": [[], ["505:666=28"], ["505:666=30"]]})
+    run(spec, sys.argv[1], workers=1, quiet=True)
+"""
+
+
+def test_a_killed_sweep_resumes_without_recomputing(tmp_path):
+    """Kill a sweep (driver and its worker, SIGKILL) once some scenarios are written, rerun:
+    only the others run, the finished ones keep their rows."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from popdispatch.sweep.store import SUMMARY
+
+    out = tmp_path / "out"
+    script = tmp_path / "sweep.py"
+    script.write_text(KILLED_SWEEP)
+    child = subprocess.Popen([sys.executable, str(script), str(out)], start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300
+        while len(list((out / SUMMARY).glob("*/part-0.parquet"))) < 2:
+            assert child.poll() is None and time.monotonic() < deadline, "sweep ended early"
+            time.sleep(0.1)
+    finally:
+        os.killpg(child.pid, signal.SIGKILL)
+        child.wait()
+    before = read_summary(out).set_index("scenario_id").finished_at
+    assert 2 <= len(before) < 6  # killed halfway
+    spec = parse_spec({"steps": "1-240", "modes": ["exact"], "x0": ["uniform", "capacity"],
+                       "limits": [[], ["505:666=28"], ["505:666=30"]]})  # fmt: skip
+    rest = run(spec, out, workers=1, quiet=True, processes=False)
+    assert (rest.ran, rest.skipped) == (6 - len(before), len(before))
+    after = read_summary(out).set_index("scenario_id").finished_at
+    assert len(after) == 6 and (after[before.index] == before).all()
+
+
+def test_report_counts_failed_and_infeasible(failing_sweep, tmp_path):
+    from popdispatch.sweep.report import write_report
+
+    _, out, _ = failing_sweep
+    text, folder = write_report(out, tmp_path / "report")
+    assert text.startswith("4 scenarios: ") and "2 failed" in text and "1 infeasible" in text
+    groups = pd.read_csv(folder / "groups.csv").set_index("limits")
+    assert groups.loc["none", ["scenarios", "failed", "converged"]].tolist() == [2, 1, 1]
+    assert groups.loc["1:34=0", ["scenarios", "failed", "infeasible"]].tolist() == [2, 1, 1]
+    assert text.count("InfeasibleError: ") == 2 and (folder / "sweep.png").is_file()

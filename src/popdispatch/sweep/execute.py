@@ -100,7 +100,7 @@ def client_for(scheduler: str | None = None, workers: int | None = None, process
         n_workers=n,
         threads_per_worker=1,
         processes=processes,
-        dashboard_address=None,
+        dashboard_address=":0",  # any free port (8787 may be taken)
         silence_logs=logging.ERROR,
     )
     with cluster, distributed.Client(cluster) as client:
