@@ -94,24 +94,35 @@ def numpy_power_flow(
 ) -> tuple[np.ndarray, complex]:
     """Plain-numpy AC power flow of a feeder: ``V = V0 + Z (conj(S / V))`` on the bus
     impedance matrix of the non-source buses (p.u., 1 kW base), iterated to 1e-15.
+    A line without impedance joins its two buses into one (same voltage).
     ``s_net_kva``: net complex injection per bus (generation minus load), kVA.
     Returns the bus voltages (p.u., complex) and the source's complex power (kVA)."""
     ids = feeder.buses.index
-    n = len(ids)
+    group = list(range(len(ids)))  # each bus's representative (buses joined by shorts)
+    for row in feeder.lines.itertuples():
+        if row.r_ohm == 0 and row.x_ohm == 0:
+            a, b = group[ids.get_loc(row.from_bus)], group[ids.get_loc(row.to_bus)]
+            group = [a if g == b else g for g in group]
+    reps = sorted(set(group))
+    where = np.array([reps.index(g) for g in group])
+    n = len(reps)
     y = np.zeros((n, n), dtype=complex)
     for row in feeder.lines.itertuples():
-        a, b = ids.get_loc(row.from_bus), ids.get_loc(row.to_bus)
-        yl = 1 / complex(row.r_ohm / z_base_ohm(), row.x_ohm / z_base_ohm())
+        if row.r_ohm == 0 and row.x_ohm == 0:
+            continue
+        a, b = where[ids.get_loc(row.from_bus)], where[ids.get_loc(row.to_bus)]
+        yl = z_base_ohm() / complex(row.r_ohm, row.x_ohm)
         y[a, a] += yl
         y[b, b] += yl
         y[a, b] -= yl
         y[b, a] -= yl
-    s = ids.get_loc(feeder.source_bus)
+    s = where[ids.get_loc(feeder.source_bus)]
     rest = [k for k in range(n) if k != s]
     z = np.linalg.inv(y[np.ix_(rest, rest)])
     v = np.full(n, source_pu, dtype=complex)
     w = -z @ y[np.ix_(rest, [s])][:, 0] * source_pu  # no-load voltages
-    inj = s_net_kva / S_BASE_KW
+    inj = np.zeros(n, dtype=complex)
+    np.add.at(inj, where, s_net_kva / S_BASE_KW)
     for _ in range(200):
         new = w + z @ np.conj(inj[rest] / v[rest])
         done = np.max(np.abs(new - v[rest])) < 1e-15
@@ -119,7 +130,7 @@ def numpy_power_flow(
         if done:
             break
     s_source = v[s] * np.conj(y[s] @ v) * S_BASE_KW
-    return v, s_source
+    return v[where], s_source
 
 
 @pytest.mark.parametrize("gen_kw", [0.0, 25.0, 60.0])
@@ -142,8 +153,8 @@ def test_three_bus_feeder_matches_a_numpy_power_flow(gen_kw):
     s_net[1:] -= load_kw * (1 + 1j * math.tan(math.acos(load_pf)))
     s_net[2] += gen_kw * (1 + 1j * math.tan(math.acos(gen_pf)))
     v, s_source = numpy_power_flow(feeder, s_net, 1.0)
-    np.testing.assert_allclose(day.flows.v_pu[0], np.abs(v), atol=1e-9)
-    np.testing.assert_allclose(day.flows.angle_deg[0], np.degrees(np.angle(v)), atol=1e-7)
+    np.testing.assert_allclose(day.flows.v_pu[0], np.abs(v), atol=1e-9, rtol=0)
+    np.testing.assert_allclose(day.flows.angle_deg[0], np.degrees(np.angle(v)), atol=1e-7, rtol=0)
     step = day.steps.iloc[0]
     losses = s_source.real + s_net.real[1:].sum()
     assert step.losses_kw == pytest.approx(losses, abs=1e-7)
@@ -152,3 +163,38 @@ def test_three_bus_feeder_matches_a_numpy_power_flow(gen_kw):
     assert math.isnan(step.max_loading_percent) and step.max_loading_line is None
     if gen_kw == 60.0:
         assert step.v_max_bus == 3 and step.v_max_pu > 1.0
+
+
+def test_series_chain_buses_and_reversed_lines_match_a_numpy_power_flow():
+    """Buses 2..5 carry nothing (one branch in power-grid-model, recovered by Ohm's law), one
+    line is written against the flow (to_bus upstream) and one has no impedance."""
+    feeder = chain_feeder(6, 0.02, 0.01, gen_bus=4, limit_kw=30.0)
+    lines = feeder.lines.copy()
+    lines.loc["L3", ["from_bus", "to_bus"]] = [4, 3]  # reversed
+    lines.loc["L2", ["r_ohm", "x_ohm"]] = 0.0
+    lines["r_ohm"] = lines["r_ohm"] * [1.0, 1.0, 2.0, 0.5, 3.0]
+    loads = pd.DataFrame({"bus": [6]}, index=["D6"])
+    feeder = Feeder("chain", feeder.buses, lines, loads, 1, make_fleet([(1, 0, 5, 0.02, 0, 99)]))
+    day = check_setpoints(
+        feeder, [[40.0]], [[0.0]], vn_kv=VN_KV, load_pf=0.9, tolerance_pu=TIGHT_PU, detail=True
+    )
+    assert day.network.chains.kept.tolist() == [True, False, False, False, False, True]
+    s_net = np.zeros(6, dtype=complex)
+    s_net[5] = -40.0 * (1 + 1j * math.tan(math.acos(0.9)))
+    v, s_source = numpy_power_flow(feeder, s_net, 1.0)
+    np.testing.assert_allclose(day.flows.v_pu[0], np.abs(v), atol=1e-9, rtol=0)
+    # every line carries the same current; the reversed line's from end is downstream
+    z_pu = (lines.r_ohm + 1j * lines.x_ohm).to_numpy() / z_base_ohm()
+    current = np.conj(s_source / S_BASE_KW / v[0])  # p.u.: kVA per p.u. of voltage
+    amps = abs(current) / (math.sqrt(3) * VN_KV)
+    np.testing.assert_allclose(day.flows.current_a[0], amps, rtol=1e-9)
+    s_from_l3 = v[3] * np.conj(-current)  # L3 from bus 4 (downstream): power enters against
+    assert day.flows.p_from_kw[0, 2] == pytest.approx(s_from_l3.real, abs=1e-9)
+    assert day.flows.q_to_kvar[0, 2] == pytest.approx((v[2] * np.conj(current)).imag, abs=1e-9)
+    np.testing.assert_allclose(
+        day.flows.loss_kw[0], abs(current) ** 2 * z_pu.real, atol=1e-9, rtol=0
+    )
+    assert day.steps.losses_kw.iloc[0] == pytest.approx(s_source.real - 40.0, abs=1e-9)
+    assert day.steps.max_loading_percent.iloc[0] == pytest.approx(
+        100 * amps / (30.0 / (math.sqrt(3) * VN_KV)), rel=1e-9
+    )

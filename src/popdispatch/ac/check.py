@@ -82,9 +82,9 @@ class ACFlows:
         return self.p_from_kw + self.p_to_kw
 
 
-#: power-grid-model outputs read: always, and with ``detail``.
-_OUTPUT = {"node": ["u_pu"], "branch": ["p_from", "p_to", "i_from", "i_to"]}
-_DETAIL = {"node": ["u_angle"], "branch": ["q_from", "q_to"]}
+#: power-grid-model outputs read: the kept buses' voltages, the power entering each branch at
+#: its top (the chain's current follows, :mod:`popdispatch.ac.chains`), the source's power.
+_OUTPUTS = {"node": ["u_pu", "u_angle"], "branch": ["p_from", "q_from"], "source": ["p", "q"]}
 
 
 def power_flow(
@@ -95,6 +95,7 @@ def power_flow(
     tolerance_pu: float = TOLERANCE_PU,
     steps: np.ndarray | None = None,
     detail: bool = True,
+    threads: int = 0,
 ) -> ACFlows:
     """AC power flow of every step in one power-grid-model batch calculation.
 
@@ -103,7 +104,10 @@ def power_flow(
     Method: power-grid-model's iterative current (fixed-point on the factorised admittance
     matrix; the same solution as Newton-Raphson, to the tolerance, and faster on radial
     feeders), until no voltage changes by more than ``tolerance_pu`` p.u. ``detail``: also
-    angles and reactive branch flows (a day without them costs about a quarter less).
+    angles and reactive line flows.
+    ``threads``: power-grid-model's batch threads (0: one per core; -1: sequential).
+    Solved on the kept buses, recovered exactly on every bus and line
+    (:mod:`popdispatch.ac.chains`).
     Raises :class:`InfeasibleError` naming the first step whose power flow does not converge.
     """
     pgm = power_grid_model()
@@ -112,10 +116,10 @@ def power_flow(
     load_kw, generator_kw = check_step_arrays(network, load_kw, generator_kw)
     if len(load_kw) != len(generator_kw):
         raise OptionError(f"{len(load_kw)} steps of loads but {len(generator_kw)} of set points")
-    node, branch = _outputs(detail)
-    outputs = {"node": node, "line": branch, "source": ["p", "q"]}
-    if len(network.link_rows):
-        outputs["link"] = branch
+    outputs = {"node": _OUTPUTS["node"], "source": _OUTPUTS["source"]}
+    for kind, rows in (("line", network.line_rows), ("link", network.link_rows)):
+        if len(rows):
+            outputs[kind] = _OUTPUTS["branch"]
     model = pgm.PowerGridModel(network.input_data)
     try:
         out = model.calculate_power_flow(
@@ -124,17 +128,11 @@ def power_flow(
             error_tolerance=tolerance_pu,
             max_iterations=100,
             output_component_types=outputs,
+            threading=threads,
         )
     except PowerGridError as exc:
         raise InfeasibleError(_divergence_message(exc, steps)) from exc
     return _flows(network, out, len(load_kw), detail)
-
-
-def _outputs(detail: bool) -> tuple[list[str], list[str]]:
-    """power-grid-model node and branch attributes to compute."""
-    if detail:
-        return _OUTPUT["node"] + _DETAIL["node"], _OUTPUT["branch"] + _DETAIL["branch"]
-    return _OUTPUT["node"], _OUTPUT["branch"]
 
 
 def _divergence_message(exc: Exception, steps: np.ndarray | None) -> str:
@@ -150,25 +148,40 @@ def _divergence_message(exc: Exception, steps: np.ndarray | None) -> str:
 
 
 def _flows(network: ACNetwork, out: dict, n_steps: int, detail: bool) -> ACFlows:
-    """power-grid-model output (SI, its id order) -> :class:`ACFlows` (kW, feeder order)."""
-    names = _outputs(detail)[1]
-    if not len(network.link_rows):  # every line has impedance: pgm's order is the feeder's
-        branch = out["line"]
-    else:
-        n_lines = len(network.feeder.lines)
-        branch = {name: np.zeros((n_steps, n_lines)) for name in names}
-        for kind, rows in (("line", network.line_rows), ("link", network.link_rows)):
-            for name in names:
-                branch[name][:, rows] = out[kind][name]
+    """power-grid-model output of the kept buses (SI) -> :class:`ACFlows` of every bus and
+    line of the feeder (kW, feeder order), by Ohm's law along each chain
+    (:mod:`popdispatch.ac.chains`)."""
+    chains, vn_kv = network.chains, network.model.vn_kv
+    z_base_ohm = vn_kv**2 * 1e3  # p.u. on 1 kVA: powers in kVA, currents in kVA per p.u.
+    s_top = np.empty((n_steps, chains.n_branches), dtype=complex)
+    for kind, rows in (("line", network.line_rows), ("link", network.link_rows)):
+        if len(rows):
+            s_top[:, rows] = out[kind]["p_from"] + 1j * out[kind]["q_from"]
+    s_top /= W_PER_KW
+    node = out["node"]
+    v = np.empty((n_steps, len(chains.kept)), dtype=complex)
+    v[:, chains.kept] = node["u_pu"] * np.exp(1j * node["u_angle"])
+    current = np.conj(s_top / v[:, chains.branch_top])  # per branch, downstream
+    inside = ~chains.kept
+    v[:, inside] = (
+        v[:, chains.branch_top[chains.bus_branch[inside]]]
+        - chains.bus_z_ohm[inside] / z_base_ohm * current[:, chains.bus_branch[inside]]
+    )
+    i_line = np.conj(current[:, chains.line_branch])
+    s_near = v[:, chains.line_near] * i_line  # kVA entering each line at its upstream end
+    s_far = -v[:, chains.line_far] * i_line  # ... and at its downstream end
+    forward = chains.line_forward
+    s_from = np.where(forward, s_near, s_far)
+    s_to = np.where(forward, s_far, s_near)
     source = out["source"]
     return ACFlows(
-        v_pu=out["node"]["u_pu"],
-        angle_deg=np.degrees(out["node"]["u_angle"]) if detail else None,
-        p_from_kw=branch["p_from"] / W_PER_KW,
-        q_from_kvar=branch["q_from"] / W_PER_KW if detail else None,
-        p_to_kw=branch["p_to"] / W_PER_KW,
-        q_to_kvar=branch["q_to"] / W_PER_KW if detail else None,
-        current_a=np.maximum(branch["i_from"], branch["i_to"]),
+        v_pu=np.abs(v),
+        angle_deg=np.degrees(np.angle(v)) if detail else None,
+        p_from_kw=s_from.real,
+        q_from_kvar=s_from.imag if detail else None,
+        p_to_kw=s_to.real,
+        q_to_kvar=s_to.imag if detail else None,
+        current_a=np.abs(i_line) / (np.sqrt(3.0) * vn_kv),
         source_kw=source["p"][:, 0] / W_PER_KW,
         source_kvar=source["q"][:, 0] / W_PER_KW,
     )

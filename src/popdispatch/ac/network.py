@@ -1,8 +1,11 @@
 """The full feeder as a positive-sequence power-grid-model network (the AC check's model).
 
 Every bus and line of the plain-table :class:`~popdispatch.feeder.model.Feeder` (not only the
-key nodes the engine reduces to) becomes a power-grid-model ``node`` and ``line``; a line
-with zero impedance (a switch or busbar coupler) becomes a ``link``. Rules (docs/ac.md):
+key nodes the engine reduces to) is in the model: power-grid-model solves the network of the
+*kept* buses (the source, buses with loads or generators, junctions and ends) joined by
+branches that are exact series sums of the lines between them, and every other bus and line
+is recovered exactly from its chain's current (:mod:`popdispatch.ac.chains`). A branch with
+zero impedance (a switch or busbar coupler) is a power-grid-model ``link``. Rules (docs/ac.md):
 
 - **Nominal voltage** ``vn_kv`` (line-to-line, kV) of every bus: the impedances of a feeder
   are in ohm referred to the source bus's voltage (the readers do so), so one voltage base
@@ -31,8 +34,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
+from popdispatch.ac.chains import Chains, find_chains
 from popdispatch.errors import FeederError, OptionError
 from popdispatch.feeder.model import Feeder
 
@@ -102,14 +105,16 @@ class ACNetwork:
     ----------
     feeder : the full feeder.
     model : the rules (:class:`ACModel`).
-    input_data : power-grid-model input dataset (SI units: V, ohm, W, var, A).
-    line_ids, link_ids : power-grid-model ids of the feeder's lines with impedance (``line``)
-        and without (``link``); ``line_rows``, ``link_rows`` their rows in ``feeder.lines``.
+    chains : the kept buses and the branches between them (:class:`Chains`).
+    input_data : power-grid-model input dataset of the kept buses (SI: V, ohm, W, var, A).
+    line_rows, link_rows : the branches (rows of ``chains``) power-grid-model holds as
+        ``line`` (with impedance) and ``link`` (without), in the order of its tables.
     rated_a : per feeder line, the rated current, A (NaN: no limit).
     """
 
     feeder: Feeder
     model: ACModel
+    chains: Chains
     input_data: dict
     line_rows: np.ndarray
     link_rows: np.ndarray
@@ -208,21 +213,21 @@ def build_network(
 
 
 def _assemble(feeder: Feeder, model: ACModel) -> ACNetwork:
-    """power-grid-model input arrays: ids are nodes 0..n-1, then branches, source, loads, gens."""
+    """power-grid-model input arrays of the kept buses: ids are nodes 0..n-1 (kept buses in
+    feeder order), then branches, source, loads, generators."""
     pgm = power_grid_model()
     init, input_type = pgm.initialize_array, pgm.DatasetType.input
-    buses, lines = feeder.buses.index, feeder.lines
-    n_bus = len(buses)
-    node = init(input_type, "node", n_bus)
-    node["id"] = np.arange(n_bus)
+    buses = feeder.buses.index
+    chains = find_chains(feeder)
+    n_node = int(chains.kept.sum())
+    node = init(input_type, "node", n_node)
+    node["id"] = np.arange(n_node)
     node["u_rated"] = model.vn_kv * V_PER_KV
-    r = lines["r_ohm"].to_numpy(float)
-    x = lines["x_ohm"].to_numpy(float)
-    zero = (r == 0) & (x == 0)
+    z = chains.branch_z_ohm
+    zero = z == 0
     line_rows, link_rows = np.flatnonzero(~zero), np.flatnonzero(zero)
-    ends = (buses.get_indexer(lines["from_bus"]), buses.get_indexer(lines["to_bus"]))
-    rated_a = rated_current_a(lines["limit_kw"].to_numpy(float), model.vn_kv)
-    next_id = n_bus
+    ends = (chains.node[chains.branch_top], chains.node[chains.branch_bottom])
+    next_id = n_node
     data = {"node": node}
     for kind, rows in (("line", line_rows), ("link", link_rows)):
         table = init(input_type, kind, len(rows))
@@ -230,26 +235,27 @@ def _assemble(feeder: Feeder, model: ACModel) -> ACNetwork:
         table["from_node"], table["to_node"] = ends[0][rows], ends[1][rows]
         table["from_status"] = table["to_status"] = 1
         if kind == "line":
-            table["r1"], table["x1"] = r[rows], x[rows]
-            table["c1"] = table["tan1"] = 0.0
-            table["i_n"] = rated_a[rows]  # NaN: no rating (loading computed here, not by pgm)
+            table["r1"], table["x1"] = z[rows].real, z[rows].imag
+            table["c1"] = table["tan1"] = 0.0  # i_n unset: loading is computed per feeder line
         data[kind] = table
-    next_id += len(lines)
+    next_id += chains.n_branches
     source = init(input_type, "source", 1)
-    source["id"], source["node"], source["status"] = next_id, buses.get_loc(feeder.source_bus), 1
+    source["id"], source["status"] = next_id, 1
+    source["node"] = chains.node[buses.get_loc(feeder.source_bus)]
     source["u_ref"], source["u_ref_angle"], source["sk"] = model.source_pu, 0.0, SOURCE_SK_VA
     data["source"] = source
     next_id += 1
     for kind, table in (("sym_load", feeder.loads), ("sym_gen", feeder.generators)):
         units = init(input_type, kind, len(table))
         units["id"] = next_id + np.arange(len(table))
-        units["node"] = buses.get_indexer(table["bus"])
+        units["node"] = chains.node[buses.get_indexer(table["bus"])]
         units["status"] = 1
         units["type"] = pgm.LoadGenType.const_power
         units["p_specified"] = units["q_specified"] = 0.0
         data[kind] = units
         next_id += len(table)
-    return ACNetwork(feeder, model, data, line_rows, link_rows, rated_a)
+    rated_a = rated_current_a(feeder.lines["limit_kw"].to_numpy(float), model.vn_kv)
+    return ACNetwork(feeder, model, chains, data, line_rows, link_rows, rated_a)
 
 
 def rated_current_a(limit_kw: np.ndarray, vn_kv: float) -> np.ndarray:
@@ -303,8 +309,3 @@ def check_step_arrays(
             raise OptionError(f"{what} {names[k]!r} has {values[step, k]} kW at step {step}")
         arrays.append(np.ascontiguousarray(values))
     return arrays[0], arrays[1]
-
-
-def bus_names(network: ACNetwork) -> pd.Index:
-    """The feeder's bus ids in node order."""
-    return network.feeder.buses.index
