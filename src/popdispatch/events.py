@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -43,6 +44,10 @@ def apply_events(
                 f"no generator at bus {bus} in {text} (generator buses: {known})", "--event"
             )
         name = buses[bus]
+        if minute > len(problem.online):
+            raise OptionError(
+                f"{text}: step {minute} is outside the series' 1-{len(problem.online)}", "--event"
+            )
         if state == "off":
             if name in off_since:
                 raise OptionError(f"{name} is already off in {text}", "--event")
@@ -50,8 +55,19 @@ def apply_events(
         elif name not in off_since:
             raise OptionError(f"{name} is not off before {text}", "--event")
         else:
-            problem = problem.with_outage(name, off_since.pop(name), minute, check=False)
+            problem = _outage(problem, name, off_since.pop(name), minute)
     for name, minute in off_since.items():
-        problem = problem.with_outage(name, minute, check=False)
+        problem = _outage(problem, name, minute, None)
     check_online(problem, minutes)
     return problem
+
+
+def _outage(problem: DispatchProblem, name: str, off: int, on: int | None) -> DispatchProblem:
+    """``name`` offline from step ``off`` until step ``on`` (excluded; ``None``: to the end).
+    As :meth:`DispatchProblem.with_outage` without its day-of-minutes bound, so that an event
+    may fall anywhere in a longer series."""
+    online = problem.online.copy()
+    online[
+        off - 1 : (on - 1 if on is not None else len(online)), problem.generators.get_loc(name)
+    ] = False
+    return replace(problem, online=online)

@@ -14,6 +14,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
+
 from popdispatch.errors import OptionError
 from popdispatch.events import Event, apply_events
 from popdispatch.feeder.model import Feeder
@@ -149,14 +152,120 @@ def load_feeder(source: FeederSource | Path | None = None) -> Feeder:
 
 
 def network_profiles(feeder: Feeder) -> LoadProfiles:
-    """A network without profiles runs on its own loads (column ``p_kw``, kW), the same at
-    every minute."""
+    """A network without profiles runs on its own loads (column ``p_kw``, kW): one time step."""
     from popdispatch.errors import ProfileError
-    from popdispatch.feeder.profiles import single_minute_profiles
 
     if "p_kw" not in feeder.loads.columns:
         raise ProfileError(f"feeder {feeder.name} has no load values (p_kw) to run on")
-    return single_minute_profiles(1, feeder.loads["p_kw"].astype(float), f"{feeder.name} loads")
+    kw = feeder.loads["p_kw"].astype(float).to_frame().T
+    kw.index = pd.RangeIndex(1, 2, name="minute")
+    return LoadProfiles(kw, f"{feeder.name} loads")
+
+
+def known_steps(
+    source: FeederSource, profiles: Path | None = None, loads: Path | None = None
+) -> int | None:
+    """How many steps a run's series has when that is known before any data is read: the
+    ELV day (1440 minutes) or a network on its own loads (1); ``None`` for a load table or a
+    SimBench year."""
+    from popdispatch.constants import MINUTES_PER_DAY
+    from popdispatch.feeder.cases import SIMBENCH_PREFIX
+
+    if loads is not None:
+        return None
+    if profiles is not None or not source.own_loads:
+        return MINUTES_PER_DAY
+    if source.case is not None and source.case.startswith(SIMBENCH_PREFIX):
+        return None
+    return 1
+
+
+def series_for(
+    source: FeederSource,
+    feeder: Feeder,
+    profiles: Path | None = None,
+    loads: Path | None = None,
+    minute: int | None = None,
+    progress: Progress | None = None,
+) -> LoadProfiles:
+    """The load time series of a run on ``feeder``: the table ``loads`` (CSV or Parquet, see
+    :mod:`popdispatch.readers.series`), else the ELV profile folder ``profiles`` (also for a
+    network read from the ELV's own files: loads match by name, case ignored), else the
+    network's own: a SimBench case's bundled year, a network's or case's own loads (one step),
+    or ieee-elv's official or default profiles (:func:`load_profiles`)."""
+    progress = progress or Progress(quiet=True)
+    if loads is not None and profiles is not None:
+        raise OptionError("give --loads or --profiles, not both", "--loads")
+    if loads is not None:
+        from popdispatch.readers.series import read_load_table
+
+        with progress.step(f"reading load table {loads}"):
+            return read_load_table(loads, feeder)
+    if profiles is not None or not source.own_loads:
+        return load_profiles(profiles, minute, progress).for_loads(feeder.loads.index)
+    from popdispatch.feeder.cases import SIMBENCH_PREFIX
+
+    if source.case is not None and source.case.startswith(SIMBENCH_PREFIX):
+        from popdispatch.readers.series import simbench_profiles
+
+        with progress.step("reading SimBench's year profiles"):
+            return simbench_profiles(source.case[len(SIMBENCH_PREFIX) :], feeder)
+    return network_profiles(feeder)
+
+
+def select_steps(
+    profiles: LoadProfiles,
+    steps: tuple[int, int] | None = None,
+    start: str | None = None,
+    end: str | None = None,
+) -> np.ndarray | None:
+    """The 1-based steps a day run simulates: ``steps`` (first, last; the CLI's ``--steps``
+    or ``--minutes``) or the steps whose intervals hold ``start`` .. ``end`` (ISO 8601 times,
+    ``HH:MM`` for the undated ELV day); ``None`` for every step. :class:`OptionError` for a
+    range outside the series."""
+    if steps is not None and (start is not None or end is not None):
+        raise OptionError("give --steps (or --minutes) or --start/--end, not both", "--steps")
+    if steps is None and start is None and end is None:
+        return None
+    timeline = profiles.timeline
+    if steps is None:
+        first = timeline.step_at(start, "--start") if start is not None else 1
+        last = timeline.step_at(end, "--end") if end is not None else profiles.steps
+        if last < first:
+            raise OptionError(f"--end {end} comes before --start {start}", "--end")
+        steps = (first, last)
+    first, last = steps
+    if not 1 <= first <= last <= profiles.steps:
+        raise OptionError(
+            f"steps {first}-{last} are outside the series' 1-{profiles.steps} ({profiles.source})",
+            "--steps",
+        )
+    return np.arange(first, last + 1)
+
+
+@dataclass(frozen=True)
+class Span:
+    """The steps a day run simulates, as the CLI gives them: ``steps`` (first, last; 1-based,
+    ``--steps``/``--minutes``) or the times ``start``/``end`` (``--start``/``--end``); all
+    ``None``: every step."""
+
+    steps: tuple[int, int] | None = None
+    start: str | None = None
+    end: str | None = None
+
+    def of(self, profiles: LoadProfiles) -> np.ndarray | None:
+        """The 1-based steps of ``profiles`` (:func:`select_steps`)."""
+        return select_steps(profiles, self.steps, self.start, self.end)
+
+
+def check_step(minute: int | None, profiles: LoadProfiles) -> None:
+    """:class:`OptionError` (``--minute``) for a step outside the series."""
+    if minute is not None and not 1 <= minute <= profiles.steps:
+        one = " (a network without profiles is one time step)" if profiles.steps == 1 else ""
+        raise OptionError(
+            f"step {minute} is outside the series' 1-{profiles.steps}{one} ({profiles.source})",
+            "--minute",
+        )
 
 
 def check_limits(limits: Sequence[Limit], feeder: Feeder) -> None:
@@ -201,18 +310,31 @@ def load_run(
     progress: Progress | None = None,
     events: Sequence[Event] = (),
     minutes=None,
+    loads: Path | None = None,
 ) -> tuple[DispatchProblem, LoadProfiles]:
-    """``(problem, profiles)`` of a run as the commands make it: ieee-elv with the profiles of
-    folder ``profiles`` (:func:`load_profiles`), or a network or case on its own loads."""
+    """``(problem, profiles)`` of a run as the commands make it: the feeder of ``source`` with
+    the time series :func:`series_for` picks (``profiles``: an ELV profile folder; ``loads``:
+    a load table), ``minute`` (a snapshot's step) checked against the series; ``minutes``
+    (the steps a day runs: an array or a :class:`Span`) for the events' check."""
     progress = progress or Progress(quiet=True)
-    if source.own_loads and profiles is not None:
-        raise OptionError(
-            "a network or case runs on its own loads; --profiles is for ieee-elv", "--profiles"
-        )
-    day_profiles = None if source.own_loads else load_profiles(profiles, minute, progress)
-    with progress.step(f"loading {source.label}"):
-        problem = load_problem(day_profiles, limits, source, events, minutes)
-    return problem, day_profiles or network_profiles(problem.feeder.original)
+    if loads is not None and profiles is not None:
+        raise OptionError("give --loads or --profiles, not both", "--loads")
+    if source.own_loads or loads is not None:
+        with progress.step(f"loading {source.label}"):
+            feeder = load_feeder(source)
+        series = series_for(source, feeder, profiles, loads, minute, progress)
+    else:  # ieee-elv: the profiles (and their note) first, as before
+        series = load_profiles(profiles, minute, progress)
+        with progress.step(f"loading {source.label}"):
+            feeder = load_feeder(source)
+        series = series.for_loads(feeder.loads.index)
+    check_step(minute, series)
+    if isinstance(minutes, Span):
+        minutes = minutes.of(series)
+    check_limits(limits, feeder)
+    problem = elv_problem(series, limits, feeder, check=False)
+    problem = apply_events(problem, events, minutes) if events else problem
+    return problem, series
 
 
 def fleet_names(source: FeederSource | None = None) -> list[str] | None:

@@ -72,7 +72,7 @@ def test_opf_on_a_network_with_a_fleet_and_a_binding_limit(fleet):
     [
         (["--net", "CASE", "--opendss", "."], "--net"),
         (["--root", "1"], "--root"),
-        (["--net", "CASE", "--profiles", "."], "--profiles"),
+        (["--net", "CASE", "--profiles", ".", "--loads", "CASE"], "--loads"),
     ],
 )
 def test_network_options_misused_are_usage_errors(args, option):

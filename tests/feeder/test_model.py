@@ -296,7 +296,7 @@ def test_missing_column(tmp_path, suffix):
         paper_fleet().drop(columns="c").to_csv(path)
     else:
         path.write_text(_toml(TABLE_I).replace("c = ", "cost = "))
-    with pytest.raises(FleetError, match="lacks column 'c'") as exc:
+    with pytest.raises(FleetError, match="lacks column 'c_eur_per_mw2h'") as exc:
         read_fleet(path)
     assert str(path) in str(exc.value)
 

@@ -15,6 +15,7 @@ from popdispatch.cli.options import (
     EngineChoice,
     EventType,
     MinutesType,
+    build,
     check_out,
     check_shares,
     feeder_options,
@@ -27,7 +28,9 @@ from popdispatch.cli.options import (
     quiet_option,
     refuse_opendss,
     run_options,
+    series_options,
     settings_from,
+    steps_options,
 )
 from popdispatch.cli.process import Failure, stamp, start_clock
 from popdispatch.cli.render import (
@@ -35,6 +38,7 @@ from popdispatch.cli.render import (
     emit,
     infeasible_day_message,
     infeasible_minute_message,
+    minute_loads,
     write_day,
     write_snapshot,
 )
@@ -48,19 +52,6 @@ from popdispatch.report.text import (
     opf_text,
     snapshot_text,
 )
-
-
-def build(source, profiles, minute, limits, progress: Progress, events=(), minutes=None):
-    """``(problem, profiles)`` of a run (:func:`popdispatch.runs.load_run`)."""
-    from popdispatch.errors import OptionError
-    from popdispatch.runs import load_run
-
-    try:
-        return load_run(source, profiles, minute, limits, progress, events, minutes)
-    except OptionError as exc:  # a bad --limit reads as click's own usage errors
-        if exc.option != "--limit":
-            raise
-        raise click.BadParameter(str(exc), param_hint="'--limit'") from None
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -103,11 +94,11 @@ def feeder(source, as_json: bool, quiet: bool) -> None:
 @cli.command(short_help="The exact DC-OPF of one minute (paper eq. 1).")
 @minute_option
 @limit_option
-@profiles_option
+@series_options
 @feeder_options
 @json_option
 @quiet_option
-def opf(minute: int, limits, profiles: Path | None, source, as_json: bool, quiet: bool) -> int:
+def opf(minute: int, limits, profiles, source, as_json: bool, quiet: bool) -> int:
     """The exact DC-OPF of one minute (paper eq. 1): the cheapest dispatch meeting the
     demand within the generator limits and the line limits. Exit code 1 (after the output)
     when no such dispatch exists."""
@@ -115,8 +106,8 @@ def opf(minute: int, limits, profiles: Path | None, source, as_json: bool, quiet
     from popdispatch.report.summaries import opf_summary
 
     progress = Progress(quiet)
-    problem, _ = build(source, profiles, minute, limits, progress)
-    summary = opf_summary(problem, solve_opf(problem, minute), limits)
+    problem, series = build(source, profiles, minute, limits, progress)
+    summary = opf_summary(problem, solve_opf(problem, minute), limits, series.timeline)
     emit(summary, as_json, opf_text(summary))
     if summary["status"] != "optimal":
         raise Failure(infeasible_minute_message(summary))
@@ -127,7 +118,7 @@ def opf(minute: int, limits, profiles: Path | None, source, as_json: bool, quiet
 @minute_option
 @limit_option
 @run_options
-@profiles_option
+@series_options
 @feeder_options
 @out_option
 @json_option
@@ -148,10 +139,10 @@ def snapshot(
     settings = settings_from(dynamics, mode, x0, graph)
     check_shares(x0, progress, source)
     announce_compile(progress)
-    problem, _ = build(source, profiles, minute, limits, progress)
+    problem, series = build(source, profiles, minute, limits, progress)
     with progress.step(f"minute {minute}: {dynamics} dynamics and DC-OPF"):
         result = run_snapshot_vs_opf(problem, minute, settings)
-    summary = snapshot_summary(problem, result, limits)
+    summary = snapshot_summary(problem, result, limits, series.timeline)
     if out is not None:
         write_snapshot(out, summary, trajectory_table(result), result, progress)
     emit(stamp(summary), as_json, snapshot_text(summary))
@@ -171,7 +162,7 @@ def snapshot(
     help="Generator availability: BUS:off@MIN trips the generator at BUS at minute MIN, "
     "BUS:on@MIN brings it back (repeatable).",
 )
-@option("--minutes", type=MinutesType(), help="Simulate only minutes START-END (default 1-1440).")
+@steps_options
 @option(
     "--warm-start",
     type=EngineChoice("popdispatch.warm_start:WARM_STARTS"),
@@ -179,7 +170,7 @@ def snapshot(
     "paper mode's default) or setpoints (set points kept, the demand step taken by the "
     "generators inside their limits; exact mode's default).",
 )
-@profiles_option
+@series_options
 @feeder_options
 @out_option
 @json_option
@@ -201,8 +192,6 @@ def day(
     Times: wall_seconds is the engine's own (no start-up, imports, data loading or DC-OPF),
     command_seconds the whole command's, from the process start.
     """
-    import numpy as np
-
     from popdispatch.events import event_label
     from popdispatch.report.summaries import day_summary, day_table
     from popdispatch.runs import run_day_vs_opf
@@ -212,13 +201,13 @@ def day(
     settings = settings_from(dynamics, mode, x0, graph, warm_start)
     check_shares(x0, progress, source)
     announce_compile(progress)
-    span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
-    problem, _ = build(source, profiles, None, limits, progress, events, span)
-    result = run_day_vs_opf(problem, settings, span, progress)
+    problem, series = build(source, profiles, None, limits, progress, events, minutes)
+    result = run_day_vs_opf(problem, settings, minutes.of(series), progress)
     labels = [event_label(event) for event in events]
-    summary = day_summary(problem, result, limits, labels)
+    summary = day_summary(problem, result, limits, labels, series.timeline)
     if out is not None:
-        write_day(out, summary, day_table(result, problem), result, problem, progress)
+        table = day_table(result, problem, series.timeline)
+        write_day(out, summary, table, result, problem, progress)
     emit(stamp(summary), as_json, day_text(summary))
     if summary["infeasible_minutes"]:
         raise Failure(infeasible_day_message(summary))
@@ -278,7 +267,7 @@ def reproduce(profiles, out, mode, minutes, as_json, quiet) -> None:
     "--out", type=click.Path(dir_okay=False, path_type=Path), required=True, help="File to write."
 )
 @limit_option
-@profiles_option
+@series_options
 @feeder_options
 @quiet_option
 def export(minute, fmt, out, limits, profiles, source, quiet) -> None:
@@ -291,8 +280,3 @@ def export(minute, fmt, out, limits, profiles, source, quiet) -> None:
     loads = minute_loads(problem, day_profiles, minute)
     write_case(out, fmt, problem, minute, loads)
     progress.note(f"wrote {out} ({fmt}, minute {minute})")
-
-
-def minute_loads(problem, profiles, minute: int):
-    """Per-load demand (kW) at ``minute`` in the order of the feeder's loads."""
-    return profiles.for_loads(problem.feeder.original.loads.index).at(minute).to_numpy(float)

@@ -7,6 +7,7 @@ import functools
 import importlib
 import re
 from pathlib import Path
+from typing import NamedTuple
 
 import click
 
@@ -57,8 +58,8 @@ class EventType(click.ParamType):
         if match is None:
             self.fail(f"{value!r} is not of the form BUS:off@MIN or BUS:on@MIN", param, ctx)
         minute = int(match[3])
-        if not 1 <= minute <= MINUTES_PER_DAY:
-            self.fail(f"{value!r}: minute {minute} is outside 1..{MINUTES_PER_DAY}", param, ctx)
+        if minute < 1:
+            self.fail(f"{value!r}: minute {minute} is not a 1-based step", param, ctx)
         return int(match[1]), match[2].lower(), minute
 
 
@@ -90,9 +91,13 @@ class X0Type(click.ParamType):
 
 
 class MinutesType(click.ParamType):
-    """``START-END``: a range of 1-based minutes, both included."""
+    """``START-END``: a range of 1-based minutes, both included (``upper``: the last allowed;
+    ``None``: any, checked against the series once it is read)."""
 
     name = "START-END"
+
+    def __init__(self, upper: int | None = MINUTES_PER_DAY) -> None:
+        self.upper = upper
 
     def convert(self, value, param, ctx) -> tuple[int, int]:
         if isinstance(value, tuple):
@@ -101,8 +106,10 @@ class MinutesType(click.ParamType):
         if match is None:
             self.fail(f"{value!r} is not of the form START-END (e.g. 540-600)", param, ctx)
         start, end = int(match[1]), int(match[2])
-        if not 1 <= start <= end <= MINUTES_PER_DAY:
-            self.fail(f"{value!r}: need 1 <= START <= END <= {MINUTES_PER_DAY}", param, ctx)
+        if self.upper is None and not 1 <= start <= end:
+            self.fail(f"{value!r}: need 1 <= START <= END", param, ctx)
+        if self.upper is not None and not 1 <= start <= end <= self.upper:
+            self.fail(f"{value!r}: need 1 <= START <= END <= {self.upper}", param, ctx)
         return start, end
 
 
@@ -135,9 +142,12 @@ json_option = option("--json", "as_json", is_flag=True, help="Print one JSON obj
 quiet_option = option("-q", "--quiet", is_flag=True, help="No progress bars or notes on stderr.")
 minute_option = option(
     "--minute",
-    type=click.IntRange(1, MINUTES_PER_DAY),
+    "--step",
+    "minute",
+    type=click.IntRange(1),
     required=True,
-    help="1-based minute of the day (566 = the peak).",
+    help="1-based minute of the day (566 = the peak), or step of a --loads/SimBench series "
+    "(a network on its own loads has one step: 1).",
 )
 limit_option = option(
     "--limit",
@@ -153,6 +163,85 @@ profiles_option = option(
     help="Folder with the official load profiles (else $POPDISPATCH_PROFILES, else the shipped "
     "synthetic default; minute 566 alone uses the official loads shipped by pandapower).",
 )
+LOADS_FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
+
+
+class Series(NamedTuple):
+    """Where a run's load time series comes from: an ELV profile ``folder`` (``--profiles``)
+    or a load ``table`` (``--loads``, CSV or Parquet); both ``None``: the feeder's own."""
+
+    folder: Path | None = None
+    table: Path | None = None
+
+
+def series_options(func):
+    """``--profiles`` and ``--loads``, handed to the command as one ``profiles``
+    (:class:`Series`)."""
+
+    @functools.wraps(func)
+    def command(*args, profiles, loads, **kwargs):
+        return func(*args, profiles=Series(profiles, loads), **kwargs)
+
+    command = option(
+        "--loads",
+        type=LOADS_FILE,
+        help="Load time series of any resolution and length: CSV or Parquet, a time column "
+        "(ISO 8601) and one column per load name or bus id, kW.",
+    )(command)
+    return profiles_option(command)
+
+
+def steps_options(func):
+    """``--steps``/``--minutes``, ``--start`` and ``--end``, handed to the command as one
+    ``minutes`` (:class:`popdispatch.runs.Span`)."""
+
+    @functools.wraps(func)
+    def command(*args, minutes, start, end, **kwargs):
+        from popdispatch.runs import Span
+
+        return func(*args, minutes=Span(minutes, start, end), **kwargs)
+
+    decorators = [
+        option(
+            "--steps",
+            "--minutes",
+            "minutes",
+            type=MinutesType(None),
+            help="Simulate only steps START-END (1-based; minutes of the ELV day, default all).",
+        ),
+        option("--start", metavar="TIME", help="First step: the one holding TIME (ISO 8601; "
+               "HH:MM on the undated ELV day)."),
+        option("--end", metavar="TIME", help="Last step: the one holding TIME."),
+    ]  # fmt: skip
+    for decorate in reversed(decorators):
+        command = decorate(command)
+    return command
+
+
+def build(source, profiles: Series, minute, limits, progress, events=(), minutes=None):
+    """``(problem, profiles)`` of a run (:func:`popdispatch.runs.load_run`); a bad ``--limit``
+    reads as click's own usage errors."""
+    from popdispatch.errors import OptionError
+    from popdispatch.runs import known_steps, load_run
+
+    steps = known_steps(source, profiles.folder, profiles.table)
+    if steps is not None and minute is not None and minute > steps:  # before any data is read
+        raise click.BadParameter(f"{minute} is outside 1..{steps}", param_hint="'--minute'")
+    span = getattr(minutes, "steps", None)
+    if steps is not None and span is not None and span[1] > steps:
+        raise click.BadParameter(
+            f"{span[0]}-{span[1]}: need 1 <= START <= END <= {steps}", param_hint="'--steps'"
+        )
+    try:
+        return load_run(
+            source, profiles.folder, minute, limits, progress, events, minutes, profiles.table
+        )
+    except OptionError as exc:
+        if exc.option != "--limit":
+            raise
+        raise click.BadParameter(str(exc), param_hint="'--limit'") from None
+
+
 out_option = option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),

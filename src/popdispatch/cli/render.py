@@ -66,3 +66,8 @@ def write_day(out: Path, summary: dict, table, result, problem, progress: Progre
         fig = figures.base_day_figure(result, generator_buses(problem))
         figures.save_figure(fig, folder.file("setpoints"))
         folder.write_json("summary.json", stamp(summary))
+
+
+def minute_loads(problem, profiles, minute: int):
+    """Per-load demand (kW) at ``minute`` in the order of the feeder's loads."""
+    return profiles.for_loads(problem.feeder.original.loads.index).at(minute).to_numpy(float)

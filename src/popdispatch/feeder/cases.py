@@ -167,6 +167,15 @@ def simbench_available() -> bool:
     return find_spec("simbench") is not None
 
 
+@functools.cache
+def simbench_net(code: str):
+    """``simbench.get_simbench_net(code)``, read once per process (13-16 s each on the 2-core
+    machine: simbench parses its whole CSV database). Callers must not modify it."""
+    import simbench
+
+    return simbench.get_simbench_net(code)
+
+
 def _simbench_case(name: str, fleet: pd.DataFrame | None, placeholder: bool = False) -> Feeder:
     from popdispatch.errors import FeederError
 
@@ -175,12 +184,10 @@ def _simbench_case(name: str, fleet: pd.DataFrame | None, placeholder: bool = Fa
         raise FeederError(
             f"case {name!r} needs the optional simbench package (pip install simbench)"
         )
-    import simbench
-
     from popdispatch.readers.pandapower import _read
 
     try:
-        net = simbench.get_simbench_net(code)
+        net = simbench_net(code)
     except Exception as exc:  # simbench raises plain exceptions for unknown codes
         raise FeederError(f"unknown SimBench code {code!r}: {exc}") from None
     return _read(net, fleet, None, True, name, placeholder)

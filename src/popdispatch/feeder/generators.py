@@ -56,12 +56,25 @@ def paper_fleet() -> pd.DataFrame:
     return make_fleet(TABLE_I)
 
 
-def read_fleet(path: str | Path) -> pd.DataFrame:
-    """Read a fleet from a CSV or TOML file with the columns of :data:`FLEET_COLUMNS`.
+#: Unit-named fleet file columns -> fleet table columns (``a_eur_per_h`` optional, default 0).
+FILE_COLUMNS = {
+    "a_eur_per_h": "a",
+    "b_eur_per_mwh": "b",
+    "c_eur_per_mw2h": "c",
+}
 
-    CSV: one row per generator, an optional ``name`` column. TOML: an array of tables
-    ``[[generator]]`` with keys ``name`` (optional), ``bus``, ``a``, ``b``, ``c``, ``pmin_kw``,
-    ``pmax_kw``.
+
+def read_fleet(path: str | Path) -> pd.DataFrame:
+    """Read a fleet from a CSV or TOML file.
+
+    Columns ``bus, name, b_eur_per_mwh, c_eur_per_mw2h, pmin_kw, pmax_kw`` and optionally
+    ``a_eur_per_h`` (default 0): ``b`` EUR/MWh, ``c`` EUR/(MW^2 h) and ``a`` EUR/h of the cost
+    rate ``a + b p + c p^2`` with p in MW (paper eq. 2), limits in kW. The short names ``a``,
+    ``b``, ``c`` of :data:`FLEET_COLUMNS` are read too; ``name`` is optional (default
+    ``G<bus>``). ``bus`` is the source format's bus id: a MATPOWER bus number, a pandapower
+    bus index, an OpenDSS bus name (kept as text when it is not an integer).
+
+    CSV: one row per generator. TOML: an array of tables ``[[generator]]`` with those keys.
     """
     path = Path(path)
     try:
@@ -71,7 +84,7 @@ def read_fleet(path: str | Path) -> pd.DataFrame:
                 raise FleetError(f"{path}: no [[generator]] tables")
             table = pd.DataFrame(rows)
         else:
-            table = pd.read_csv(path, skipinitialspace=True)
+            table = pd.read_csv(path, skipinitialspace=True, dtype={"bus": str, "name": str})
     except (
         OSError,
         UnicodeDecodeError,
@@ -81,19 +94,53 @@ def read_fleet(path: str | Path) -> pd.DataFrame:
     ) as exc:
         raise FleetError(f"cannot read fleet file {path}: {exc}") from None
     table.columns = [str(c).strip().lower() for c in table.columns]
+    table = table.rename(columns=FILE_COLUMNS)
+    if "a" not in table.columns:
+        table["a"] = 0.0
     missing = [c for c in FLEET_COLUMNS if c not in table.columns]
     if missing:
-        raise FleetError(f"{path}: fleet table lacks column {missing[0]!r} (needs {FLEET_COLUMNS})")
-    names = table["name"].astype(str) if "name" in table.columns else None
-    for column in FLEET_COLUMNS:
+        unit_named = {v: k for k, v in FILE_COLUMNS.items()}
+        wanted = unit_named.get(missing[0], missing[0])
+        raise FleetError(
+            f"{path}: fleet table lacks column {wanted!r} (needs bus, name, b_eur_per_mwh, "
+            "c_eur_per_mw2h, pmin_kw, pmax_kw; optional a_eur_per_h)"
+        )
+    return _fleet_table(table, path)
+
+
+def _fleet_table(table: pd.DataFrame, path: Path) -> pd.DataFrame:
+    """Numbers checked (the first bad cell named by row), buses as integers where they are."""
+    for column in FLEET_COLUMNS[1:]:
         numeric = pd.to_numeric(table[column], errors="coerce")
         if numeric.isna().any():
             row = int(numeric.isna().to_numpy().argmax())
             raise FleetError(
                 f"{path}: row {row + 1} has non-numeric {column} = {table[column][row]!r}"
             )
-        table[column] = numeric if column == "bus" else numeric.astype(float)
-    return make_fleet(table[FLEET_COLUMNS].itertuples(index=False), names)
+        table[column] = numeric.astype(float)
+    buses = [_bus_id(bus, path, row) for row, bus in enumerate(table["bus"])]
+    names = (
+        table["name"].astype(str).str.strip().tolist()
+        if "name" in table.columns
+        else [f"G{b}" for b in buses]
+    )
+    fleet = table[FLEET_COLUMNS].copy()
+    named = any(isinstance(b, str) for b in buses)
+    fleet["bus"] = np.array(buses, dtype=object if named else np.int64)
+    fleet.index = pd.Index(names, name="generator")
+    return fleet
+
+
+def _bus_id(bus, path: Path, row: int) -> int | str:
+    """A fleet file's bus: an integer where it spells one, else the name (OpenDSS)."""
+    text = str(bus).strip() if bus is not None else ""
+    if text in ("", "nan", "None"):
+        raise FleetError(f"{path}: row {row + 1} has no bus")
+    try:
+        return int(text)
+    except ValueError:
+        number = pd.to_numeric(text, errors="coerce")
+        return int(number) if pd.notna(number) and float(number).is_integer() else text
 
 
 def validate_fleet(fleet: pd.DataFrame, buses: pd.Index) -> None:

@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from popdispatch.feeder.model import Feeder
+from popdispatch.feeder.profiles import Timeline, day_timeline
 from popdispatch.feeder.reduction import ReducedFeeder
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.opf import OpfResult
@@ -65,6 +66,33 @@ def outside_limits(problem: DispatchProblem, p_kw: np.ndarray, online: np.ndarra
     return distance_outside_limits_kw(problem, p_kw, online) > LIMIT_TOLERANCE_KW
 
 
+def _timeline(problem: DispatchProblem, timeline: Timeline | None) -> Timeline:
+    """The run's timeline; default one-minute steps of an undated day (the ELV day)."""
+    return timeline if timeline is not None else day_timeline(len(problem.demand))
+
+
+def _per_hour(hours: np.ndarray) -> float | None:
+    """Steps per hour when every step lasts the same (60 for one-minute steps), else None."""
+    if len(hours) == 0 or not np.allclose(hours, hours[0], rtol=0, atol=1e-12):
+        return None
+    per_hour = 1.0 / float(hours[0])
+    return float(round(per_hour)) if abs(per_hour - round(per_hour)) < 1e-9 else per_hour
+
+
+def _energy(values: np.ndarray, hours: np.ndarray) -> np.ndarray:
+    """Energy of per-step powers ``values`` (steps, ...) lasting ``hours`` each: kW -> kWh,
+    EUR/h -> EUR (a regular series divides the sum by the steps per hour)."""
+    per_hour = _per_hour(hours)
+    if per_hour is not None:
+        return values.sum(axis=0) / per_hour
+    return np.tensordot(hours, values, axes=(0, 0))
+
+
+def _time_keys(timeline: Timeline, step: int) -> dict:
+    """``step`` and ``time`` (ISO 8601, the start of the step's interval) of one step."""
+    return {"step": int(step), "time": timeline.label(step)}
+
+
 def _finite(value) -> float | None:
     """A float, or None where it is NaN or infinite (JSON's null: unknown)."""
     return float(value) if value is not None and np.isfinite(value) else None
@@ -73,6 +101,7 @@ def _finite(value) -> float | None:
 def feeder_summary(feeder: Feeder, reduced: ReducedFeeder) -> dict:
     """What the feeder is: sizes of the original and reduced networks, loads, fleet."""
     gens = reduced.generators
+    ids = source_bus_ids(feeder, gens.bus)
     return {
         "case": feeder.name,
         "buses": len(feeder.buses),
@@ -85,7 +114,7 @@ def feeder_summary(feeder: Feeder, reduced: ReducedFeeder) -> dict:
         "generators": [
             {
                 "name": name,
-                "bus": int(row.bus),
+                "bus": bus,
                 "node": int(row.node),
                 "a_eur": float(row.a),
                 "b_eur_per_mwh": float(row.b),
@@ -93,26 +122,42 @@ def feeder_summary(feeder: Feeder, reduced: ReducedFeeder) -> dict:
                 "pmin_kw": float(row.pmin_kw),
                 "pmax_kw": float(row.pmax_kw),
             }
-            for name, row in gens.iterrows()
+            for (name, row), bus in zip(gens.iterrows(), ids, strict=True)
         ],
         "capacity_kw": float(gens.pmax_kw.sum()),
     }
 
 
-def generator_buses(problem: DispatchProblem) -> list[int]:
-    """Original bus of every generator, in the problem's generator order."""
-    return problem.feeder.generators.bus.astype(int).tolist()
+def generator_buses(problem: DispatchProblem) -> list[int | str]:
+    """Original bus of every generator, in the problem's generator order, as the source format
+    names it (:func:`source_bus_ids`)."""
+    return source_bus_ids(problem.feeder.original, problem.feeder.generators.bus)
+
+
+def source_bus_ids(feeder: Feeder, buses) -> list[int | str]:
+    """The source format's ids of ``feeder``'s ``buses``: the bus number, or the name of a bus
+    an OpenDSS file names with other than its number (``rg60``, ``sourcebus``)."""
+    numbers = [int(b) for b in buses]
+    if "name" not in feeder.buses.columns:
+        return numbers
+    names = feeder.buses["name"].astype(str)
+    return [b if names.get(b, str(b)) == str(b) else names[b] for b in numbers]
 
 
 def opf_summary(
-    problem: DispatchProblem, opf: OpfResult, limits: Sequence[tuple[int, int, float]] = ()
+    problem: DispatchProblem,
+    opf: OpfResult,
+    limits: Sequence[tuple[int, int, float]] = (),
+    timeline: Timeline | None = None,
 ) -> dict:
-    """The DC-OPF of one minute."""
+    """The DC-OPF of one minute (``step``: the same 1-based step; ``time``: its start, ISO
+    8601, from ``timeline``, default a day of minutes)."""
     buses = generator_buses(problem)
     online = problem.online[opf.minute - 1]
     return {
         "status": opf.status,
         "minute": opf.minute,
+        **_time_keys(_timeline(problem, timeline), opf.minute),
         "demand_kw": opf.demand_kw,
         "capacity_kw": float(np.where(online, problem.pmax, 0.0).sum() * KW_PER_MW),
         "case": problem.feeder.original.name,
@@ -142,8 +187,10 @@ def snapshot_summary(
     problem: DispatchProblem,
     result: SnapshotComparison,
     limits: Sequence[tuple[int, int, float]] = (),
+    timeline: Timeline | None = None,
 ) -> dict:
     """One minute of dynamics compared with the DC-OPF (null where the DC-OPF is infeasible).
+    ``step`` and ``time`` as in :func:`opf_summary`.
 
     ``status`` is the comparison's (``infeasible``: no DC-OPF exists); ``dynamics_status``
     the run's own (``infeasible`` there: exact mode's line prices ran away). A generator's
@@ -160,6 +207,7 @@ def snapshot_summary(
         "status": snapshot_status(result),
         "dynamics_status": run.status,
         "minute": run.minute,
+        **_time_keys(_timeline(problem, timeline), run.minute),
         "demand_kw": run.demand_kw,
         "capacity_kw": float(setpoint_bounds_kw(problem, online)[1].sum()),
         "case": problem.feeder.original.name,
@@ -231,8 +279,15 @@ def day_summary(
     result: DayComparison,
     limits: Sequence[tuple[int, int, float]] = (),
     events: Sequence[str] = (),
+    timeline: Timeline | None = None,
 ) -> dict:
     """An online day compared minute by minute with the DC-OPF (energies kWh, costs EUR).
+
+    A "minute" is a 1-based step of the series (``timeline``: when each starts and how long it
+    lasts; default a day of one-minute steps): ``steps``, ``first_step`` and ``last_step``
+    repeat ``minutes``, ``first_minute`` and ``last_minute``; ``first_time`` and ``last_time``
+    are the starts of the first and last steps (ISO 8601), ``step_minutes`` the step length
+    (null if the steps differ). Energies and costs weigh each step by its duration.
 
     Every simulated minute is reported. ``infeasible_minutes`` (1-based) are those whose DC-OPF
     is infeasible; errors, ``energy_kwh``/``opf_energy_kwh`` and ``cost_eur``/``opf_cost_eur``
@@ -246,11 +301,19 @@ def day_summary(
     """
     run = result.run
     settings = run.settings
+    timeline = _timeline(problem, timeline)
+    first, last = int(run.minutes[0]), int(run.minutes[-1])
     return {
         "status": day_status(result),
         "minutes": len(run.minutes),
-        "first_minute": int(run.minutes[0]),
-        "last_minute": int(run.minutes[-1]),
+        "first_minute": first,
+        "last_minute": last,
+        "steps": len(run.minutes),
+        "first_step": first,
+        "last_step": last,
+        "first_time": timeline.label(first),
+        "last_time": timeline.label(last),
+        "step_minutes": timeline.step_minutes,
         "case": problem.feeder.original.name,
         "profile_source": run.profile_source,
         "mode": settings.mode,
@@ -264,7 +327,7 @@ def day_summary(
         "price_runaway_minutes": _runaway_minutes(run),
         "stalled_minutes": sorted(int(m) for m in getattr(run, "stall_reasons", {})),
         "converged_minutes": int(run.converged.sum()),
-        **_day_comparison(problem, result),
+        **_day_comparison(problem, result, timeline.hours[run.minutes - 1]),
         "max_overflow_kw": float(run.overflow_kw.max()) if run.overflow_kw.size else 0.0,
         "wall_seconds": run.wall_seconds,
     }
@@ -275,8 +338,9 @@ def _runaway_minutes(run) -> list[int]:
     return [int(m) for m in run.minutes[flags]]
 
 
-def _day_comparison(problem: DispatchProblem, result: DayComparison) -> dict:
-    """Errors, energies and costs of the dynamics and the DC-OPF over the same minutes."""
+def _day_comparison(problem: DispatchProblem, result: DayComparison, hours: np.ndarray) -> dict:
+    """Errors, energies and costs of the dynamics and the DC-OPF over the same minutes (each
+    lasting ``hours``, h)."""
     run, feasible = result.run, result.feasible
     buses = [str(b) for b in generator_buses(problem)]
     error = result.abs_error_kw[feasible]
@@ -286,23 +350,24 @@ def _day_comparison(problem: DispatchProblem, result: DayComparison) -> dict:
     distance = distance_outside_limits_kw(problem, run.setpoints_kw, run.online)
     outside = distance > LIMIT_TOLERANCE_KW
     counts = outside.sum(axis=0)
-    cost = float(run.cost[feasible].sum() / 60.0)
-    total_opf_cost = float(opf_cost.sum() / 60.0) if some else None
-    cost_all = float(run.cost.sum() / 60.0)
+    kept = hours[feasible]
+    cost = float(_energy(run.cost[feasible], kept))
+    total_opf_cost = float(_energy(opf_cost, kept)) if some else None
+    cost_all = float(_energy(run.cost, hours))
     return {
         "compared_minutes": int(feasible.sum()),
         "minutes_within_0_1_kw": int((worst <= MATCH_KW).sum()),
         "max_abs_error_kw": float(error.max()) if some else None,
         "mean_abs_error_kw": float(error.mean()) if some else None,
         "median_max_abs_error_kw": float(np.median(worst)) if some else None,
-        "energy_kwh": _by_bus(buses, run.setpoints_kw[feasible].sum(axis=0) / 60.0),
-        "opf_energy_kwh": _by_bus(buses, result.opf_kw[feasible].sum(axis=0) / 60.0, some),
+        "energy_kwh": _by_bus(buses, _energy(run.setpoints_kw[feasible], kept)),
+        "opf_energy_kwh": _by_bus(buses, _energy(result.opf_kw[feasible], kept), some),
         "cost_eur": cost,
         "opf_cost_eur": total_opf_cost,
         "cost": cost,  # deprecated: cost_eur
         "opf_cost": total_opf_cost,  # deprecated: opf_cost_eur
         "cost_unit": "EUR",  # deprecated with cost
-        "energy_all_minutes_kwh": _by_bus(buses, run.setpoints_kw.sum(axis=0) / 60.0),
+        "energy_all_minutes_kwh": _by_bus(buses, _energy(run.setpoints_kw, hours)),
         "cost_all_minutes_eur": cost_all,
         "cost_all_minutes": cost_all,  # deprecated: cost_all_minutes_eur
         "minutes_outside_limits": int(outside.any(axis=1).sum()),
@@ -336,12 +401,24 @@ def trajectory_table(result: SnapshotComparison) -> pd.DataFrame:
     return table
 
 
-def day_table(result: DayComparison, problem: DispatchProblem | None = None) -> pd.DataFrame:
-    """One row per simulated minute: demand, set points, DC-OPF (empty where infeasible:
-    ``opf_feasible`` false), iterations, costs, overflow; with ``problem``, ``outside_limits``
-    (some set point more than :data:`LIMIT_TOLERANCE_KW` outside its limits)."""
+def day_table(
+    result: DayComparison, problem: DispatchProblem | None = None, timeline: Timeline | None = None
+) -> pd.DataFrame:
+    """One row per simulated minute: the step (``minute`` and ``step``, 1-based) and its start
+    ``time`` (ISO 8601, from ``timeline``; default a day of minutes), demand, set points, DC-OPF
+    (empty where infeasible: ``opf_feasible`` false), iterations, costs, overflow; with
+    ``problem``, ``outside_limits`` (some set point more than :data:`LIMIT_TOLERANCE_KW` outside
+    its limits)."""
     run = result.run
-    table = pd.DataFrame({"minute": run.minutes, "demand_kw": run.demand_kw})
+    timeline = timeline if timeline is not None else day_timeline(int(run.minutes.max()))
+    table = pd.DataFrame(
+        {
+            "minute": run.minutes,
+            "step": run.minutes,
+            "time": timeline.labels(run.minutes),
+            "demand_kw": run.demand_kw,
+        }
+    )
     for k, name in enumerate(run.generators):
         table[f"{name}_setpoint_kw"] = run.setpoints_kw[:, k]
     for k, name in enumerate(run.generators):

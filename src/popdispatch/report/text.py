@@ -100,10 +100,15 @@ def _inputs(s: dict) -> str:
     )
 
 
+def _when(s: dict) -> str:
+    """`` (time 09:25:00)`` for a summary that carries its step's time, else nothing."""
+    return f" (time {s['time']})" if s.get("time") else ""
+
+
 def opf_text(summary: dict) -> str:
     """``popdispatch opf``."""
     s = summary
-    head = f"DC-OPF, minute {s['minute']}: "
+    head = f"DC-OPF, minute {s['minute']}{_when(s)}: "
     demand = f"demand {s['demand_kw']:.3f} kW"
     if s.get("capacity_kw") is not None:
         demand += f", online capacity {s['capacity_kw']:.3f} kW"
@@ -143,7 +148,8 @@ def _run_line(s: dict) -> str:
 def snapshot_text(s: dict) -> str:
     """``popdispatch snapshot``."""
     head = (
-        f"minute {s['minute']}, demand {s['demand_kw']:.3f} kW: {s['dynamics']} dynamics, "
+        f"minute {s['minute']}{_when(s)}, demand {s['demand_kw']:.3f} kW: {s['dynamics']} "
+        "dynamics, "
         f"{s['mode']} mode, x0 {s['x0']}\n{_inputs(s)}\n"
     )
     rows = s["generators"]
@@ -220,20 +226,31 @@ def _day_notes(s: dict) -> list[str]:
     return notes
 
 
+def _span(s: dict) -> str:
+    """What a day run covers: ``online day, minutes 1-1440 (00:00:00 .. 23:59:00)`` for
+    one-minute steps, else ``online run, steps 1-35136 of 15 min (2016-01-01T00:00:00 ..
+    2016-12-31T23:45:00)``."""
+    times = f" ({s['first_time']} .. {s['last_time']})" if s.get("first_time") else ""
+    step = s.get("step_minutes", 1.0)
+    if step == 1.0:
+        return f"online day, minutes {s['first_minute']}-{s['last_minute']}{times}"
+    length = "irregular steps" if step is None else f"steps of {step:g} min"
+    return f"online run, {length} {s['first_minute']}-{s['last_minute']}{times}"
+
+
 def day_text(s: dict) -> str:
     """``popdispatch day``."""
-    lines = [
-        f"online day, minutes {s['first_minute']}-{s['last_minute']}: {s['dynamics']} "
-        f"dynamics, {s['mode']} mode",
-        _inputs(s),
-        events_text(s.get("events", [])),
+    outcome = [
         f"status: {s['status']} ({s['converged_minutes']} of {s['minutes']} minutes converged; "
         f"engine {s['wall_seconds']:.3f} s, whole command {s['command_seconds']:.1f} s)",
         *_day_notes(s),
         _day_comparison(s),
         f"max overflow {s['max_overflow_kw']:.3f} kW (over all {s['minutes']} minutes)",
     ]
-    return "\n".join(lines)
+    if s.get("step_minutes", 1.0) != 1.0:  # a series of other steps counts steps
+        outcome = [line.replace(" minute", " step") for line in outcome]
+    head = f"{_span(s)}: {s['dynamics']} dynamics, {s['mode']} mode"
+    return "\n".join([head, _inputs(s), events_text(s.get("events", [])), *outcome])
 
 
 def cases_summary(table) -> dict:
