@@ -150,38 +150,37 @@ def _divergence_message(exc: Exception, steps: np.ndarray | None) -> str:
 def _flows(network: ACNetwork, out: dict, n_steps: int, detail: bool) -> ACFlows:
     """power-grid-model output of the kept buses (SI) -> :class:`ACFlows` of every bus and
     line of the feeder (kW, feeder order), by Ohm's law along each chain
-    (:mod:`popdispatch.ac.chains`)."""
+    (:mod:`popdispatch.ac.chains`). Computed with buses and lines as rows (steps contiguous:
+    gathering a bus is one copy), returned as (steps, ...) views."""
     chains, vn_kv = network.chains, network.model.vn_kv
     z_base_ohm = vn_kv**2 * 1e3  # p.u. on 1 kVA: powers in kVA, currents in kVA per p.u.
-    s_top = np.empty((n_steps, chains.n_branches), dtype=complex)
+    s_top = np.empty((chains.n_branches, n_steps), dtype=complex)
     for kind, rows in (("line", network.line_rows), ("link", network.link_rows)):
         if len(rows):
-            s_top[:, rows] = out[kind]["p_from"] + 1j * out[kind]["q_from"]
-    s_top /= W_PER_KW
+            s_top[rows] = (out[kind]["p_from"] + 1j * out[kind]["q_from"]).T / W_PER_KW
     node = out["node"]
-    v = np.empty((n_steps, len(chains.kept)), dtype=complex)
-    v[:, chains.kept] = node["u_pu"] * np.exp(1j * node["u_angle"])
-    current = np.conj(s_top / v[:, chains.branch_top])  # per branch, downstream
-    inside = ~chains.kept
-    v[:, inside] = (
-        v[:, chains.branch_top[chains.bus_branch[inside]]]
-        - chains.bus_z_ohm[inside] / z_base_ohm * current[:, chains.bus_branch[inside]]
-    )
-    i_line = np.conj(current[:, chains.line_branch])
-    s_near = v[:, chains.line_near] * i_line  # kVA entering each line at its upstream end
-    s_far = -v[:, chains.line_far] * i_line  # ... and at its downstream end
-    forward = chains.line_forward
-    s_from = np.where(forward, s_near, s_far)
-    s_to = np.where(forward, s_far, s_near)
+    v = np.empty((len(chains.kept), n_steps), dtype=complex)
+    v[chains.kept] = (node["u_pu"] * np.exp(1j * node["u_angle"])).T
+    current = np.conj(s_top / v[chains.branch_top])  # per branch, downstream
+    inside = np.flatnonzero(~chains.kept)
+    branch = chains.bus_branch[inside]
+    z_pu = (chains.bus_z_ohm[inside] / z_base_ohm)[:, None]
+    v[inside] = v[chains.branch_top[branch]] - z_pu * current[branch]
+    i_line = np.conj(current[chains.line_branch])
+    s_near = v[chains.line_near] * i_line  # kVA entering each line at its upstream end
+    s_far = v[chains.line_far] * i_line  # minus what enters at its downstream end
+    backward = ~chains.line_forward
+    s_from, s_to = s_near, -s_far
+    s_from[backward], s_to[backward] = s_to[backward], s_near[backward].copy()
     source = out["source"]
     return ACFlows(
-        v_pu=np.abs(v),
-        angle_deg=np.degrees(np.angle(v)) if detail else None,
-        p_from_kw=s_from.real,
-        q_from_kvar=s_from.imag if detail else None,
-        p_to_kw=s_to.real,
-        q_to_kvar=s_to.imag if detail else None,
-        current_a=np.abs(i_line) / (np.sqrt(3.0) * vn_kv),
+        v_pu=np.abs(v).T,
+        angle_deg=np.degrees(np.angle(v)).T if detail else None,
+        p_from_kw=s_from.real.T,
+        q_from_kvar=s_from.imag.T if detail else None,
+        p_to_kw=s_to.real.T,
+        q_to_kvar=s_to.imag.T if detail else None,
+        current_a=np.abs(i_line).T / (np.sqrt(3.0) * vn_kv),
         source_kw=source["p"][:, 0] / W_PER_KW,
         source_kvar=source["q"][:, 0] / W_PER_KW,
     )
