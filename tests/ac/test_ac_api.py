@@ -120,6 +120,14 @@ def test_day_of_a_comparison_summarises_its_steps(congestion_problem):
     )
     summary = day.summary()
     json.dumps(summary)
+    assert set(summary) == {
+        "steps", "losses_kwh", "source_extra_kwh", "max_losses_kw", "max_losses_minute",
+        "v_min_pu", "v_min_bus", "v_min_minute", "v_max_pu", "v_max_bus", "v_max_minute",
+        "max_loading_percent", "max_loading_line", "max_loading_minute", "max_source_extra_kw",
+        "max_source_extra_minute", "model",
+    }  # fmt: skip
+    assert summary["max_losses_kw"] == steps.losses_kw.max()
+    assert summary["max_losses_minute"] == steps.losses_kw.idxmax()
     assert summary["losses_kwh"] == pytest.approx(steps.losses_kw.sum() / 60)
     assert summary["v_min_pu"] == steps.v_min_pu.min()
     assert summary["v_min_minute"] == steps.v_min_pu.idxmin() == 565  # least generation

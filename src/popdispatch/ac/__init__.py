@@ -17,9 +17,11 @@ from popdispatch.ac.check import (
     check_snapshot,
     power_flow,
 )
+from popdispatch.ac.lindistflow import shared_path_ohm, voltage_sensitivity
 from popdispatch.ac.network import ACModel, ACNetwork, build_network, nominal_kv
 
 __all__ = [
     "STEP_COLUMNS", "ACDay", "ACFlows", "ACModel", "ACNetwork", "ACSnapshot", "build_network",
     "check_day", "check_setpoints", "check_snapshot", "nominal_kv", "power_flow",
+    "shared_path_ohm", "voltage_sensitivity",
 ]  # fmt: skip

@@ -238,6 +238,17 @@ def _json(value: Any) -> Any:
     return value
 
 
+#: Day summary extremes: (key prefix, step column, largest?, column naming where it occurs);
+#: keys ``<prefix><unit>`` (e.g. ``max_losses_kw``), ``<prefix>minute`` and the where.
+_DAY_EXTREMES = [
+    ("max_losses_", "losses_kw", True, None),
+    ("v_min_", "v_min_pu", False, "v_min_bus"),
+    ("v_max_", "v_max_pu", True, "v_max_bus"),
+    ("max_loading_", "max_loading_percent", True, "max_loading_line"),
+    ("max_source_extra_", "source_extra_kw", True, None),
+]
+
+
 @dataclass(frozen=True)
 class ACDay:
     """The AC check of several time steps (a day, or any minutes).
@@ -274,27 +285,14 @@ class ACDay:
         out: dict[str, Any] = {"steps": len(s)}
         out["losses_kwh"] = float(s.losses_kw.sum() / 60.0)
         out["source_extra_kwh"] = float(s.source_extra_kw.sum() / 60.0)
-        for key, column, pick in (
-            ("max_losses", "losses_kw", "idxmax"),
-            ("v_min", "v_min_pu", "idxmin"),
-            ("v_max", "v_max_pu", "idxmax"),
-            ("max_loading", "max_loading_percent", "idxmax"),
-            ("max_source_extra", "source_extra_kw", "idxmax"),
-        ):
-            values = s[column]
-            if values.notna().any():
-                at = getattr(values, pick)()
-                out[f"{key}_{column.rsplit('_', 1)[-1]}"] = _json(values[at])
-                out[f"{key}_minute"] = _json(at)
-                if key in ("v_min", "v_max"):
-                    out[f"{key}_bus"] = _json(s.at[at, f"{key}_bus"])
-                if key == "max_loading":
-                    out["max_loading_line"] = _json(s.at[at, "max_loading_line"])
-            else:
-                out[f"{key}_{column.rsplit('_', 1)[-1]}"] = None
-                out[f"{key}_minute"] = None
-                if key == "max_loading":
-                    out["max_loading_line"] = None
+        for prefix, column, largest, where in _DAY_EXTREMES:
+            values = s[column].astype(float)
+            found = values.notna().any()
+            at = (values.idxmax() if largest else values.idxmin()) if found else None
+            out[f"{prefix}{column.rsplit('_', 1)[-1]}"] = _json(values[at]) if found else None
+            if where is not None:
+                out[where] = _json(s.at[at, where]) if found else None
+            out[f"{prefix}minute"] = _json(at)
         out["model"] = self.model.as_dict()
         return out
 
