@@ -31,6 +31,7 @@ class RoundAgent(Agent):
         self.addresses: dict[str, AgentAddress] = {}
         self.outbox: list[tuple[Any, str]] = []
         self.crashed = False
+        self.error: BaseException | None = None  # what stopped this agent's ticks, if any
 
     def on_ready(self) -> None:
         self.schedule_periodic_task(self._tick, delay=TICK_S)
@@ -39,7 +40,12 @@ class RoundAgent(Agent):
         if self.crashed:
             return
         rnd, phase = tick_of(self.context.current_timestamp / TICK_S)
-        self.act(rnd, phase)
+        try:
+            self.act(rnd, phase)
+        except Exception as exc:  # mango logs and drops it; the run must not go on quietly
+            self.error = exc
+            self.crashed = True
+            return
         outbox, self.outbox = self.outbox, []
         for content, aid in outbox:
             copies = self.network.copies() if self.network is not None else 1

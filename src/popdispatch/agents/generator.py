@@ -10,11 +10,18 @@ Each round (:mod:`popdispatch.agents.schedule`) the generator
 2. (tick 3) from the latest statuses of its neighbours, sums its pairwise in- and outflow
    (:func:`popdispatch.dynamics.pairwise.graph_flows` on its own star of edges, eqs. 13-14)
    and applies the steppers' flux limiter to its own side: a sender whose outflow over the
-   step ``h`` would exceed its movable mass scales its ``v`` so that it exactly empties, a
-   receiver whose inflow would exceed its room scales its ``w`` (integrate/steppers.py). It
-   offers each better neighbour ``h * D * w_i * v_j^lim * (f_i - f_j)`` MW;
-3. (tick 4) accepts this round's offers scaled by its own receiver factor (never more than
-   the room it has left, counting what it has reserved), reserving the amount;
+   step ``h`` would exceed its movable mass scales its ``v`` so that it exactly empties
+   (integrate/steppers.py). It offers each better neighbour
+   ``h * D * w_i * v_j^lim * (f_i - f_j)`` MW;
+3. (tick 4) accepts the offers that arrived, all scaled by one factor and never past the
+   room it has left (counting what it has reserved), reserving the amounts. The factor is
+   the steppers' receiver limiter ``room / (h * inflow)`` (``engine_limiter``, the default on
+   a perfect network, where the agents then follow the engine exactly) or
+   ``room / offered``. They differ where both ends of a pair are limited: the engine's
+   receiver factor is computed from the senders' *unlimited* masses, so such a pair is
+   scaled twice and moves ``~ 1 / gap``: the larger the fitness gap, the slower. After a
+   disturbance that winds the line prices up (a lost decision, a late price), the engine's
+   rule thus stalls while the prices keep integrating; ``room / offered`` does not;
 4. (tick 5) commits the offers accepted in time (lowering its own set point by the amount:
    the transaction's decision point) and aborts the others, then sends every decision not
    yet acknowledged (again each round until the receiver acknowledges).
@@ -71,15 +78,23 @@ class GeneratorAgent(RoundAgent):
     latest at its last round's tick 5; 1 = within its own round); ``lag``: rounds between a
     commit and the change of both inverters (0: the sender's at once, the receiver's as the
     decision arrives), so that a decision lost or late a few times still lands at both ends
-    at the same tick and the source bus never sees the transaction half done."""
+    at the same tick and the source bus never sees the transaction half done; ``copies``:
+    copies of each decision sent per round (a decision lost on the way leaves the
+    transaction half done, and the source bus takes up the difference, until a copy
+    arrives); ``engine_limiter``: the receiver scales the offers by the steppers' own factor
+    ``room / (h * inflow)`` (inflow from its neighbours' unlimited masses, as the engine
+    does), else by ``room / offered`` (see step 3)."""
 
     def __init__(self, rule: GeneratorRule, index: int, inverters: Inverters,
-                 neighbours: list[str], timeout: int = 1, lag: int = 0,
-                 network=None):  # fmt: skip
+                 neighbours: list[str], timeout: int = 1, lag: int = 0, copies: int = 1,
+                 engine_limiter: bool = True, network=None):  # fmt: skip
         super().__init__(network)
         self.rule = rule
         self.timeout = int(timeout)
         self.lag = int(lag)
+        self.copies = int(copies)
+        self.engine_limiter = bool(engine_limiter)
+        self.receiver_scale = 1.0
         self.pending_out: dict[str, tuple[float, int]] = {}  # committed: MW, effective round
         self.pending_in: dict[str, tuple[float, int]] = {}  # received: MW, effective round
         self.index = index
@@ -89,7 +104,6 @@ class GeneratorAgent(RoundAgent):
         self.signals: dict[str, tuple[int, float]] = {}
         self.statuses: dict[str, Status] = {}
         self.own: tuple[float, float, float, float] | None = None  # f, w, v, room
-        self.receiver_scale = 1.0
         self.offers_in: list[tuple[str, Offer]] = []
         self.open_offers: dict[str, tuple[str, int, float]] = {}  # txid: receiver, round, MW
         self.accepted: dict[str, float] = {}  # txid: MW, as the receiver accepted
@@ -168,7 +182,7 @@ class GeneratorAgent(RoundAgent):
         """Fitness and weights at the own set point; status to the neighbours."""
         r = self.rule
         one = np.ones(1)
-        p = np.array([self.planned])
+        p = np.array([self.p])  # the inverter's output: what the lines carry
         signal = np.array(
             [sum(value for _, value in (self.signals[k] for k in sorted(self.signals, key=int)))]
         )
@@ -179,7 +193,9 @@ class GeneratorAgent(RoundAgent):
         active = np.ones(1, dtype=np.bool_)
         share_bounds(r.pmin * one, r.pmax * one, active, r.demand_mw, lo, hi)
         w, v, room = np.empty(1), np.empty(1), np.empty(1)
-        field_weights(r.field, p / r.demand_mw, lo, hi, active, w, v, room)
+        # weights on the planned set point: mass already committed away cannot move again
+        x = np.array([self.planned]) / r.demand_mw
+        field_weights(r.field, x, lo, hi, active, w, v, room)
         self.own = (float(f[0]), float(w[0]), float(v[0]), float(room[0]))
         status = Status(rnd, *self.own[:3])
         for aid in self.neighbours:
@@ -216,7 +232,7 @@ class GeneratorAgent(RoundAgent):
         # what is still offered from earlier rounds is not movable again
         movable = v0 * demand - sum(amount for _, _, amount in self.open_offers.values())
         total = sum(amounts.values())
-        scale = max(movable, 0.0) / total if total > movable else 1.0
+        scale = max(movable, 0.0) / total if total > max(movable, 0.0) else 1.0
         for aid, amount in amounts.items():
             if amount * scale > 0.0:
                 txid = f"{self.aid}/{rnd}/{aid}"
@@ -224,23 +240,30 @@ class GeneratorAgent(RoundAgent):
                 self.send(Offer(rnd, txid, amount * scale), aid)
 
     def _accept(self, rnd: int) -> None:
-        """Accept this round's offers, scaled by the own limiter, within the room left."""
+        """Accept the open offers that arrived, all in the same proportion, within the room
+        left (counting what is reserved): the receiver's side of the flux limiter."""
         offers, self.offers_in = self.offers_in, []
-        room = self.rule.pmax - self.planned - sum(self.reserved.values())
-        if self.rule.barrier:  # paper mode: no upper limit in the revision rule
-            room = np.inf
+        valid = []
         for sender, offer in offers:
             if offer.txid in self.answered:
                 continue
             self.answered.add(offer.txid)
-            if rnd >= offer.round + self.timeout:
-                continue  # expired: refused (the sender aborts it)
-            amount = min(offer.amount_mw * self.receiver_scale, max(room, 0.0))
-            if amount <= 0.0:
-                continue
+            if rnd < offer.round + self.timeout:  # else expired: refused, the sender aborts
+                valid.append((sender, offer))
+        total = sum(offer.amount_mw for _, offer in valid)
+        room = self.rule.pmax - self.planned - sum(self.reserved.values())
+        if self.rule.barrier:  # paper mode: no upper limit in the revision rule
+            room = np.inf
+        if self.engine_limiter:  # the steppers' factor, then never past the room left
+            scale = self.receiver_scale
+        else:
+            scale = 1.0 if total <= max(room, 0.0) else max(room, 0.0) / total
+        for sender, offer in valid:
+            amount = min(offer.amount_mw * scale, max(room, 0.0))
             room -= amount
-            self.reserved[offer.txid] = amount
-            self.send(Accept(offer.txid, amount), sender)
+            if amount > 0.0:
+                self.reserved[offer.txid] = amount
+                self.send(Accept(offer.txid, amount), sender)
 
     def _commit(self, rnd: int) -> None:
         """Commit the accepted offers, abort the expired ones; (re)send every decision not yet
@@ -259,7 +282,8 @@ class GeneratorAgent(RoundAgent):
                 self.undelivered[txid] = (aid, Decision(txid, False, 0.0, effective))
         self._due(rnd)
         for aid, decision in self.undelivered.values():
-            self.send(decision, aid)
+            for _ in range(self.copies):
+                self.send(decision, aid)
 
     def _due(self, rnd: int) -> None:
         """Change the inverter by every commit whose effective round has come."""

@@ -70,6 +70,7 @@ class LossyNetwork(CommunicationSimulation):
         self.rng = random.Random(faults.seed)
         self.sent = 0
         self.lost = 0
+        self.duplicated = 0
 
     def calculate_communication(self, current_time, messages) -> CommunicationSimulationResult:
         results = []
@@ -85,5 +86,6 @@ class LossyNetwork(CommunicationSimulation):
     def copies(self) -> int:
         """How many copies of the next message the network delivers attempts for (1 or 2)."""
         if self.faults.duplicate and self.rng.random() < self.faults.duplicate:
+            self.duplicated += 1
             return 2
         return 1

@@ -46,12 +46,17 @@ class AgentSettings:
     step_s : the round's Euler step ``h``, s (the engine's ``dt / substeps``; exact mode is
         stable on the congestion minute at 0.005 s, paper mode's barrier wants 1e-4 s).
     max_rounds : horizon, rounds.
-    window : rounds over which the set points must move less than ``tol_kw`` to be at rest.
+    window : rounds over which the set points must move less than ``tol_kw`` to be at rest
+        (and every controller's residual, modes/exact.py, be within ``tol_kw``: a price may
+        still be decaying on a slack line while the set points wait at their limits).
     tol_kw : rest tolerance, kW.
     drain_rounds : most rounds after rest to decide and acknowledge every transaction.
     timeout : rounds an offer stays open (None: ``2 * delay_max + 1`` of the faults, so that
         an offer and its acceptance can both arrive as late as the network delays them).
     lag : rounds from a commit to the change of both inverters (see :meth:`lag_for`).
+    decision_copies : copies of each commit or abort sent per round (see :meth:`copies_for`).
+    engine_limiter : receivers scale offers by the engine's limiter factor (None: on a
+        perfect network only; see :mod:`popdispatch.agents.generator`).
     """
 
     step_s: float | None = None
@@ -61,16 +66,28 @@ class AgentSettings:
     drain_rounds: int = 200
     timeout: int | None = None
     lag: int | None = None
+    decision_copies: int | None = None
+    engine_limiter: bool | None = None
+
+    def engine_limiter_for(self, faults: Faults) -> bool:
+        """Whether receivers use the engine's limiter factor (None: on a perfect network)."""
+        if self.engine_limiter is not None:
+            return self.engine_limiter
+        return not (faults.loss or faults.delay_max or faults.duplicate or faults.noise_kw)
 
     def lag_for(self, faults: Faults) -> int:
-        """Rounds from a commit to the inverters' change (None: 0 on a perfect network, else
-        ``delay_max + 2``: a decision delayed as long as the network delays it, or lost
-        once and resent, still reaches its receiver in time)."""
-        if self.lag is not None:
-            return self.lag
-        return 0 if not (faults.loss or faults.delay_max or faults.duplicate) else (
-            int(faults.delay_max) + 2
-        )  # fmt: skip
+        """Rounds from a commit to the inverters' change (None: 0; a lag holds the inverters
+        behind the planned set points the revision rule works with, and on the congestion
+        minute with delays it stalled the run 3.4 kW from the DC-OPF, docs/agents.md)."""
+        return self.lag if self.lag is not None else 0
+
+    def copies_for(self, faults: Faults) -> int:
+        """Copies of each decision per round (None: 1 on a lossless network, else 3: a lost
+        decision leaves a transaction half done and the source bus, then the lines, carry
+        the difference, which the exact mode's line prices amplify)."""
+        if self.decision_copies is not None:
+            return self.decision_copies
+        return 3 if faults.loss else 1
 
     def timeout_for(self, faults: Faults) -> int:
         """Rounds an offer stays open (see the attribute)."""
@@ -131,7 +148,8 @@ class AgentRun:
     ``trajectory_kw``: set points at the start of every round (rows), as the plant saw them;
     ``setpoints_kw``: after the drain; ``rest_round``: the round the set points came to rest
     (None if never); ``messages``: every message sent (lost ones and duplicate copies
-    included); ``lost``: of them lost; ``max_imbalance_w``: largest |supply - demand| of the
+    included); ``lost``: of them lost; ``duplicated``: messages the network delivered
+    twice; ``max_imbalance_w``: largest |supply - demand| of the
     committed state at any round; ``max_transient_w``: largest |supply - demand| of the
     inverters as they were at a measurement (taken up by the source bus while a commit is in
     flight); ``final_imbalance_w``: of the inverters after the drain; ``open_transactions``:
@@ -146,6 +164,7 @@ class AgentRun:
     rest_round: int | None
     messages: int
     lost: int
+    duplicated: int
     max_imbalance_w: float
     max_transient_w: float
     final_imbalance_w: float
@@ -186,8 +205,8 @@ def generator_graph(problem: DispatchProblem, settings: RunSettings) -> nx.Graph
 
 
 def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
-                 step_s: float, faults: Faults, timeout: int = 1,
-                 lag: int = 0) -> AgentSystem:  # fmt: skip
+                 step_s: float, faults: Faults, timeout: int = 1, lag: int = 0,
+                 copies: int = 1, engine_limiter: bool = True) -> AgentSystem:  # fmt: skip
     """The agents of one minute (not yet registered anywhere); ``timeout``: rounds an offer
     stays open; ``lag``: rounds from a commit to the inverters' change."""
     if not problem.online[minute - 1].all():
@@ -211,7 +230,11 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
             demand, step_s,
         )  # fmt: skip
         neighbours = [n for n in names if graph.has_edge(name, n)]
-        generators.append(GeneratorAgent(rule, i, inverters, neighbours, timeout, lag, network))
+        generators.append(
+            GeneratorAgent(
+                rule, i, inverters, neighbours, timeout, lag, copies, engine_limiter, network
+            )  # fmt: skip
+        )
     controllers, line_ends = _controllers(problem, mode.bounded, fp, step_s, network)
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
                        network)  # fmt: skip
@@ -261,8 +284,9 @@ def run_agents(
     agent_settings = agent_settings or AgentSettings()
     step_s = agent_settings.step_for(settings.mode)
     system = build_agents(problem, minute, settings, step_s, faults,
-                          agent_settings.timeout_for(faults),
-                          agent_settings.lag_for(faults))  # fmt: skip
+                          agent_settings.timeout_for(faults), agent_settings.lag_for(faults),
+                          agent_settings.copies_for(faults),
+                          agent_settings.engine_limiter_for(faults))  # fmt: skip
     window = agent_settings.rest_window(faults)
     return asyncio.run(_simulate(system, agent_settings, window, on_round))
 
@@ -293,7 +317,8 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
             max_transient = max(max_transient, abs(system.physical_imbalance_mw()))
             if on_round is not None:
                 on_round(system, rnd)
-            if not quiet and _at_rest(system.plant.history, window, tol):
+            settled = all(c.residual_mw() <= tol for c in system.controllers.values())
+            if not quiet and settled and _at_rest(system.plant.history, window, tol):
                 rest_round = len(system.plant.history) - 1
             if not quiet and (rest_round is not None or rnd >= opts.max_rounds):
                 quiet = True  # the drain: no new offers, open transactions decided
@@ -303,6 +328,7 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
             if (quiet and not busy) or rnd >= opts.max_rounds + opts.drain_rounds:
                 break
             await world.step_until(TICKS_PER_ROUND)
+            _raise_agent_errors(system)
             rnd += 1
     wall = time.perf_counter() - start
     prices = {
@@ -319,6 +345,7 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         rest_round=rest_round,
         messages=system.network.sent,
         lost=system.network.lost,
+        duplicated=system.network.duplicated,
         max_imbalance_w=max_imbalance * W_PER_MW,
         max_transient_w=max_transient * W_PER_MW,
         final_imbalance_w=system.physical_imbalance_mw() * W_PER_MW,
@@ -331,6 +358,13 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         step_s=system.generators[0].rule.step_s,
         prices=prices,
     )
+
+
+def _raise_agent_errors(system: AgentSystem) -> None:
+    """Re-raise the first error an agent's tick met (mango would only log it)."""
+    for agent in system.agents:
+        if agent.error is not None:
+            raise RuntimeError(f"agent {agent.aid} failed: {agent.error!r}") from agent.error
 
 
 def _at_rest(history: list[np.ndarray], window: int, tol_mw: float) -> bool:

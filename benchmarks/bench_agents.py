@@ -1,0 +1,60 @@
+"""Benchmark of the agents (mango's simulated world): the congestion minute (566, path 505-666
+limited to 28 kW), exact mode, perfect network and 10 % loss (and 10 % loss with delays up to
+3 rounds): wall time of the simulation, rounds, messages, error against the DC-OPF.
+
+Usage: python benchmarks/bench_agents.py [--repeat N]
+Prints medians of N runs (after one warm-up run that loads the compiled kernels).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+from datetime import date
+
+import numpy as np
+
+from popdispatch.agents.network import Faults
+from popdispatch.agents.system import AgentSettings, run_agents
+from popdispatch.online import RunSettings
+from popdispatch.opf import solve_opf
+from popdispatch.scenarios import CONGESTION_PATH, PEAK_MINUTE, elv_problem, peak_profiles
+
+CASES = {
+    "perfect network": Faults(),
+    "10 % loss": Faults(loss=0.1, seed=1),
+    "10 % loss, delays up to 3 rounds": Faults(loss=0.1, delay_max=3, seed=1),
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args()
+    problem = elv_problem(peak_profiles(), [CONGESTION_PATH])
+    opf_kw = solve_opf(problem, PEAK_MINUTE).p_kw
+    settings = RunSettings(mode="exact")
+    print(
+        f"# popdispatch agents benchmark, {date.today()}, "
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"Python {platform.python_version()}"
+    )
+    run_agents(problem, PEAK_MINUTE, settings, Faults(), AgentSettings(max_rounds=5))  # warm-up
+    print("| network | wall s (median) | rounds | messages | lost | msgs/agent/round | "
+          "max error kW | max imbalance W |")  # fmt: skip
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for label, faults in CASES.items():
+        runs = [run_agents(problem, PEAK_MINUTE, settings, faults) for _ in range(args.repeat)]
+        run = runs[-1]
+        error = float(np.abs(run.setpoints_kw - opf_kw).max())
+        wall = statistics.median(r.wall_seconds for r in runs)
+        print(
+            f"| {label} | {wall:.2f} | {run.rounds} | {run.messages} | {run.lost} | "
+            f"{run.messages_per_agent_round:.2f} | {error:.4f} | {run.max_imbalance_w:.2g} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
