@@ -391,7 +391,8 @@ def open_report(browser, path: Path):
     page.goto(path.as_uri())
     page.wait_for_function(
         "() => { const m = document.getElementById('popdispatch-map');"
-        " return m && m._transitionData && m._transitionData._frames.length > 0; }"
+        " return m && m._transitionData && m._transitionData._frames.length > 0; }",
+        timeout=60_000,
     )
     return page
 
@@ -445,6 +446,22 @@ def test_a_click_on_a_panel_moves_the_map(browser, small, tmp_path) -> None:
     state = page.evaluate(MAP_STATE)
     assert state["title"].startswith("minute 3 ")
     np.testing.assert_allclose(state["setpoints"], comparison.run.setpoints_kw[2], atol=5e-4)
+    assert page.errors == []
+
+
+def test_play_runs_through_the_frames(browser, small, tmp_path) -> None:
+    problem, profiles, comparison = small
+    path = write_day_html(tmp_path / "play.html", comparison, problem, profiles)
+    page = open_report(browser, path)
+    move_slider(page, 0.0)
+    active = "document.getElementById('popdispatch-map').layout.sliders[0].active"
+    page.wait_for_function(f"() => {active} === 0", timeout=60_000)
+    page.get_by_text("\u25b6 play").click()
+    page.wait_for_function(f"() => {active} >= 3", timeout=60_000)
+    page.get_by_text("pause").click()
+    page.wait_for_timeout(300)
+    state = page.evaluate(MAP_STATE)
+    assert state["cursor"] == float(state["title"].split()[1])  # the panels kept up
     assert page.errors == []
 
 

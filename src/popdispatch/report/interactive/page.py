@@ -84,6 +84,11 @@ def link_script(frame_names: list[str]) -> str:
   var panels = document.getElementById("{PANELS_ID}");
   var frames = {names};
   window.popdispatchReport = {{frames: frames, step: frames[frames.length - 1]}};
+  // Plotly.animate rejects its promise with no reason when a newer animation (pause, the
+  // slider, a click on a panel) interrupts it; plotly's own buttons leave that uncaught.
+  window.addEventListener("unhandledrejection", function (e) {{
+    if (e.reason === undefined) {{ e.preventDefault(); }}
+  }});
   function cursor(step) {{
     window.popdispatchReport.step = step;
     Plotly.relayout(panels, {{"shapes[0].x0": step, "shapes[0].x1": step}});
