@@ -53,6 +53,8 @@ class ControllerAgent(RoundAgent):
     round's Euler step ``h``, s.
     """
 
+    PHASES = (Phase.SIGNAL,)
+
     def __init__(self, ends: list[LineEnd], exact: bool, C: float, price_rate: float,
                  step_s: float, network=None):  # fmt: skip
         super().__init__(network)

@@ -85,6 +85,8 @@ class GeneratorAgent(RoundAgent):
     ``room / (h * inflow)`` (inflow from its neighbours' unlimited masses, as the engine
     does), else by ``room / offered`` (see step 3)."""
 
+    PHASES = (Phase.STATUS, Phase.OFFER, Phase.ACCEPT, Phase.COMMIT)
+
     def __init__(self, rule: GeneratorRule, index: int, inverters: Inverters,
                  neighbours: list[str], timeout: int = 1, lag: int = 0, copies: int = 1,
                  engine_limiter: bool = True, network=None):  # fmt: skip

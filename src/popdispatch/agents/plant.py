@@ -40,6 +40,8 @@ class PlantAgent(RoundAgent):
     noise.
     """
 
+    PHASES = (Phase.MEASURE,)
+
     def __init__(self, problem: DispatchProblem, minute: int, inverters: Inverters,
                  line_ends: list[tuple[str, str]], noise_kw: float = 0.0, seed: int = 0,
                  network=None):  # fmt: skip
