@@ -14,6 +14,7 @@ kW of the losses (the issue's tolerances).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import re
@@ -50,38 +51,46 @@ needs_case33 = pytest.mark.skipif(
 
 
 def run_oracle(net) -> None:
-    pp.runpp(net, algorithm="nr", init="flat", tolerance_mva=1e-11, max_iteration=50)
+    """Newton-Raphson to 1e-11 MVA (pandapower's numba kernels off: no compile per process)."""
+    pp.runpp(net, algorithm="nr", init="flat", tolerance_mva=1e-11, max_iteration=50, numba=False)
 
 
 # -- ieee-elv -----------------------------------------------------------------------------------
 
 
+@functools.lru_cache(maxsize=1)
+def elv_tables():
+    """pandapower's ieee-elv net (asymmetric, with its transformer and MV source)."""
+    import pandapower.networks as pn
+
+    return pn.ieee_european_lv_asymmetric("on_peak_566")
+
+
 def elv_oracle(load_kw: pd.Series, gen_kw: pd.Series, limit_kw: pd.Series):
-    """Balanced pandapower net of ieee-elv from pandapower's own tables.
+    """Balanced pandapower net of ieee-elv from pandapower's own tables, after ``runpp``.
 
     ``load_kw``: per load name (kW, q at power factor 0.95 lagging); ``gen_kw``: per IEEE bus
     number (kW, unity power factor); ``limit_kw``: per line name (finite: a rating)."""
-    import pandapower.networks as pn
-
-    src = pn.ieee_european_lv_asymmetric("on_peak_566")
+    src = elv_tables()
     net = pp.create_empty_network()
     lv = src.bus[src.bus.index != src.trafo.hv_bus.iloc[0]]
-    for index, row in lv.iterrows():
-        pp.create_bus(net, vn_kv=row.vn_kv, name=int(row["name"]), index=index)
-    by_id = pd.Series(lv.index, index=lv["name"].astype(int))
-    for row in src.line.itertuples():
-        limit = limit_kw.get(row.name, math.inf)
-        max_i_ka = limit / (math.sqrt(3) * ELV_KV) / 1000 if math.isfinite(limit) else 1e6
-        pp.create_line_from_parameters(
-            net, row.from_bus, row.to_bus, row.length_km, row.r_ohm_per_km, row.x_ohm_per_km,
-            c_nf_per_km=0.0, max_i_ka=max_i_ka, name=row.name, parallel=row.parallel,
-        )  # fmt: skip
+    pp.create_buses(net, len(lv), lv.vn_kv.to_numpy(), name=lv["name"].astype(int), index=lv.index)
+    limit = limit_kw.astype(float).reindex(src.line.name).fillna(math.inf).to_numpy()
+    lines = src.line
+    pp.create_lines_from_parameters(
+        net, lines.from_bus.to_numpy(), lines.to_bus.to_numpy(), lines.length_km.to_numpy(),
+        lines.r_ohm_per_km.to_numpy(), lines.x_ohm_per_km.to_numpy(), c_nf_per_km=0.0,
+        max_i_ka=np.where(np.isfinite(limit), limit / (math.sqrt(3) * ELV_KV) / 1000, 1e6),
+        name=lines.name.to_numpy(), parallel=lines.parallel.to_numpy(),
+    )  # fmt: skip
     pp.create_ext_grid(net, src.trafo.lv_bus.iloc[0], vm_pu=1.0)
-    for row in src.asymmetric_load.itertuples():
-        p_mw = load_kw[row.name] / 1000
-        pp.create_load(net, row.bus, p_mw=p_mw, q_mvar=p_mw * math.tan(math.acos(ELV_PF)))
-    for bus, kw in gen_kw.items():
-        pp.create_sgen(net, by_id[bus], p_mw=kw / 1000, q_mvar=0.0)
+    loads = src.asymmetric_load
+    p_mw = load_kw.loc[loads.name].to_numpy() / 1000
+    q_mvar = p_mw * math.tan(math.acos(ELV_PF))
+    pp.create_loads(net, loads.bus.to_numpy(), p_mw=p_mw, q_mvar=q_mvar)
+    by_id = pd.Series(lv.index, index=lv["name"].astype(int))
+    gen_buses = by_id.loc[gen_kw.index].to_numpy()
+    pp.create_sgens(net, gen_buses, p_mw=gen_kw.to_numpy() / 1000, q_mvar=0.0)
     run_oracle(net)
     return net
 
@@ -145,7 +154,9 @@ def test_elv_day_batch_matches_pandapower_minute_by_minute():
     day = check_day(problem, profiles, run)
     buses = feeder.generators.loc[problem.generators, "bus"].to_numpy()
     for row, minute in enumerate(minutes):
-        net = elv_oracle(load.loc[minute], pd.Series(setpoints[row], index=buses), pd.Series())
+        net = elv_oracle(
+            load.loc[minute], pd.Series(setpoints[row], index=buses), pd.Series(dtype=float)
+        )
         v_oracle = elv_voltages(net).loc[feeder.buses.index].to_numpy()
         assert np.max(np.abs(day.flows.v_pu[row] - v_oracle)) < V_TOL_PU
         step = day.steps.loc[minute]
