@@ -212,8 +212,12 @@ def test_zero_impedance_line_is_a_link_equal_to_merged_buses():
 def test_bad_input_is_refused_naming_the_element():
     feeder = small_feeder()
     ok = {"vn_kv": 0.4}
-    with pytest.raises(OptionError, match=r"generator 'G4' has nan kW at step 1"):
-        check_setpoints(feeder, [[1, 1], [1, 1]], [[0, 1], [0, np.nan]], **ok)
+    with pytest.raises(OptionError, match=r"generator 'G4' has nan kW at minute 8"):
+        check_setpoints(feeder, [[1, 1], [1, 1]], [[0, 1], [0, np.nan]], [7, 8], **ok)
+    with pytest.raises(OptionError, match=r"load 'D3' has inf kW at minute 2"):
+        check_setpoints(feeder, [[1, 1], [np.inf, 1]], [[0, 1], [0, 1]], **ok)
+    with pytest.raises(OptionError, match="3 minutes for 2 steps"):
+        check_setpoints(feeder, [[1, 1], [1, 1]], [[0, 1], [0, 1]], [1, 2, 3], **ok)
     with pytest.raises(OptionError, match="1 generator values per step for 2 generators"):
         check_setpoints(feeder, [[1, 1]], [[1]], **ok)
     with pytest.raises(OptionError, match="2 steps of loads but 1 of set points"):

@@ -113,9 +113,7 @@ def power_flow(
     pgm = power_grid_model()
     from power_grid_model.errors import PowerGridError
 
-    load_kw, generator_kw = check_step_arrays(network, load_kw, generator_kw)
-    if len(load_kw) != len(generator_kw):
-        raise OptionError(f"{len(load_kw)} steps of loads but {len(generator_kw)} of set points")
+    load_kw, generator_kw = check_step_arrays(network, load_kw, generator_kw, steps)
     outputs = {"node": _OUTPUTS["node"], "source": _OUTPUTS["source"]}
     for kind, rows in (("line", network.line_rows), ("link", network.link_rows)):
         if len(rows):
@@ -359,8 +357,10 @@ def check_setpoints(
         :func:`popdispatch.ac.network.build_network`.
     """
     network = feeder if isinstance(feeder, ACNetwork) else build_network(feeder, **model_options)
-    load_kw, setpoints_kw = check_step_arrays(network, load_kw, setpoints_kw)
-    steps = np.arange(1, len(load_kw) + 1) if minutes is None else np.asarray(minutes)
+    steps = None if minutes is None else np.asarray(minutes)
+    load_kw, setpoints_kw = check_step_arrays(network, load_kw, setpoints_kw, steps)
+    if steps is None:
+        steps = np.arange(1, len(load_kw) + 1)
     flows = power_flow(
         network, load_kw, setpoints_kw, tolerance_pu=tolerance_pu, steps=steps, detail=detail
     )

@@ -287,10 +287,14 @@ def update_data(network: ACNetwork, load_kw: np.ndarray, generator_kw: np.ndarra
 
 
 def check_step_arrays(
-    network: ACNetwork, load_kw: np.ndarray, generator_kw: np.ndarray
+    network: ACNetwork,
+    load_kw: np.ndarray,
+    generator_kw: np.ndarray,
+    steps: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(load_kw, generator_kw)`` as (steps, loads) and (steps, generators) float arrays;
-    :class:`OptionError` naming the first non-finite entry or a shape mismatch."""
+    :class:`OptionError` naming the first non-finite entry (its load or generator and its
+    minute, ``steps`` labelling the rows, default 1, 2, ...) or a shape mismatch."""
     feeder = network.feeder
     arrays = []
     for what, values, names in (
@@ -305,7 +309,12 @@ def check_step_arrays(
             )
         bad = ~np.isfinite(values)
         if bad.any():
-            step, k = np.argwhere(bad)[0]
-            raise OptionError(f"{what} {names[k]!r} has {values[step, k]} kW at step {step}")
+            row, k = np.argwhere(bad)[0]
+            minute = steps[row] if steps is not None else row + 1
+            raise OptionError(f"{what} {names[k]!r} has {values[row, k]} kW at minute {minute}")
         arrays.append(np.ascontiguousarray(values))
+    if len(arrays[0]) != len(arrays[1]):
+        raise OptionError(f"{len(arrays[0])} steps of loads but {len(arrays[1])} of set points")
+    if steps is not None and len(steps) != len(arrays[0]):
+        raise OptionError(f"{len(steps)} minutes for {len(arrays[0])} steps of loads")
     return arrays[0], arrays[1]
