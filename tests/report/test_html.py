@@ -255,6 +255,42 @@ def test_a_large_feeder_draws_its_lines_once_and_colours_their_middles(small, mo
     assert first["marker"]["color"] != last["marker"]["color"]
 
 
+def test_a_dated_series_is_labelled_by_its_times(small, monkeypatch) -> None:
+    """Steps of a dated 15-minute series are called steps and labelled by their start times;
+    a series longer than the panels' MAX_POINTS draws fewer steps, the map's frames among
+    them."""
+    from popdispatch.feeder.profiles import Timeline
+    from popdispatch.report.interactive import panels
+
+    problem, profiles, comparison = small
+    times = pd.date_range("2016-03-01 00:00", periods=1440, freq="15min")
+    dated = LoadProfiles(profiles.kw, "dated", Timeline.from_times(times))
+    monkeypatch.setattr(panels, "MAX_POINTS", 4)
+    text = day_report_html(comparison, problem, dated, every_minutes=5)
+    figure = _figure_json(text, "popdispatch-map")
+    titles = {f["name"]: f["layout"]["title"]["text"] for f in figure["frames"]}
+    for name, title in titles.items():
+        assert title.startswith(f"step {name} ({times[int(name) - 1]:%Y-%m-%d %H:%M}): ")
+    panel = _figure_json(text, "popdispatch-panels")
+    drawn = panel["data"][0]["x"]
+    assert len(drawn) < MINUTES and {int(n) for n in titles} <= set(drawn)
+    labels = panel["data"][0]["customdata"]
+    assert labels == [f"{times[step - 1]:%Y-%m-%d %H:%M}" for step in drawn]
+    assert "of 12 steps, evenly spaced" in text
+
+
+def test_panels_show_the_error_to_the_dc_opf_and_the_demand(small) -> None:
+    """The error panel: the largest |set point - DC-OPF| per minute (down to 1e-9 kW on its
+    log axis); the demand panel: the loads' sum."""
+    problem, profiles, comparison = small
+    panel = _figure_json(day_report_html(comparison, problem, profiles), "popdispatch-panels")
+    traces = {t.get("name"): t for t in panel["data"]}
+    error = np.abs(comparison.run.setpoints_kw - comparison.opf_kw).max(axis=1)
+    np.testing.assert_allclose(traces["max error"]["y"], np.maximum(error, 1e-9), rtol=1e-6)
+    demand = small_loads_kw()[:MINUTES].sum(axis=1)
+    np.testing.assert_allclose(traces["demand"]["y"], demand, rtol=1e-6)
+
+
 def test_the_page_is_self_contained_and_names_the_run(small) -> None:
     problem, profiles, comparison = small
     info = {"case": "small", "mode": "exact", "limits": [{"from_bus": 3, "to_bus": 4,

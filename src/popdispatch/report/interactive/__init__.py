@@ -92,7 +92,7 @@ def day_report_html(
     """
     from popdispatch.report.interactive.feeder_map import map_figure
     from popdispatch.report.interactive.page import frame_count_note, header_html, page_html
-    from popdispatch.report.interactive.panels import clock, panel_figure
+    from popdispatch.report.interactive.panels import panel_figure, panel_rows
 
     require_plotly()
     steps = day_steps(comparison, problem, profiles, voltages_pu)
@@ -101,18 +101,23 @@ def day_report_html(
     states = steps.line_states(problem)
     error = steps.abs_error_kw
     titles = [
-        f"minute {m} ({clock(m)}): demand {steps.demand_kw[r]:.2f} kW, max |error| to the "
+        f"{steps.step_name} {m} ({steps.times[r]}): demand {steps.demand_kw[r]:.2f} kW, max "
+        f"|error| to the "
         f"DC-OPF {_kw(error[r])}, {_at_limit(states[r])}"
         for r, m in ((int(r), int(steps.values[r])) for r in rows)
     ]
     info = _run_info(run_info, problem, steps, comparison)
     title = f"popdispatch day: {info.get('case')}, {info.get('mode')} mode"
-    notes = [frame_count_note("minute", rows, len(steps.values), every), *NOTES]
+    notes = [frame_count_note(steps.step_name, rows, len(steps.values), every), *NOTES]
+    drawn = panel_rows(steps, rows)
+    if len(drawn) < len(steps.values):
+        notes.append(f"Panels: {len(drawn)} of {len(steps.values)} {steps.step_name}s, evenly "
+                     "spaced, plus every step with a map frame.")  # fmt: skip
     return page_html(
         title,
         header_html(title, info, notes),
         map_figure(problem, steps, rows, titles),
-        panel_figure(problem, steps, int(steps.values[rows[-1]])),
+        panel_figure(problem, steps.take(drawn), int(steps.values[rows[-1]])),
     )
 
 
@@ -131,7 +136,7 @@ def snapshot_report_html(
     Other arguments as in :func:`day_report_html` (``run_info``: the ``snapshot`` summary)."""
     from popdispatch.report.interactive.feeder_map import map_figure
     from popdispatch.report.interactive.page import frame_count_note, header_html, page_html
-    from popdispatch.report.interactive.panels import panel_figure
+    from popdispatch.report.interactive.panels import panel_figure, panel_rows
 
     require_plotly()
     run = comparison.run
@@ -143,7 +148,8 @@ def snapshot_report_html(
     error = steps.abs_error_kw
     dt = run.settings.stepping.dt
     titles = [
-        f"minute {run.minute}, iteration {r} ({r * dt:.2f} s): max |error| to the DC-OPF "
+        f"minute {run.minute} ({steps.times[r]}), iteration {r} ({r * dt:.2f} s): max |error| "
+        f"to the DC-OPF "
         f"{_kw(error[r])}, {_at_limit(states[r])}"
         for r in (int(r) for r in rows)
     ]
@@ -157,7 +163,7 @@ def snapshot_report_html(
         title,
         header_html(title, info, notes),
         map_figure(problem, steps, rows, titles),
-        panel_figure(problem, steps, int(rows[-1])),
+        panel_figure(problem, steps.take(panel_rows(steps, rows)), int(rows[-1])),
     )
 
 

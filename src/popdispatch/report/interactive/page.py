@@ -19,7 +19,9 @@ MAP_ID, PANELS_ID = "popdispatch-map", "popdispatch-panels"
 HEADER_KEYS = [
     ("case", "case"), ("status", "status"), ("mode", "mode"), ("dynamics", "dynamics"),
     ("graph", "communication graph"), ("x0", "initial shares"), ("warm_start", "warm start"),
-    ("minute", "minute"), ("first_minute", "first minute"), ("last_minute", "last minute"),
+    ("minute", "minute"), ("time", "time"), ("first_minute", "first minute"),
+    ("last_minute", "last minute"), ("first_time", "first time"), ("last_time", "last time"),
+    ("step_minutes", "step, min"),
     ("demand_kw", "demand, kW"), ("limits", "line limits"), ("events", "events"),
     ("profile_source", "profile source"), ("iterations", "iterations"),
     ("converged_iteration", "converged at iteration"),

@@ -2,8 +2,9 @@
 
 Rows: set points against the DC-OPF (kW); the limited lines' loading (%); line prices and
 congestion signals (EUR/MWh); the largest error to the DC-OPF (kW, log scale); the demand (kW).
-Every step is drawn (no decimation: a day is 1440 points per curve). A vertical cursor marks
-the map's step; the page's script moves it and a click on a panel moves the map.
+Every step is drawn up to :data:`MAX_POINTS` steps (a day's 1440 minutes are); a longer series
+keeps every k-th step plus the map's frames. A vertical cursor marks the map's step; the page's
+script moves it and a click on a panel moves the map.
 """
 
 from __future__ import annotations
@@ -16,6 +17,11 @@ from popdispatch.report.interactive.steps import Steps
 
 #: Errors below this are drawn at it on the log axis (kW).
 ERROR_FLOOR_KW = 1e-9
+#: Steps drawn per curve at most, beyond the map's frames (a year at 15 min has 35,136).
+MAX_POINTS = 5000
+#: Tick spacings, in steps (with one-minute steps: 2 h, 6 h, a day, a week, ...).
+TICK_STEPS = (1, 2, 5, 10, 15, 30, 60, 120, 240, 360, 720, 1440, 2880, 5760, 10080, 20160,
+              40320, 80640)  # fmt: skip
 ROWS = ("setpoints", "loading", "prices", "error", "demand")
 TITLES = {
     "setpoints": "set points (solid) vs DC-OPF (dotted), kW",
@@ -28,23 +34,48 @@ TITLES = {
 
 
 def _clean(values) -> list:
-    """A list for JSON with NaN as None (a gap in the curve)."""
-    array = np.round(np.asarray(values, dtype=float), 6)
-    return [None if not np.isfinite(v) else float(v) for v in array]
+    """A list for JSON, 7 significant digits (errors of 1e-9 kW stay on the log axis), NaN as
+    None (a gap in the curve)."""
+    return [float(f"{v:.7g}") if np.isfinite(v) else None for v in np.asarray(values, float)]
+
+
+def panel_rows(steps: Steps, frames: np.ndarray) -> np.ndarray:
+    """Rows drawn in the panels: all, or every k-th (at most :data:`MAX_POINTS`) plus the map's
+    frame rows ``frames``."""
+    n = len(steps.values)
+    if n <= MAX_POINTS:
+        return np.arange(n)
+    every = int(np.ceil(n / MAX_POINTS))
+    return np.union1d(np.arange(0, n, every), frames)
 
 
 def panel_figure(problem: DispatchProblem, steps: Steps, cursor: int) -> dict:
-    """The panels as a plotly figure dict, with the cursor at step ``cursor``."""
+    """The panels as a plotly figure dict (``steps``: the rows to draw), with the cursor at
+    step ``cursor``."""
     x = steps.values.tolist()
-    axis = "minute of day" if steps.kind == "minute" else "iteration (0.01 s each)"
     data = _setpoints(problem, steps, x) + _loading(problem, steps, x)
     data += _prices(problem, steps, x) + _error(steps, x) + _demand(steps, x)
+    if steps.kind == "minute":
+        _hover_times(data, steps.times)
     layout = {
         "height": 1050, "hovermode": "x unified", "plot_bgcolor": "#ffffff",
         "margin": {"l": 70, "r": 20, "t": 30, "b": 50},
         "legend": {"orientation": "h", "y": 1.04, "yanchor": "bottom", "x": 0.0},
         "shapes": [_cursor(cursor)], "annotations": [],
     }  # fmt: skip
+    _stack_rows(layout)
+    bottom = layout[f"xaxis{len(ROWS)}"]
+    if steps.kind == "minute":
+        bottom.update(_time_ticks(steps))
+        bottom["title"] = {"text": f"{steps.step_name} (labelled by the time it starts)"}
+    else:
+        bottom["title"] = {"text": "iteration (0.01 s each)"}
+    layout["yaxis4"]["type"] = "log"
+    return {"data": data, "layout": layout}
+
+
+def _stack_rows(layout: dict) -> None:
+    """One x/y axis pair per row, stacked top to bottom, x axes matched, titles above."""
     gap, n = 0.035, len(ROWS)
     height = (1.0 - gap * (n - 1)) / n
     for r, name in enumerate(ROWS):
@@ -60,11 +91,17 @@ def panel_figure(problem: DispatchProblem, steps: Steps, cursor: int) -> dict:
             "text": TITLES[name], "xref": "paper", "yref": "paper", "x": 0.0, "y": top,
             "xanchor": "left", "yanchor": "bottom", "showarrow": False, "font": {"size": 12},
         })  # fmt: skip
-    layout[f"xaxis{n}"]["title"] = {"text": axis}
-    if steps.kind == "minute":
-        layout[f"xaxis{n}"].update(_clock_ticks(steps.values))
-    layout["yaxis4"]["type"] = "log"
-    return {"data": data, "layout": layout}
+
+
+def _hover_times(data: list[dict], times: list[str]) -> None:
+    """The first trace of each row names the step's time in the unified hover."""
+    seen = set()
+    for trace in data:
+        if trace["yaxis"] in seen or trace.get("hoverinfo") == "skip":
+            continue
+        seen.add(trace["yaxis"])
+        trace["customdata"] = times
+        trace["hovertemplate"] = "%{customdata}: " + trace["hovertemplate"]
 
 
 def _cursor(step: int) -> dict:
@@ -72,18 +109,17 @@ def _cursor(step: int) -> dict:
             "y1": 1, "line": {"color": "#444444", "width": 1.5, "dash": "dot"}}  # fmt: skip
 
 
-def _clock_ticks(minutes: np.ndarray) -> dict:
-    """Ticks at round hours (every 2 h over a day, finer over shorter spans) labelled hh:mm."""
-    span = int(minutes[-1] - minutes[0]) if len(minutes) else 0
-    spacing = next(s for s in (120, 60, 30, 10, 5, 1) if span >= 4 * s or s == 1)
-    first = int(np.ceil(minutes[0] / spacing) * spacing)
-    ticks = list(range(first, int(minutes[-1]) + 1, spacing))
-    return {"tickvals": ticks, "ticktext": [clock(t) for t in ticks]}
-
-
-def clock(minute: int) -> str:
-    """``hh:mm`` at the end of a 1-based minute of the day (minute 566 -> 09:26)."""
-    return f"{int(minute) // 60:02d}:{int(minute) % 60:02d}"
+def _time_ticks(steps: Steps) -> dict:
+    """About 6-12 ticks at round step counts (every 2 h over a day of minutes), labelled with
+    the time each step starts."""
+    values = steps.values
+    span = int(values[-1] - values[0]) if len(values) else 0
+    spacing = next((t for t in TICK_STEPS if span / t <= 12), TICK_STEPS[-1])
+    ticks = [v for v in range(int(values[0]), int(values[-1]) + 1) if (v - 1) % spacing == 0]
+    positions = np.searchsorted(values, ticks)
+    keep = [(t, p) for t, p in zip(ticks, positions, strict=True)
+            if p < len(values) and values[p] == t]  # fmt: skip
+    return {"tickvals": [t for t, _ in keep], "ticktext": [steps.times[p] for _, p in keep]}
 
 
 def _setpoints(problem: DispatchProblem, steps: Steps, x: list) -> list[dict]:

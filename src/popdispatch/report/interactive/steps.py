@@ -9,7 +9,7 @@ paper eq. 1d: a line carries the net demand of its subtree). Powers in kW, price
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -44,6 +44,10 @@ class Steps:
         limited lines), computed from the dynamics' flows (what paper mode broadcasts); the
         child end sends the opposite value.
     voltages_pu : index step value, columns bus ids, p.u. (None without an AC check).
+    times : per step, the start of its interval (``HH:MM`` in an undated day, else
+        ``YYYY-MM-DD HH:MM``; a snapshot's iterations all carry their minute's).
+    step_name : what a step is called in titles: ``"minute"`` in a day of one-minute steps,
+        ``"step"`` in other series, ``"iteration"`` in a snapshot.
     """
 
     kind: str
@@ -56,6 +60,19 @@ class Steps:
     opf_price: np.ndarray
     signal: np.ndarray
     voltages_pu: pd.DataFrame | None = None
+    times: list[str] | None = None
+    step_name: str = "minute"
+
+    def take(self, rows: np.ndarray) -> Steps:
+        """The same steps restricted to ``rows``."""
+        voltages = self.voltages_pu
+        if voltages is not None:
+            voltages = voltages[voltages.index.isin(self.values[rows])]
+        times = None if self.times is None else [self.times[r] for r in rows]
+        arrays = {name: getattr(self, name)[rows] for name in (
+            "values", "setpoints_kw", "opf_kw", "flows_kw", "online", "demand_kw", "opf_price",
+            "signal")}  # fmt: skip
+        return replace(self, **arrays, voltages_pu=voltages, times=times)
 
     def limited_flows_kw(self, problem: DispatchProblem) -> np.ndarray:
         """(steps, limited lines): flows of the limited lines, kW."""
@@ -77,6 +94,22 @@ class Steps:
         error = np.abs(self.setpoints_kw - self.opf_kw)
         known = np.isfinite(error).all(axis=1)
         return np.where(known, np.nanmax(np.where(known[:, None], error, 0.0), axis=1), np.nan)
+
+
+def time_labels(profiles: LoadProfiles, minutes) -> list[str]:
+    """Start of each 1-based step of ``profiles``' series: ``HH:MM`` in an undated day (the
+    ELV day: minute 566 starts at 09:25), ``YYYY-MM-DD HH:MM`` in a dated series."""
+    timeline = getattr(profiles, "timeline", None)
+    if timeline is None:  # profiles without a timeline: a day of minutes
+        return [f"{(m - 1) // 60:02d}:{(m - 1) % 60:02d}" for m in np.asarray(minutes, int)]
+    return [label[:16].replace("T", " ") if "T" in label else label[:5]
+            for label in timeline.labels(minutes)]  # fmt: skip
+
+
+def step_name(profiles: LoadProfiles) -> str:
+    """``"minute"`` for a series of one-minute steps, else ``"step"``."""
+    timeline = getattr(profiles, "timeline", None)
+    return "minute" if timeline is None or timeline.step_minutes == 1.0 else "step"
 
 
 def ordered_loads_kw(problem: DispatchProblem, profiles: LoadProfiles, minutes) -> np.ndarray:
@@ -132,6 +165,8 @@ def day_steps(
         opf_price=price,
         signal=eq8_signals(problem, flows[:, problem.lines], run.settings.fitness.C),
         voltages_pu=check_voltages(voltages_pu, problem, minutes),
+        times=time_labels(profiles, minutes),
+        step_name=step_name(profiles),
     )
 
 
@@ -163,6 +198,8 @@ def snapshot_steps(
         opf_price=np.tile(np.asarray(opf.line_price, dtype=float), (n, 1)),
         signal=eq8_signals(problem, flows[:, problem.lines], run.settings.fitness.C),
         voltages_pu=voltages,
+        times=time_labels(profiles, [run.minute]) * n,
+        step_name="iteration",
     )
 
 
