@@ -1,6 +1,6 @@
 """AC check benchmark: the ieee-elv day, 1440 power flows on 906 buses (issue 14, part 1).
 
-Usage: python benchmarks/bench_ac.py [--profiles DIR] [--repeat 7] [--json]
+Usage: python benchmarks/bench_ac.py [--profiles DIR] [--repeat 7] [--threads 0] [--json]
 
 Set points: the DC-OPF of every minute of the official day (profiles from ``--profiles``,
 ``$POPDISPATCH_PROFILES`` or ``../shared/ieee-elv``; solved once, not timed). Times
@@ -8,6 +8,8 @@ Set points: the DC-OPF of every minute of the official day (profiles from ``--pr
 one power-grid-model batch of 1440 steps, per-step table), ``--repeat`` times, and prints the
 median wall time (target under 0.5 s on the 2-core machine), the minimum, the median CPU time
 of the process and the load average (other work on the machine shows in the wall time).
+``--threads``: power-grid-model's batch threads (0, the default: one per core; -1: one
+thread).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--profiles", help="official ieee-elv folder (OpenDSS or CSV form)")
     parser.add_argument("--repeat", type=int, default=7)
+    parser.add_argument("--threads", type=int, default=0, help="0: one per core; -1: one")
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
     args = parser.parse_args()
 
@@ -56,11 +59,11 @@ def main() -> None:
         generators=problem.generators,
         setpoints_kw=np.array([o.p_kw for o in opf]),
     )
-    check_day(problem, profiles, run)  # warm-up: imports, first allocation
+    check_day(problem, profiles, run, threads=args.threads)  # warm-up: imports, allocation
     walls, cpus = [], []
     for _ in range(args.repeat):
         wall, cpu = time.perf_counter(), time.process_time()
-        day = check_day(problem, profiles, run)
+        day = check_day(problem, profiles, run, threads=args.threads)
         cpus.append(time.process_time() - cpu)
         walls.append(time.perf_counter() - wall)
     summary = day.summary()
@@ -74,6 +77,7 @@ def main() -> None:
         "per_step_ms": statistics.median(walls) / len(day.steps) * 1e3,
         "target_s": TARGET_S,
         "repeat": args.repeat,
+        "threads": args.threads,
         "load_average": os.getloadavg()[0],
         "cpus": os.cpu_count(),
         "machine": platform.machine(),
@@ -89,8 +93,8 @@ def main() -> None:
         f"AC check of the ieee-elv day: {result['steps']} power flows on {result['buses']} "
         f"buses, median {result['median_s']:.3f} s (min {result['min_s']:.3f} s, CPU "
         f"{result['median_cpu_s']:.3f} s; {result['per_step_ms']:.3f} ms per step) over "
-        f"{args.repeat} runs; target < {TARGET_S} s; load average {result['load_average']:.2f} "
-        f"on {result['cpus']} CPUs"
+        f"{args.repeat} runs, threads {args.threads}; target < {TARGET_S} s; load average "
+        f"{result['load_average']:.2f} on {result['cpus']} CPUs"
     )
     print(
         f"losses {result['losses_kwh']:.4f} kWh over the day; lowest voltage "

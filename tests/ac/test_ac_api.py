@@ -193,7 +193,7 @@ def test_zero_impedance_line_is_a_link_equal_to_merged_buses():
         1, merged_fleet,
     )  # fmt: skip
     load_kw, setpoints = [[20.0, 15.0]], [[30.0, 5.0]]
-    tight = {"vn_kv": 0.4, "detail": True, "tolerance_pu": 1e-12}
+    tight = {"vn_kv": 0.4, "tolerance_pu": 1e-12}
     a = check_setpoints(linked, load_kw, setpoints, **tight)
     b = check_setpoints(merged, load_kw, setpoints, **tight)
     # power-grid-model's link is a very large admittance, not an exact short: 2e-9 p.u. here

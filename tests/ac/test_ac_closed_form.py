@@ -147,7 +147,6 @@ def test_three_bus_feeder_matches_a_numpy_power_flow(gen_kw):
         load_pf=load_pf,
         generator_pf=gen_pf,
         tolerance_pu=TIGHT_PU,
-        detail=True,
     )
     s_net = np.zeros(3, dtype=complex)
     s_net[1:] -= load_kw * (1 + 1j * math.tan(math.acos(load_pf)))
@@ -176,7 +175,7 @@ def test_series_chain_buses_and_reversed_lines_match_a_numpy_power_flow():
     loads = pd.DataFrame({"bus": [6]}, index=["D6"])
     feeder = Feeder("chain", feeder.buses, lines, loads, 1, make_fleet([(1, 0, 5, 0.02, 0, 99)]))
     day = check_setpoints(
-        feeder, [[40.0]], [[0.0]], vn_kv=VN_KV, load_pf=0.9, tolerance_pu=TIGHT_PU, detail=True
+        feeder, [[40.0]], [[0.0]], vn_kv=VN_KV, load_pf=0.9, tolerance_pu=TIGHT_PU
     )
     assert day.network.chains.kept.tolist() == [True, False, False, False, False, True]
     s_net = np.zeros(6, dtype=complex)

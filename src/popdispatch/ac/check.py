@@ -20,6 +20,7 @@ generation, 0 for a balanced dispatch).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -54,32 +55,90 @@ TOLERANCE_PU = 1e-8
 
 @dataclass(frozen=True)
 class ACFlows:
-    """AC power-flow results of several time steps (rows), feeder order of buses and lines.
+    """AC power-flow results of several time steps, every bus and line of the feeder.
+
+    Held per chain (:mod:`popdispatch.ac.chains`): the complex voltage of every bus and the
+    current of every branch between kept buses; the per-line arrays are computed when first
+    read (a day's summary needs only voltages, branch currents and losses).
 
     Attributes
     ----------
-    v_pu, angle_deg : (steps, buses) voltage magnitude (p.u.) and angle (degrees).
-    p_from_kw, q_from_kvar, p_to_kw, q_to_kvar : (steps, lines) power entering each line at
-        its ``from_bus`` / ``to_bus`` end, kW / kvar (``p_from + p_to`` is the line's loss).
-        Without ``detail`` (:func:`power_flow`) ``angle_deg`` and the kvar arrays are None.
-    current_a : (steps, lines) the larger of the line's two end currents, A.
+    network : the network solved (its ``chains`` map buses and lines onto branches).
+    v : (buses, steps) complex voltage, p.u. (buses in feeder order).
+    current : (branches, steps) complex current flowing down each branch, kVA per p.u. of
+        voltage (``|current| / (sqrt(3) vn_kv)`` is in A).
     source_kw, source_kvar : (steps,) what the ideal source supplies, kW / kvar.
+
+    Per-step arrays (properties, feeder order): ``v_pu``, ``angle_deg`` (steps, buses; p.u.,
+    degrees); ``p_from_kw``, ``q_from_kvar``, ``p_to_kw``, ``q_to_kvar`` (steps, lines: power
+    entering each line at its ``from_bus`` / ``to_bus`` end, kW / kvar), ``loss_kw`` (their
+    sum), ``current_a`` (A, the same at both ends: no shunts); ``losses_kw`` (steps,) in total.
     """
 
-    v_pu: np.ndarray
-    angle_deg: np.ndarray | None
-    p_from_kw: np.ndarray
-    q_from_kvar: np.ndarray | None
-    p_to_kw: np.ndarray
-    q_to_kvar: np.ndarray | None
-    current_a: np.ndarray
+    network: ACNetwork
+    v: np.ndarray
+    current: np.ndarray
     source_kw: np.ndarray
     source_kvar: np.ndarray
+
+    @cached_property
+    def v_pu(self) -> np.ndarray:
+        return np.abs(self.v).T
+
+    @property
+    def angle_deg(self) -> np.ndarray:
+        return np.degrees(np.angle(self.v)).T
+
+    @cached_property
+    def _line_ends(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lines, steps) complex power entering each line at its from and to end, kVA."""
+        chains = self.network.chains
+        i_line = np.conj(self.current[chains.line_branch])
+        s_near = self.v[chains.line_near] * i_line  # entering at the upstream end
+        s_far = -self.v[chains.line_far] * i_line  # entering at the downstream end
+        backward = ~chains.line_forward
+        s_from, s_to = s_near, s_far
+        s_from[backward], s_to[backward] = s_far[backward], s_near[backward]
+        return s_from, s_to
+
+    @property
+    def p_from_kw(self) -> np.ndarray:
+        return self._line_ends[0].real.T
+
+    @property
+    def q_from_kvar(self) -> np.ndarray:
+        return self._line_ends[0].imag.T
+
+    @property
+    def p_to_kw(self) -> np.ndarray:
+        return self._line_ends[1].real.T
+
+    @property
+    def q_to_kvar(self) -> np.ndarray:
+        return self._line_ends[1].imag.T
 
     @property
     def loss_kw(self) -> np.ndarray:
         """(steps, lines) each line's active-power loss, kW."""
         return self.p_from_kw + self.p_to_kw
+
+    @cached_property
+    def current_a(self) -> np.ndarray:
+        """(steps, lines) each line's current, A."""
+        return self.line_current_a(np.arange(len(self.network.feeder.lines))).T
+
+    def line_current_a(self, lines: np.ndarray) -> np.ndarray:
+        """(len(lines), steps) the current of the given lines (rows of the lines table), A."""
+        amps = np.abs(self.current) / (np.sqrt(3.0) * self.network.model.vn_kv)
+        return amps[self.network.chains.line_branch[lines]]
+
+    @property
+    def losses_kw(self) -> np.ndarray:
+        """(steps,) total active-power loss of the lines, kW: ``|i|^2 R`` of every branch
+        (each chain's lines carry its current)."""
+        chains = self.network.chains
+        r_pu = chains.branch_z_ohm.real / (self.network.model.vn_kv**2 * 1e3)
+        return r_pu @ (self.current.real**2 + self.current.imag**2)
 
 
 #: power-grid-model outputs read: the kept buses' voltages, the power entering each branch at
@@ -94,7 +153,6 @@ def power_flow(
     *,
     tolerance_pu: float = TOLERANCE_PU,
     steps: np.ndarray | None = None,
-    detail: bool = True,
     threads: int = 0,
 ) -> ACFlows:
     """AC power flow of every step in one power-grid-model batch calculation.
@@ -103,8 +161,7 @@ def power_flow(
     feeder fleet order, kW; ``steps``: labels of the steps for error messages (e.g. minutes).
     Method: power-grid-model's iterative current (fixed-point on the factorised admittance
     matrix; the same solution as Newton-Raphson, to the tolerance, and faster on radial
-    feeders), until no voltage changes by more than ``tolerance_pu`` p.u. ``detail``: also
-    angles and reactive line flows.
+    feeders), until no voltage changes by more than ``tolerance_pu`` p.u.
     ``threads``: power-grid-model's batch threads (0: one per core; -1: sequential).
     Solved on the kept buses, recovered exactly on every bus and line
     (:mod:`popdispatch.ac.chains`).
@@ -130,7 +187,7 @@ def power_flow(
         )
     except PowerGridError as exc:
         raise InfeasibleError(_divergence_message(exc, steps)) from exc
-    return _flows(network, out, len(load_kw), detail)
+    return _flows(network, out, len(load_kw))
 
 
 def _divergence_message(exc: Exception, steps: np.ndarray | None) -> str:
@@ -145,13 +202,12 @@ def _divergence_message(exc: Exception, steps: np.ndarray | None) -> str:
     return f"AC power flow did not converge{where} (voltage collapse?): {reason}"
 
 
-def _flows(network: ACNetwork, out: dict, n_steps: int, detail: bool) -> ACFlows:
-    """power-grid-model output of the kept buses (SI) -> :class:`ACFlows` of every bus and
-    line of the feeder (kW, feeder order), by Ohm's law along each chain
-    (:mod:`popdispatch.ac.chains`). Computed with buses and lines as rows (steps contiguous:
-    gathering a bus is one copy), returned as (steps, ...) views."""
-    chains, vn_kv = network.chains, network.model.vn_kv
-    z_base_ohm = vn_kv**2 * 1e3  # p.u. on 1 kVA: powers in kVA, currents in kVA per p.u.
+def _flows(network: ACNetwork, out: dict, n_steps: int) -> ACFlows:
+    """power-grid-model output of the kept buses (SI) -> :class:`ACFlows`: every bus's voltage
+    and every branch's current, by Ohm's law along each chain (:mod:`popdispatch.ac.chains`).
+    Buses and branches are rows (steps contiguous: gathering a bus is one copy)."""
+    chains = network.chains
+    z_base_ohm = network.model.vn_kv**2 * 1e3  # p.u. on 1 kVA: kVA, kVA per p.u. of voltage
     s_top = np.empty((chains.n_branches, n_steps), dtype=complex)
     for kind, rows in (("line", network.line_rows), ("link", network.link_rows)):
         if len(rows):
@@ -164,24 +220,8 @@ def _flows(network: ACNetwork, out: dict, n_steps: int, detail: bool) -> ACFlows
     branch = chains.bus_branch[inside]
     z_pu = (chains.bus_z_ohm[inside] / z_base_ohm)[:, None]
     v[inside] = v[chains.branch_top[branch]] - z_pu * current[branch]
-    i_line = np.conj(current[chains.line_branch])
-    s_near = v[chains.line_near] * i_line  # kVA entering each line at its upstream end
-    s_far = v[chains.line_far] * i_line  # minus what enters at its downstream end
-    backward = ~chains.line_forward
-    s_from, s_to = s_near, -s_far
-    s_from[backward], s_to[backward] = s_to[backward], s_near[backward].copy()
     source = out["source"]
-    return ACFlows(
-        v_pu=np.abs(v).T,
-        angle_deg=np.degrees(np.angle(v)).T if detail else None,
-        p_from_kw=s_from.real.T,
-        q_from_kvar=s_from.imag.T if detail else None,
-        p_to_kw=s_to.real.T,
-        q_to_kvar=s_to.imag.T if detail else None,
-        current_a=np.abs(i_line).T / (np.sqrt(3.0) * vn_kv),
-        source_kw=source["p"][:, 0] / W_PER_KW,
-        source_kvar=source["q"][:, 0] / W_PER_KW,
-    )
+    return ACFlows(network, v, current, source["p"][:, 0] / W_PER_KW, source["q"][:, 0] / W_PER_KW)
 
 
 def loading_percent(network: ACNetwork, flows: ACFlows) -> np.ndarray:
@@ -200,24 +240,26 @@ def step_table(
     the source supplied (columns :data:`STEP_COLUMNS`)."""
     buses, lines = network.feeder.buses.index, network.feeder.lines.index
     rows = np.arange(len(index))
-    low, high = flows.v_pu.argmin(axis=1), flows.v_pu.argmax(axis=1)
-    loading = loading_percent(network, flows)
-    rated = np.isfinite(network.rated_a)
-    if rated.any():
-        worst = np.flatnonzero(rated)[loading[:, rated].argmax(axis=1)]
-        worst_loading, worst_line = loading[rows, worst], lines[worst]
+    v_pu = flows.v_pu
+    low, high = v_pu.argmin(axis=1), v_pu.argmax(axis=1)
+    rated = np.flatnonzero(np.isfinite(network.rated_a))
+    if len(rated):
+        loading = 100.0 * flows.line_current_a(rated) / network.rated_a[rated, None]
+        worst = loading.argmax(axis=0)
+        worst_loading, worst_line = loading[worst, rows], lines[rated[worst]]
     else:
         worst_loading, worst_line = np.full(len(index), np.nan), [None] * len(index)
+    amps = np.abs(flows.current) / (np.sqrt(3.0) * network.model.vn_kv)
     return pd.DataFrame(
         {
-            "losses_kw": flows.loss_kw.sum(axis=1),
-            "v_min_pu": flows.v_pu[rows, low],
+            "losses_kw": flows.losses_kw,
+            "v_min_pu": v_pu[rows, low],
             "v_min_bus": buses[low],
-            "v_max_pu": flows.v_pu[rows, high],
+            "v_max_pu": v_pu[rows, high],
             "v_max_bus": buses[high],
             "max_loading_percent": worst_loading,
             "max_loading_line": worst_line,
-            "max_current_a": flows.current_a.max(axis=1),
+            "max_current_a": amps.max(axis=0),
             "source_extra_kw": flows.source_kw,
             "source_kvar": flows.source_kvar,
             "load_kw": load_kw.sum(axis=1),
@@ -340,7 +382,7 @@ def check_setpoints(
     minutes: np.ndarray | None = None,
     *,
     tolerance_pu: float = TOLERANCE_PU,
-    detail: bool = False,
+    threads: int = 0,
     **model_options: Any,
 ) -> ACDay:
     """AC check of set points on a feeder, any number of steps, in one batch.
@@ -352,7 +394,7 @@ def check_setpoints(
     setpoints_kw : (steps, generators) set points in the feeder's fleet order, kW.
     minutes : step labels (default 1..steps).
     tolerance_pu : power-flow tolerance, p.u.
-    detail : also keep voltage angles and reactive branch flows (:class:`ACFlows`).
+    threads : power-grid-model's batch threads (0: one per core; -1: one thread).
     model_options : ``vn_kv``, ``source_pu``, ``load_pf``, ``generator_pf`` of
         :func:`popdispatch.ac.network.build_network`.
     """
@@ -362,14 +404,19 @@ def check_setpoints(
     if steps is None:
         steps = np.arange(1, len(load_kw) + 1)
     flows = power_flow(
-        network, load_kw, setpoints_kw, tolerance_pu=tolerance_pu, steps=steps, detail=detail
+        network,
+        load_kw,
+        setpoints_kw,
+        tolerance_pu=tolerance_pu,
+        steps=steps,
+        threads=threads,
     )
     index = pd.Index(steps, name="minute")
     return ACDay(network, step_table(network, flows, load_kw, setpoints_kw, index), flows)
 
 
 def snapshot_of(day: ACDay, row: int = 0) -> ACSnapshot:
-    """One step of an :class:`ACDay` checked with ``detail`` as an :class:`ACSnapshot`."""
+    """One step of an :class:`ACDay` as an :class:`ACSnapshot` (bus and line tables)."""
     network, flows = day.network, day.flows
     feeder = network.feeder
     lines = feeder.lines
@@ -451,7 +498,6 @@ def check_snapshot(
         fleet_setpoints(feeder, run.generators, run.setpoints_kw),
         minutes,
         tolerance_pu=tolerance_pu,
-        detail=True,
         **model_options,
     )
     return snapshot_of(day)
