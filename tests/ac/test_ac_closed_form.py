@@ -21,6 +21,8 @@ from popdispatch.ac import check_setpoints  # noqa: E402
 from popdispatch.feeder.generators import make_fleet  # noqa: E402
 from popdispatch.feeder.model import Feeder  # noqa: E402
 
+from helpers import random_feeder  # noqa: E402
+
 VN_KV = 0.4
 TIGHT_PU = 1e-12  # power-flow tolerance here: the model, not the default tolerance, is tested
 S_BASE_KW = 1.0  # p.u. base of the yardsticks: 1 kW, 0.4 kV -> Z_base = 160 ohm
@@ -196,4 +198,41 @@ def test_series_chain_buses_and_reversed_lines_match_a_numpy_power_flow():
     assert day.steps.losses_kw.iloc[0] == pytest.approx(s_source.real - 40.0, abs=1e-9)
     assert day.steps.max_loading_percent.iloc[0] == pytest.approx(
         100 * amps / (30.0 / (math.sqrt(3) * VN_KV)), rel=1e-9
+    )
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_random_radial_feeders_match_a_numpy_power_flow(seed):
+    """Random trees (tests/helpers.random_feeder) with half their lines written against the
+    flow: every bus voltage, every line's current and the losses."""
+    rng = np.random.default_rng(seed)
+    feeder = random_feeder(rng, 40, 3)
+    lines = feeder.lines.copy()
+    flip = rng.random(len(lines)) < 0.5
+    lines.loc[flip, ["from_bus", "to_bus"]] = lines.loc[flip, ["to_bus", "from_bus"]].to_numpy()
+    feeder = Feeder("random", feeder.buses, lines, feeder.loads, 1, feeder.generators)
+    load_kw = rng.uniform(0, 8, len(feeder.loads))
+    gen_kw = rng.uniform(0, 10, len(feeder.generators))
+    day = check_setpoints(
+        feeder, [load_kw], [gen_kw], vn_kv=VN_KV, load_pf=0.95, tolerance_pu=TIGHT_PU
+    )
+    ids = feeder.buses.index
+    s_net = np.zeros(len(ids), dtype=complex)
+    np.add.at(
+        s_net, ids.get_indexer(feeder.loads.bus), -load_kw * (1 + 1j * math.tan(math.acos(0.95)))
+    )
+    np.add.at(s_net, ids.get_indexer(feeder.generators.bus), gen_kw)
+    v, s_source = numpy_power_flow(feeder, s_net, 1.0)
+    np.testing.assert_allclose(day.flows.v_pu[0], np.abs(v), atol=1e-9, rtol=0)
+    a, b = ids.get_indexer(lines.from_bus), ids.get_indexer(lines.to_bus)
+    z = (lines.r_ohm + 1j * lines.x_ohm).to_numpy() / z_base_ohm()
+    current = (v[a] - v[b]) / z  # p.u. from -> to
+    np.testing.assert_allclose(
+        day.flows.current_a[0], np.abs(current) / (math.sqrt(3) * VN_KV), rtol=1e-6, atol=1e-6
+    )  # A; lines to leaves without load carry none
+    np.testing.assert_allclose(
+        day.flows.p_from_kw[0], (v[a] * np.conj(current)).real, atol=1e-7, rtol=0
+    )
+    assert day.steps.losses_kw.iloc[0] == pytest.approx(
+        s_source.real + s_net.real.sum() - s_net.real[0], abs=1e-7
     )
