@@ -127,10 +127,14 @@ class ACFlows:
         """(steps, lines) each line's current, A."""
         return self.line_current_a(np.arange(len(self.network.feeder.lines))).T
 
+    @cached_property
+    def branch_current_a(self) -> np.ndarray:
+        """(branches, steps) each chain's current, A (kVA per p.u. / (sqrt(3) vn_kv))."""
+        return np.abs(self.current) / (np.sqrt(3.0) * self.network.model.vn_kv)
+
     def line_current_a(self, lines: np.ndarray) -> np.ndarray:
         """(len(lines), steps) the current of the given lines (rows of the lines table), A."""
-        amps = np.abs(self.current) / (np.sqrt(3.0) * self.network.model.vn_kv)
-        return amps[self.network.chains.line_branch[lines]]
+        return self.branch_current_a[self.network.chains.line_branch[lines]]
 
     @property
     def losses_kw(self) -> np.ndarray:
@@ -249,7 +253,6 @@ def step_table(
         worst_loading, worst_line = loading[worst, rows], lines[rated[worst]]
     else:
         worst_loading, worst_line = np.full(len(index), np.nan), [None] * len(index)
-    amps = np.abs(flows.current) / (np.sqrt(3.0) * network.model.vn_kv)
     return pd.DataFrame(
         {
             "losses_kw": flows.losses_kw,
@@ -259,7 +262,7 @@ def step_table(
             "v_max_bus": buses[high],
             "max_loading_percent": worst_loading,
             "max_loading_line": worst_line,
-            "max_current_a": amps.max(axis=0),
+            "max_current_a": flows.branch_current_a.max(axis=0),
             "source_extra_kw": flows.source_kw,
             "source_kvar": flows.source_kvar,
             "load_kw": load_kw.sum(axis=1),

@@ -122,13 +122,8 @@ class ACNetwork:
 
     @property
     def n_buses(self) -> int:
+        """Buses of the feeder (all of them, kept or not)."""
         return len(self.feeder.buses)
-
-    def load_ids(self) -> np.ndarray:
-        return self.input_data["sym_load"]["id"]
-
-    def generator_ids(self) -> np.ndarray:
-        return self.input_data["sym_gen"]["id"]
 
 
 def nominal_kv(feeder: Feeder, vn_kv: float | None = None) -> float:
