@@ -286,9 +286,9 @@ def test_panels_show_the_error_to_the_dc_opf_and_the_demand(small) -> None:
     panel = _figure_json(day_report_html(comparison, problem, profiles), "popdispatch-panels")
     traces = {t.get("name"): t for t in panel["data"]}
     error = np.abs(comparison.run.setpoints_kw - comparison.opf_kw).max(axis=1)
-    np.testing.assert_allclose(traces["max error"]["y"], np.maximum(error, 1e-9), rtol=1e-6)
+    np.testing.assert_allclose(traces["max error"]["y"], np.maximum(error, 1e-9), rtol=1e-3)
     demand = small_loads_kw()[:MINUTES].sum(axis=1)
-    np.testing.assert_allclose(traces["demand"]["y"], demand, rtol=1e-6)
+    np.testing.assert_allclose(traces["demand"]["y"], demand, atol=5e-5)
 
 
 def test_the_page_is_self_contained_and_names_the_run(small) -> None:

@@ -32,6 +32,8 @@ from popdispatch.scenarios import DayComparison, SnapshotComparison
 TARGET_FRAMES = 288
 #: The map's frames take at most about this much of the page (plotly.js itself is ~4.8 MB).
 FRAMES_BUDGET_BYTES = 4_000_000
+#: At most this many map frames (a slider of more steps is not usable anyway).
+MAX_FRAMES = 1000
 EXTRA = 'pip install "popdispatch[html]"'
 
 
@@ -46,16 +48,18 @@ def require_plotly():
 
 def within_budget(steps: Steps, problem: DispatchProblem, every: int) -> tuple[np.ndarray, int]:
     """``(rows, every)``: the map frames of :func:`frame_rows`, with ``every`` doubled until
-    they fit :data:`FRAMES_BUDGET_BYTES` (events past that are thinned evenly)."""
+    they fit :data:`FRAMES_BUDGET_BYTES` and :data:`MAX_FRAMES`; if the changes alone are too
+    many, all frames are thinned evenly (``every`` is then 0)."""
     from popdispatch.report.interactive.feeder_map import frame_bytes
 
-    limit = max(int(FRAMES_BUDGET_BYTES // frame_bytes(problem, steps)), 2)
+    n = len(steps.values)
+    limit = max(min(int(FRAMES_BUDGET_BYTES // frame_bytes(problem, steps)), MAX_FRAMES), 2)
     rows = frame_rows(steps, problem, every)
-    while len(rows) > limit and every < len(steps.values):
-        every *= 2
+    while len(rows) > limit and every < n:
+        every = min(every * 2, n)
         rows = frame_rows(steps, problem, every)
     if len(rows) > limit:
-        rows = np.unique(np.concatenate([rows[:: int(np.ceil(len(rows) / limit))], rows[-1:]]))
+        return np.unique(np.linspace(0, n - 1, limit).round().astype(np.int64)), 0
     return rows, every
 
 

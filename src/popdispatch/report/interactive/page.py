@@ -128,12 +128,18 @@ def page_html(title: str, header: str, map_fig: dict, panel_fig: dict) -> str:
 
 
 def frame_count_note(kind: str, kept: np.ndarray, total: int, every: int) -> str:
-    """How the map's frames were chosen (the panels always show every step)."""
+    """How the map's frames were chosen (``every`` 0: evenly spaced, the changes being too
+    many to keep)."""
     if len(kept) == total:
         return f"Map: one frame per {kind} ({total})."
+    if every == 0:
+        return (
+            f"Map: {len(kept)} evenly spaced frames of {total} {kind}s (more {kind}s "
+            "change state than a page can hold). Click a panel to move the map there."
+        )
     return (
         f"Map: {len(kept)} frames of {total} {kind}s: every {every}th {kind}, plus each {kind} "
         "where a limited line's state (idle, binding, overloaded), the generators at a limit, "
-        f"a generator's availability or the DC-OPF's feasibility changes; the panels show "
-        f"every {kind}. Click a panel to move the map there."
+        f"a generator's availability or the DC-OPF's feasibility changes. Click a panel to "
+        "move the map there."
     )

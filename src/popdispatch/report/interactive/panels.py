@@ -33,10 +33,15 @@ TITLES = {
 }
 
 
-def _clean(values) -> list:
-    """A list for JSON, 7 significant digits (errors of 1e-9 kW stay on the log axis), NaN as
-    None (a gap in the curve)."""
-    return [float(f"{v:.7g}") if np.isfinite(v) else None for v in np.asarray(values, float)]
+def _clean(values, decimals: int = 4) -> list:
+    """A list for JSON rounded to ``decimals`` (kW: 0.1 W), NaN as None (a gap)."""
+    array = np.round(np.asarray(values, dtype=float), decimals)
+    return [float(v) if np.isfinite(v) else None for v in array]
+
+
+def _significant(values) -> list:
+    """A list for JSON with 4 significant digits (errors of 1e-9 kW stay on the log axis)."""
+    return [float(f"{v:.4g}") if np.isfinite(v) else None for v in np.asarray(values, float)]
 
 
 def panel_rows(steps: Steps, frames: np.ndarray) -> np.ndarray:
@@ -175,7 +180,7 @@ def _prices(problem: DispatchProblem, steps: Steps, x: list) -> list[dict]:
 
 def _error(steps: Steps, x: list) -> list[dict]:
     error = np.maximum(steps.abs_error_kw, ERROR_FLOOR_KW)
-    return [{"type": "scatter", "mode": "lines", "x": x, "y": _clean(error),
+    return [{"type": "scatter", "mode": "lines", "x": x, "y": _significant(error),
              "name": "max error", "xaxis": "x4", "yaxis": "y4", "showlegend": False,
              "line": {"color": "#34495e"},
              "hovertemplate": "max |error| %{y:.2e} kW"}]  # fmt: skip
