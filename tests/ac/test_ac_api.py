@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 
 import numpy as np
 import pandas as pd
@@ -235,3 +236,9 @@ def test_a_power_flow_without_solution_names_its_minute():
     feeder = small_feeder()
     with pytest.raises(InfeasibleError, match=r"AC power flow did not converge at minute 8"):
         check_setpoints(feeder, [[1, 1], [20000, 1]], [[0, 0], [0, 0]], [7, 8], vn_kv=0.4)
+
+
+def test_missing_power_grid_model_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "power_grid_model", None)  # import fails
+    with pytest.raises(ImportError, match=r'pip install "popdispatch\[ac\]"'):
+        build_network(small_feeder(), vn_kv=0.4)
