@@ -7,11 +7,13 @@ Usage:
   python benchmarks/bench_sweep.py --profiles DIR [--scenarios 24] [--repeat 3] [--steps day]
   python benchmarks/bench_sweep.py --profiles DIR --memory 100,1000 [--workers 2]
 
-Throughput: medians of ``--repeat`` runs of the same scenarios, each into a fresh folder; the
+Throughput: ``--repeat`` A/B pairs of the same scenarios, a plain in-process loop then Dask,
+each run into a fresh folder (alternated so both see the same load on a shared machine); the
 cluster is started and every worker warmed up (kernels loaded from numba's disk cache) once,
-before the timed runs (its start-up time is printed separately). Memory: the driver process's
-resident set (it holds the scheduler of a LocalCluster), sampled every 50 ms during a whole
-sweep, peak minus the level before the sweep.
+before the timed runs (its start-up time is printed separately). Overhead: the median of the
+pairs' Dask/loop time ratios, times the workers (core-seconds), minus one. Memory: the
+driver process's resident set (it holds the scheduler of a LocalCluster), sampled every 50 ms
+during a whole sweep, peak minus the level before the sweep.
 """
 
 from __future__ import annotations
@@ -55,30 +57,15 @@ def timed_runs(run, repeat: int) -> list[float]:
     return times
 
 
-def loop(todo: list, profiles: str, repeat: int) -> list[float]:
-    """The same scenarios in a plain loop in this process (after a warm-up)."""
-    warm_up()
+def loop_run(todo: list, profiles: str):
+    """A run of the scenarios in a plain loop in this process (``run(out)``)."""
 
     def run(out: Path) -> None:
         context = Context(str(out), profiles)
         for s in todo:
             run_and_store(s, context)
 
-    return timed_runs(run, repeat)
-
-
-def on_dask(todo: list, profiles: str, repeat: int, workers: int) -> tuple[list[float], float]:
-    """The scenarios on a LocalCluster of ``workers``; returns the run times and the seconds
-    to start the cluster and warm its workers."""
-    start = time.perf_counter()
-    with client_for(workers=workers) as client:
-        client.run(warm_up)
-        ready = time.perf_counter() - start
-
-        def run(out: Path) -> None:
-            submit_all(client, todo, Context(str(out), profiles), lambda outcome: None)
-
-        return timed_runs(run, repeat), ready
+    return run
 
 
 def per_minute(count: int, seconds: float) -> float:
@@ -86,18 +73,33 @@ def per_minute(count: int, seconds: float) -> float:
 
 
 def throughput(args) -> None:
+    """Plain loop and Dask runs alternated (A/B pairs), so both see the same machine load
+    (it is shared); the overhead is the median of the pairs' ratios."""
     todo = scenarios(args.scenarios, args.steps)
-    plain = statistics.median(loop(todo, args.profiles, args.repeat))
-    print(f"plain loop, in process: {plain:.2f} s = {per_minute(len(todo), plain):.1f} "
-          f"scenario-days/min")  # fmt: skip
+    warm_up()
+    plain = loop_run(todo, args.profiles)
     for workers in (1, 2):
-        times, ready = on_dask(todo, args.profiles, args.repeat, workers)
-        took = statistics.median(times)
+        start = time.perf_counter()
+        with client_for(workers=workers) as client:
+            client.run(warm_up)
+            ready = time.perf_counter() - start
+
+            def dask_run(out: Path, client=client) -> None:
+                submit_all(client, todo, Context(str(out), args.profiles), lambda _: None)
+
+            pairs = [
+                (timed_runs(plain, 1)[0], timed_runs(dask_run, 1)[0]) for _ in range(args.repeat)
+            ]
+        loops, dasks = zip(*pairs, strict=True)
+        ratio = statistics.median(d / p for p, d in pairs)
         print(
-            f"dask, {workers} worker(s): {took:.2f} s (runs {', '.join(f'{t:.2f}' for t in times)}"
-            f") = {per_minute(len(todo), took):.1f} scenario-days/min; overhead vs loop "
-            f"{(took / plain - 1) * 100:+.1f} % (x{workers} cores: "
-            f"{(took * workers / plain - 1) * 100:+.1f} %); cluster start + warm-up {ready:.1f} s"
+            f"{workers} worker(s), {len(todo)} scenarios, {args.repeat} A/B pairs: loop "
+            f"{', '.join(f'{t:.1f}' for t in loops)} s, dask {', '.join(f'{t:.1f}' for t in dasks)}"
+            f" s; medians {per_minute(len(todo), statistics.median(loops)):.1f} vs "
+            f"{per_minute(len(todo), statistics.median(dasks)):.1f} scenario-days/min; dask/loop "
+            f"time ratio (median of pairs) {ratio:.3f}: overhead "
+            f"{(ratio * workers - 1) * 100:+.1f} % of the loop's core-seconds; cluster start + "
+            f"warm-up {ready:.1f} s"
         )
 
 
