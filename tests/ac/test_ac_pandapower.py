@@ -8,8 +8,8 @@
   (ohm, kW, kvar, base kV), read with a regular expression independent of the reader.
 
 Both sources are ideal voltage sources (pandapower's ext_grid; power-grid-model's source with
-an internal impedance of 1e-20 p.u.): agreement within 1e-6 p.u. of every bus voltage and 1e-3
-kW of the losses (the issue's tolerances).
+an internal impedance of 1e-17 p.u. on 1 kVA): agreement within 1e-6 p.u. of every bus
+voltage and 1e-3 kW of the losses (the issue's tolerances).
 """
 
 from __future__ import annotations
