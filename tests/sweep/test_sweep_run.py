@@ -130,3 +130,20 @@ def test_report_counts_failed_and_infeasible(failing_sweep, tmp_path):
     assert groups.loc["none", ["scenarios", "failed", "converged"]].tolist() == [2, 1, 1]
     assert groups.loc["1:34=0", ["scenarios", "failed", "infeasible"]].tolist() == [2, 1, 1]
     assert text.count("InfeasibleError: ") == 2 and (folder / "sweep.png").is_file()
+
+
+def test_a_lost_task_is_recorded_failed_unless_its_results_were_written(tmp_path):
+    from popdispatch.sweep.execute import _lost
+    from popdispatch.sweep.scenario import Context
+    from popdispatch.sweep.store import status_of, write_scenario
+
+    first, second = parse_spec({"steps": "1-2", "modes": ["exact", "paper"]}).scenarios
+    context = Context(str(tmp_path))
+    write_scenario(tmp_path, second.id, {"status": "converged"})
+    lost = _lost(first, context, RuntimeError("worker tcp://x died\n3 times"))
+    assert (
+        lost["status"] == "failed" and lost["error"] == "RuntimeError: worker tcp://x died 3 times"
+    )
+    assert status_of(tmp_path, first.id) == "failed"
+    assert _lost(second, context, RuntimeError("late"))["status"] == "converged"
+    assert status_of(tmp_path, second.id) == "converged"

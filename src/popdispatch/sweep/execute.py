@@ -154,11 +154,15 @@ def submit_all(
 
 
 def _lost(scenario: Scenario, context: Context, exc: Exception) -> dict:
-    """Record a scenario whose task itself failed (not its run) as failed, from the driver."""
+    """Record a scenario whose task itself failed (not its run) as failed, from the driver,
+    unless an earlier attempt of the task wrote its results before its worker was lost."""
     from popdispatch.sweep.scenario import parameters
-    from popdispatch.sweep.store import write_scenario
+    from popdispatch.sweep.store import status_of, write_scenario
 
     message = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    status = status_of(Path(context.out), scenario.id)
+    if status not in (None, FAILED):
+        return {"id": scenario.id, "status": status, "error": None, "scenario_seconds": None}
     with contextlib.suppress(OSError):
         row = {"status": FAILED, "error": message} | parameters(scenario)
         write_scenario(Path(context.out), scenario.id, row)

@@ -126,6 +126,14 @@ def write_scenario(out: Path, scenario_id: str, summary: dict, steps=None) -> No
     _write(row, partition(out, SUMMARY, scenario_id))
 
 
+def status_of(out: Path, scenario_id: str) -> str | None:
+    """The recorded status of one scenario, None if it has no summary yet."""
+    part = partition(out, SUMMARY, scenario_id) / PART
+    if not part.is_file():
+        return None
+    return pq.read_table(part, columns=["status"])["status"][0].as_py()
+
+
 def finished_ids(out: Path, retry_failed: bool = True) -> set[str]:
     """Ids of the scenarios already written in ``out`` (``retry_failed``: not those that
     failed, so a rerun runs them again)."""
@@ -137,7 +145,7 @@ def finished_ids(out: Path, retry_failed: bool = True) -> set[str]:
         part = folder / PART
         if not part.is_file():
             continue
-        if retry_failed and pq.read_table(part, columns=["status"])["status"][0].as_py() == FAILED:
+        if retry_failed and status_of(out, folder.name.partition("=")[2]) == FAILED:
             continue
         done.add(folder.name.partition("=")[2])
     return done
