@@ -98,9 +98,15 @@ class AgentSettings:
         hold every transaction up for ``delay_max`` rounds)."""
         return self.window * (1 + int(faults.delay_max))
 
-    def step_for(self, mode: str) -> float:
-        """The Euler step in force: the given one, else the mode's stable default."""
-        return self.step_s if self.step_s is not None else DEFAULT_STEP_S[mode]
+    def step_for(self, mode: str, faults: Faults | None = None) -> float:
+        """The Euler step in force: the given one, else the mode's default, halved in exact
+        mode on a faulty network (its price loop, stable at 0.005 s with fresh information,
+        kept oscillating 0.7-0.8 kW from the DC-OPF after a crash; at 0.0025 s the congestion
+        minute with a 10-round crash, 10 % or 20 % loss came within 0.01 kW in 25-46 rounds)."""
+        if self.step_s is not None:
+            return self.step_s
+        faulty = faults is not None and not faults.perfect
+        return DEFAULT_STEP_S[mode] / (2.0 if faulty and mode == "exact" else 1.0)
 
 
 #: Default Euler step per mode, s (the engine's dt 0.01 s over 2 or 100 substeps).
@@ -282,7 +288,7 @@ def run_agents(
     settings = settings or RunSettings()
     faults = faults or Faults()
     agent_settings = agent_settings or AgentSettings()
-    step_s = agent_settings.step_for(settings.mode)
+    step_s = agent_settings.step_for(settings.mode, faults)
     system = build_agents(problem, minute, settings, step_s, faults,
                           agent_settings.timeout_for(faults), agent_settings.lag_for(faults),
                           agent_settings.copies_for(faults),
