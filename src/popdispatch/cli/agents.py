@@ -179,4 +179,4 @@ def agents_text(s: dict) -> str:
         f"max {s['max_transient_w']:.3g} W, final {s['final_imbalance_w']:.3g} W, open "
         f"transactions {s['open_transactions']}",
     ]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines)

@@ -1,0 +1,33 @@
+"""The agents reach the DC-OPF (Clarabel, solved here) on the congestion minute despite
+message loss, in exact mode (issue 15: within 0.01 kW)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip(
+    "mango", reason='the agents need mango-agents: pip install "popdispatch[agents]"'
+)
+
+from popdispatch.agents.network import Faults  # noqa: E402
+from popdispatch.agents.system import AgentSettings, run_agents  # noqa: E402
+from popdispatch.online import RunSettings  # noqa: E402
+from popdispatch.opf import solve_opf  # noqa: E402
+from popdispatch.scenarios import PEAK_MINUTE  # noqa: E402
+
+
+@pytest.mark.parametrize(
+    "faults", [Faults(loss=0.1, seed=1), Faults(loss=0.1, seed=2), Faults(loss=0.2, seed=1)],
+    ids=lambda f: f"loss{f.loss}-seed{f.seed}",
+)  # fmt: skip
+def test_lossy_network_reaches_dc_opf(congestion_problem, faults):
+    opf = solve_opf(congestion_problem, PEAK_MINUTE)
+    run = run_agents(congestion_problem, PEAK_MINUTE, RunSettings(mode="exact"), faults,
+                     AgentSettings(max_rounds=400))  # fmt: skip
+    assert run.lost > 0.05 * run.messages
+    assert run.rest_round is not None
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() < 0.01  # kW
+    # the binding line of the DC-OPF carries its limit, none overflows (kW)
+    assert run.residual_kw < 0.01
+    assert abs(run.final_imbalance_w) < 1.0 and run.open_transactions == 0
