@@ -124,7 +124,7 @@ def opf(minute: int, limits, profiles, source, as_json: bool, quiet: bool) -> in
 @json_option
 @quiet_option
 def snapshot(
-    minute, limits, dynamics, mode, x0, graph, profiles, source, out, as_json, quiet
+    minute, limits, dynamics, mode, x0, graph, constants, profiles, source, out, as_json, quiet
 ) -> int:
     """One minute of dynamics: trajectory, convergence, comparison with the DC-OPF.
 
@@ -136,7 +136,7 @@ def snapshot(
 
     progress = Progress(quiet)
     check_out(out)
-    settings = settings_from(dynamics, mode, x0, graph)
+    settings = settings_from(dynamics, mode, x0, graph, None, constants)
     check_shares(x0, progress, source)
     announce_compile(progress)
     problem, series = build(source, profiles, minute, limits, progress)
@@ -176,8 +176,8 @@ def snapshot(
 @json_option
 @quiet_option
 def day(
-    limits, dynamics, mode, x0, graph, events, minutes, warm_start, profiles, source, out,
-    as_json, quiet,
+    limits, dynamics, mode, x0, graph, constants, events, minutes, warm_start, profiles, source,
+    out, as_json, quiet,
 ) -> int:  # fmt: skip
     """The online day: every minute continues from the last (warm start), against the DC-OPF.
 
@@ -198,7 +198,7 @@ def day(
 
     progress = Progress(quiet)
     check_out(out)
-    settings = settings_from(dynamics, mode, x0, graph, warm_start)
+    settings = settings_from(dynamics, mode, x0, graph, warm_start, constants)
     check_shares(x0, progress, source)
     announce_compile(progress)
     problem, series = build(source, profiles, None, limits, progress, events, minutes)

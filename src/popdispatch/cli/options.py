@@ -90,6 +90,30 @@ class X0Type(click.ParamType):
         return shares
 
 
+class ConstantsType(click.ParamType):
+    """``NAME=VALUE,...``: the game's constants (:class:`popdispatch.game.fitness.
+    FitnessParameters`: ``B``, ``m``, ``C``, ``gain``, ``price_rate``), each finite and >= 0."""
+
+    name = "B=1000,m=400,C=1000"
+    known = ("B", "m", "C", "gain", "price_rate")
+
+    def convert(self, value, param, ctx) -> dict[str, float]:
+        if isinstance(value, dict):
+            return value
+        constants: dict[str, float] = {}
+        for item in str(value).split(","):
+            key, sep, text = item.partition("=")
+            key, number = key.strip(), _float(text)
+            if key not in self.known:
+                self.fail(
+                    f"{item!r}: unknown constant (known: {', '.join(self.known)})", param, ctx
+                )
+            if not sep or number is None or number < 0:
+                self.fail(f"{item!r}: need {key}=VALUE with a finite VALUE >= 0", param, ctx)
+            constants[key] = number
+        return constants
+
+
 class MinutesType(click.ParamType):
     """``START-END``: a range of 1-based minutes, both included (``upper``: the last allowed;
     ``None``: any, checked against the series once it is read)."""
@@ -281,6 +305,12 @@ def run_options(func):
             show_default=True,
             help="Communication graph (local-replicator and distributed-smith only).",
         ),
+        option(
+            "--constants",
+            type=ConstantsType(),
+            help="The game's constants, e.g. B=1000,m=400,C=1000 (paper, on MW: B EUR/MW, m and "
+            "C EUR/MW^2; exact mode also gain and price_rate); others keep their defaults.",
+        ),
     ]
     for decorate in reversed(decorators):
         func = decorate(func)
@@ -331,10 +361,19 @@ def feeder_options(func):
     return command
 
 
-def settings_from(dynamics: str, mode: str, x0, graph: str, warm_start: str | None = None):
+def settings_from(
+    dynamics: str, mode: str, x0, graph: str, warm_start: str | None = None, constants=None
+):
+    """The run's :class:`~popdispatch.online.RunSettings`; ``constants`` (``--constants``)
+    replace those of the default fitness parameters."""
+    from dataclasses import replace
+
     from popdispatch.online import RunSettings
 
-    return RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0, warm_start=warm_start)
+    settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0, warm_start=warm_start)
+    return (
+        replace(settings, fitness=replace(settings.fitness, **constants)) if constants else settings
+    )
 
 
 def check_out(out: Path | None) -> None:
