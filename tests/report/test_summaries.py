@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from popdispatch.feeder.synthetic import synthetic_feeder, synthetic_profiles
@@ -77,3 +78,34 @@ def test_day_cost_keys_are_eur():
     assert s["cost_all_minutes_eur"] == pytest.approx(sum(per_hour) / 60.0, rel=1e-12)
     opf = [_cost_eur_per_h(problem, p, on) for p, on in zip(result.opf_kw, online, strict=True)]
     assert s["opf_cost_eur"] == pytest.approx(sum(opf) / 60.0, rel=1e-9)
+
+
+def test_day_energies_weigh_each_step_by_its_length():
+    """Irregular steps (15, 15, 30, 60, 60, 60 min): energies and costs are sum(kW x h) from the
+    per-step values recomputed here; the span keys carry the steps' ISO 8601 start times."""
+    from popdispatch.feeder.profiles import Timeline
+
+    feeder = synthetic_feeder(120, 4, seed=2)
+    problem = elv_problem(synthetic_profiles(feeder, seed=3), feeder=feeder)
+    minutes = np.arange(600, 606)
+    result = day_vs_opf(problem, RunSettings(mode="exact"), minutes)
+    starts = pd.DatetimeIndex([f"2024-05-01T{t}" for t in ("10:00", "10:15", "10:30", "11:00",
+                                                            "12:00", "13:00")])  # fmt: skip
+    hours = np.full(1440, 0.25)
+    hours[minutes - 1] = [0.25, 0.25, 0.5, 1.0, 1.0, 1.0]
+    before = pd.date_range("2024-04-25", periods=minutes[0] - 1, freq="15min")
+    after = pd.date_range("2024-05-02", periods=1440 - minutes[-1], freq="15min")
+    timeline = Timeline(before.append(starts).append(after), hours)
+    s = day_summary(problem, result, timeline=timeline)
+    weight = hours[minutes - 1]
+    online = problem.online[minutes - 1]
+    energy = (result.run.setpoints_kw * weight[:, None]).sum(axis=0)
+    for (bus, kwh), expected in zip(s["energy_kwh"].items(), energy, strict=True):
+        assert kwh == pytest.approx(expected, rel=1e-12), bus
+    per_hour = [
+        _cost_eur_per_h(problem, p, on)
+        for p, on in zip(result.run.setpoints_kw, online, strict=True)
+    ]
+    assert s["cost_eur"] == pytest.approx(float(np.dot(per_hour, weight)), rel=1e-12)
+    assert (s["first_time"], s["last_time"]) == ("2024-05-01T10:00:00", "2024-05-01T13:00:00")
+    assert s["step_minutes"] is None and (s["first_step"], s["last_step"]) == (600, 605)
