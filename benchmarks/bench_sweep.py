@@ -6,6 +6,7 @@ memory as the scenario count grows.
 Usage:
   python benchmarks/bench_sweep.py --profiles DIR [--scenarios 24] [--repeat 3] [--steps day]
   python benchmarks/bench_sweep.py --profiles DIR --memory 100,1000 [--workers 2]
+  python benchmarks/bench_sweep.py --profiles DIR --scaling [--scenarios 24] [--repeat 3]
 
 Throughput: ``--repeat`` A/B pairs of the same scenarios, a plain in-process loop then Dask,
 each run into a fresh folder (alternated so both see the same load on a shared machine); the
@@ -103,6 +104,33 @@ def throughput(args) -> None:
         )
 
 
+def _ignore(outcome: dict) -> None:
+    """Outcomes are not needed: every scenario's results are on disk."""
+
+
+def scaling(args) -> None:
+    """1 and 2 workers alternated (two LocalClusters alive at once), so both see the same
+    machine load: scenario-days per minute and the speed-up, medians of the pairs."""
+    todo = scenarios(args.scenarios, args.steps)
+    with client_for(workers=1) as one, client_for(workers=2) as two:
+        for client in (one, two):
+            client.run(warm_up)
+
+        def on(client):
+            return lambda out: submit_all(client, todo, Context(str(out), args.profiles), _ignore)
+
+        pairs = [(timed_runs(on(one), 1)[0], timed_runs(on(two), 1)[0]) for _ in range(args.repeat)]
+    ones, twos = zip(*pairs, strict=True)
+    print(
+        f"{len(todo)} scenarios, {args.repeat} pairs: 1 worker "
+        f"{', '.join(f'{t:.1f}' for t in ones)} s, 2 workers "
+        f"{', '.join(f'{t:.1f}' for t in twos)} s; medians "
+        f"{per_minute(len(todo), statistics.median(ones)):.1f} and "
+        f"{per_minute(len(todo), statistics.median(twos)):.1f} scenario-days/min; speed-up "
+        f"(median of pairs) {statistics.median(a / b for a, b in pairs):.2f}"
+    )
+
+
 def peak_rss_mb(run) -> tuple[float, float]:
     """``(peak - before, seconds)`` of this process's resident set while ``run()`` runs."""
     import psutil
@@ -151,6 +179,7 @@ def main() -> None:
         "--memory", help="scenario counts for the driver-memory runs, e.g. 100,1000"
     )
     parser.add_argument("--workers", type=int, default=2, help="workers of the memory runs")
+    parser.add_argument("--scaling", action="store_true", help="1 vs 2 workers, alternated")
     args = parser.parse_args()
     if not args.profiles:
         parser.error("the official profiles are needed: --profiles DIR or POPDISPATCH_PROFILES")
@@ -161,6 +190,8 @@ def main() -> None:
     )
     if args.memory:
         memory(args)
+    elif args.scaling:
+        scaling(args)
     else:
         throughput(args)
 
