@@ -31,3 +31,20 @@ def test_lossy_network_reaches_dc_opf(congestion_problem, faults):
     # the binding line of the DC-OPF carries its limit, none overflows (kW)
     assert run.residual_kw < 0.01
     assert abs(run.final_imbalance_w) < 1.0 and run.open_transactions == 0
+
+
+@pytest.mark.parametrize(
+    "faults",
+    [Faults(loss=0.1, delay_max=3, seed=1), Faults(loss=0.1, delay_max=10, seed=2)],
+    ids=lambda f: f"loss{f.loss}-delay{f.delay_max}",
+)
+def test_delayed_network_reaches_dc_opf_in_paced_rounds(congestion_problem, faults):
+    """Issue 15's target: 10 % loss and delays up to 3 rounds (and 10), exact mode, within
+    0.01 kW of the DC-OPF; the rounds wait for the longest delay (paced, the default)."""
+    opf = solve_opf(congestion_problem, PEAK_MINUTE)
+    run = run_agents(congestion_problem, PEAK_MINUTE, RunSettings(mode="exact"), faults,
+                     AgentSettings(max_rounds=400))  # fmt: skip
+    assert run.phase_ticks == 1 + 6 * faults.delay_max
+    assert run.rest_round is not None
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() < 0.01  # kW
+    assert abs(run.max_imbalance_w) < 1.0 and run.open_transactions == 0

@@ -74,7 +74,7 @@ def _in_flight(system) -> float:
 def test_duplicates_change_nothing(congestion_problem):
     """Half the messages delivered twice: every copy of a decision is acknowledged and none is
     applied twice, so the set points are those of the perfect network, round by round."""
-    opts = AgentSettings(max_rounds=40, engine_limiter=True)
+    opts = AgentSettings(step_s=0.005, max_rounds=40, engine_limiter=True)
     settings = RunSettings(mode="exact")
     twice = run_agents(congestion_problem, PEAK_MINUTE, settings, Faults(duplicate=0.5, seed=5),
                        opts)  # fmt: skip

@@ -32,6 +32,7 @@ class RoundAgent(Agent):
         self.outbox: list[tuple[Any, str]] = []
         self.crashed = False
         self.error: BaseException | None = None  # what stopped this agent's ticks, if any
+        self.phase_ticks = 1  # ticks per phase (rounds paced to the network's latency)
 
     #: The ticks of a round this agent acts at (each its own periodic task: an agent that
     #: woke at every tick only to find nothing to do cost the simulation a third of its time).
@@ -40,15 +41,20 @@ class RoundAgent(Agent):
     def on_ready(self) -> None:
         start = self.context.current_timestamp
         for phase in self.PHASES:
-            self.schedule_timestamp_task(self._start(), start + phase * TICK_S)
+            self.schedule_timestamp_task(self._start(), start + phase * self.phase_ticks * TICK_S)
 
     async def _start(self) -> None:
-        self.schedule_periodic_task(self._tick, delay=TICKS_PER_ROUND * TICK_S)
+        self.schedule_periodic_task(self._tick, delay=self.round_ticks * TICK_S)
+
+    @property
+    def round_ticks(self) -> int:
+        """Ticks per round."""
+        return TICKS_PER_ROUND * self.phase_ticks
 
     async def _tick(self) -> None:
         if self.crashed:
             return
-        rnd, phase = tick_of(self.context.current_timestamp / TICK_S)
+        rnd, phase = tick_of(self.context.current_timestamp / TICK_S, self.phase_ticks)
         try:
             self.act(rnd, phase)
         except Exception as exc:  # mango logs and drops it; the run must not go on quietly

@@ -43,7 +43,7 @@ import numpy as np
 from popdispatch.agents.base import RoundAgent
 from popdispatch.agents.messages import Accept, Ack, Decision, Offer, Signals, Status
 from popdispatch.agents.plant import Inverters
-from popdispatch.agents.schedule import TICKS_PER_ROUND, Phase
+from popdispatch.agents.schedule import Phase
 from popdispatch.dynamics.fields import field_weights
 from popdispatch.dynamics.pairwise import graph_flows
 from popdispatch.game.fitness import fitness_into
@@ -161,7 +161,7 @@ class GeneratorAgent(RoundAgent):
             self.applied.add(decision.txid)
             self.reserved.pop(decision.txid, None)
             if decision.commit:
-                now = int(self.context.current_timestamp // TICKS_PER_ROUND)
+                now = int(self.context.current_timestamp // self.round_ticks)
                 if now >= decision.effective_round:
                     self._set(self.p + decision.amount_mw)
                 else:

@@ -5,8 +5,9 @@ message sent, whether it arrives and after how long; this module answers with a 
 :class:`random.Random`, so a run is repeatable. Time is counted in *ticks* (1 s of simulated
 clock each): a revision round has :data:`popdispatch.agents.schedule.TICKS_PER_ROUND` ticks and
 agents act on whole ticks, so every message takes half a tick (it is in the receiver's inbox
-before the receiver's next tick) plus a random whole number of ticks up to ``delay_max``
-rounds. Duplication is decided by the sender's outbox (:meth:`LossyNetwork.copies`): mango's
+before the receiver's next tick) plus a random whole number of rounds up to ``delay_max``
+(whole rounds: arrivals then fall on few instants, and mango's world steps once per
+instant). Duplication is decided by the sender's outbox (:meth:`LossyNetwork.copies`): mango's
 package result is one delivery per send, so a duplicated packet is sent twice, each copy with
 its own loss and delay draw (hence also reordered).
 """
@@ -29,8 +30,8 @@ class Faults:
     Attributes
     ----------
     loss : probability that a message is lost, 0-1 (each message independently).
-    delay_max : largest extra delay, in rounds (each message: a whole number of ticks drawn
-        uniformly from 0 to ``delay_max`` rounds).
+    delay_max : largest extra delay, in rounds (each message: a whole number of rounds drawn
+        uniformly from 0 to ``delay_max``).
     duplicate : probability that a message is delivered twice (each copy delayed on its own).
     noise_kw : standard deviation of the flow measurement noise, kW (plant sensors).
     seed : seed of every random draw of the run.
@@ -79,7 +80,11 @@ class LossyNetwork(CommunicationSimulation):
             self.sent += 1
             reached = self.rng.random() >= self.faults.loss
             self.lost += not reached
-            extra = self.rng.randint(0, extra_max) if extra_max else 0
+            extra = (
+                self.rng.randint(0, int(self.faults.delay_max)) * TICKS_PER_ROUND
+                if extra_max
+                else 0
+            )
             results.append(PackageResult(reached=reached, delay_s=HOP_TICKS + extra))
         return CommunicationSimulationResult(package_results=results)
 

@@ -40,7 +40,9 @@ TICKS_PER_ROUND = len(Phase)
 HOP_TICKS = 0.5
 
 
-def tick_of(time_s: float) -> tuple[int, Phase]:
-    """``(round, phase)`` of the clock time ``time_s`` (ticks)."""
-    tick = int(round(time_s))
+def tick_of(time_s: float, phase_ticks: int = 1) -> tuple[int, Phase]:
+    """``(round, phase)`` of the clock time ``time_s`` (ticks) when each phase lasts
+    ``phase_ticks`` ticks (1: the rounds of the table above; more: rounds paced to a slow
+    network, see :class:`popdispatch.agents.system.AgentSettings`)."""
+    tick = int(round(time_s)) // phase_ticks
     return tick // TICKS_PER_ROUND, Phase(tick % TICKS_PER_ROUND)

@@ -54,6 +54,11 @@ class AgentSettings:
     timeout : rounds an offer stays open (None: ``2 * delay_max + 1`` of the faults, so that
         an offer and its acceptance can both arrive as late as the network delays them).
     lag : rounds from a commit to the change of both inverters (see :meth:`lag_for`).
+    paced : rounds paced to the network's latency (default): each phase lasts one tick more
+        than the longest simulated delay, so agents act on this round's messages only (a
+        synchronizer); a round then takes ``1 + 6 * delay_max`` times the simulated time of
+        an unpaced one, and delays cost time, not staleness. Unpaced, agents act on the
+        latest messages they have, however old (docs/agents.md: exact mode does not settle).
     decision_copies : copies of each commit or abort sent per round (see :meth:`copies_for`).
     engine_limiter : receivers scale offers by the engine's limiter factor (None: on a
         perfect network only; see :mod:`popdispatch.agents.generator`).
@@ -66,6 +71,7 @@ class AgentSettings:
     drain_rounds: int = 200
     timeout: int | None = None
     lag: int | None = None
+    paced: bool = True
     decision_copies: int | None = None
     engine_limiter: bool | None = None
 
@@ -90,13 +96,21 @@ class AgentSettings:
         return 3 if faults.loss else 1
 
     def timeout_for(self, faults: Faults) -> int:
-        """Rounds an offer stays open (see the attribute)."""
-        return self.timeout if self.timeout is not None else 2 * int(faults.delay_max) + 1
+        """Rounds an offer stays open (see the attribute; 1 in paced rounds)."""
+        if self.timeout is not None:
+            return self.timeout
+        return 1 if self.paced else 2 * int(faults.delay_max) + 1
+
+    def phase_ticks_for(self, faults: Faults) -> int:
+        """Ticks per phase: 1, or in paced rounds one more than the longest simulated delay
+        (``delay_max`` unpaced rounds), so that every message of a phase is in before the
+        next phase acts."""
+        return 1 + TICKS_PER_ROUND * int(faults.delay_max) if self.paced else 1
 
     def rest_window(self, faults: Faults) -> int:
         """Rounds of rest required: ``window`` times ``1 + delay_max`` (a late network can
-        hold every transaction up for ``delay_max`` rounds)."""
-        return self.window * (1 + int(faults.delay_max))
+        hold every transaction up for ``delay_max`` rounds; ``window`` in paced rounds)."""
+        return self.window * (1 if self.paced else 1 + int(faults.delay_max))
 
     def step_for(self, mode: str, faults: Faults | None = None) -> float:
         """The Euler step in force: the given one, else the mode's default, halved in exact
@@ -160,7 +174,8 @@ class AgentRun:
     inverters as they were at a measurement (taken up by the source bus while a commit is in
     flight); ``final_imbalance_w``: of the inverters after the drain; ``open_transactions``:
     undecided or unacknowledged transactions left after the drain; ``prices``: exact mode,
-    each controller's ``(line, z_up, z_down)`` EUR/MW; ``step_s``: the round's Euler step.
+    each controller's ``(line, z_up, z_down)`` EUR/MW; ``step_s``: the round's Euler step;
+    ``phase_ticks``: ticks per phase (paced rounds).
     """
 
     generators: list[str]
@@ -179,6 +194,7 @@ class AgentRun:
     wall_seconds: float
     agents: int
     step_s: float
+    phase_ticks: int = 1
     prices: dict = field(default_factory=dict)
 
     @property
@@ -293,6 +309,8 @@ def run_agents(
                           agent_settings.timeout_for(faults), agent_settings.lag_for(faults),
                           agent_settings.copies_for(faults),
                           agent_settings.engine_limiter_for(faults))  # fmt: skip
+    for agent in system.agents:
+        agent.phase_ticks = agent_settings.phase_ticks_for(faults)
     window = agent_settings.rest_window(faults)
     return asyncio.run(_simulate(system, agent_settings, window, on_round))
 
@@ -333,7 +351,7 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
             busy = any(g.busy for g in system.generators)
             if (quiet and not busy) or rnd >= opts.max_rounds + opts.drain_rounds:
                 break
-            await world.step_until(TICKS_PER_ROUND)
+            await world.step_until(system.plant.round_ticks)
             _raise_agent_errors(system)
             rnd += 1
     wall = time.perf_counter() - start
@@ -362,6 +380,7 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         wall_seconds=wall,
         agents=len(system.agents),
         step_s=system.generators[0].rule.step_s,
+        phase_ticks=system.plant.phase_ticks,
         prices=prices,
     )
 

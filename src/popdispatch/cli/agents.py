@@ -12,6 +12,8 @@ keys, with ``iterations`` counting rounds) plus what the messages did: ``message
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import click
 
 from popdispatch.cli.options import (
@@ -47,23 +49,28 @@ from popdispatch.report.progress import Progress
         help="Euler step of one round, s (default: exact 0.005, paper 1e-4).")  # fmt: skip
 @option("--max-rounds", type=click.IntRange(1), default=4000, show_default=True,
         help="Horizon, rounds.")  # fmt: skip
+@option("--pace/--no-pace", default=True, show_default=True,
+        help="Pace rounds to the longest delay (agents act on this round's messages only) "
+        "or act on the latest messages however old.")  # fmt: skip
 @profiles_option
 @feeder_options
 @json_option
 @quiet_option
 def agents(minute, limits, dynamics, mode, x0, graph, loss, delay_max, duplicate, noise_kw,
-           seed, step_s, max_rounds, profiles, source, as_json, quiet) -> int:  # fmt: skip
+           seed, step_s, max_rounds, pace, profiles, source, as_json, quiet,
+           constants=None) -> int:  # fmt: skip
     """One minute dispatched by agents: one per generator, one per node controller and the
     plant, exchanging messages in mango's simulated world with seeded loss, delay and
     duplication; power moves only in pairwise transactions (offer, accept, commit), compared
     with the DC-OPF.
     """
     progress = Progress(quiet)
-    settings = settings_from(dynamics, mode, x0, graph)
+    settings = settings_from(dynamics, mode, x0, graph, None, constants)
     faults = _faults(loss, delay_max, duplicate, noise_kw, seed)
     problem = _problem(source, profiles, minute, limits, progress)
     with progress.step(f"minute {minute}: {dynamics} dynamics by agents"):
-        summary = agents_summary(problem, minute, settings, faults, step_s, max_rounds, limits)
+        options = AgentOptions(step_s, max_rounds, pace)
+        summary = agents_summary(problem, minute, settings, faults, options, limits)
     emit(stamp(summary), as_json, agents_text(summary))
     if summary["status"] == "infeasible":
         raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given limits")
@@ -98,7 +105,16 @@ def _problem(source, profiles, minute, limits, progress):
     return problem
 
 
-def agents_summary(problem, minute, settings, faults, step_s, max_rounds, limits) -> dict:
+class AgentOptions(NamedTuple):
+    """The command's own run options: round step (s, None: the default), horizon (rounds),
+    paced rounds."""
+
+    step_s: float | None
+    max_rounds: int
+    paced: bool
+
+
+def agents_summary(problem, minute, settings, faults, options: AgentOptions, limits) -> dict:
     """The snapshot summary of the agents' run against the DC-OPF, plus the messages' keys."""
     import numpy as np
 
@@ -110,8 +126,9 @@ def agents_summary(problem, minute, settings, faults, step_s, max_rounds, limits
     from popdispatch.scenarios import SnapshotComparison
 
     check_x0(settings.x0, problem.generators)
-    run = run_agents(problem, minute, settings, faults,
-                     AgentSettings(step_s=step_s, max_rounds=max_rounds))  # fmt: skip
+    opts = AgentSettings(step_s=options.step_s, max_rounds=options.max_rounds,
+                         paced=options.paced)  # fmt: skip
+    run = run_agents(problem, minute, settings, faults, opts)
     final_mw = run.setpoints_kw / 1000.0
     overflow = [overflow_kw(problem, row / 1000.0, minute).max(initial=0.0) > 0.0
                 for row in run.trajectory_kw]  # fmt: skip
@@ -134,6 +151,8 @@ def agents_summary(problem, minute, settings, faults, step_s, max_rounds, limits
         iterations=run.rounds,
         rounds=run.rounds,
         step_s=run.step_s,
+        paced=options.paced,
+        phase_ticks=run.phase_ticks,
         loss=faults.loss,
         delay_max=faults.delay_max,
         duplicate=faults.duplicate,
@@ -157,7 +176,8 @@ def agents_text(s: dict) -> str:
         f"minute {s['minute']}, demand {s['demand_kw']:.3f} kW: {s['dynamics']} dynamics, "
         f"{s['mode']} mode, by {s['agents']} agents ({s['graph']} graph)",
         f"network: loss {s['loss']:g}, delays up to {s['delay_max']} rounds, duplicates "
-        f"{s['duplicate']:g}, noise {s['noise_kw']:g} kW, seed {s['seed']}",
+        f"{s['duplicate']:g}, noise {s['noise_kw']:g} kW, seed {s['seed']}"
+        + (f"; rounds paced to {s['phase_ticks']} ticks per phase" if s["phase_ticks"] > 1 else ""),
         f"status: {s['dynamics_status']} after {s['rounds']} rounds of {s['step_s']:g} s"
         + (
             f" (at rest from round {s['converged_iteration']})"
