@@ -14,10 +14,10 @@ from popdispatch.cli.sweep import sweep, sweep_report
 from popdispatch.feeder.generators import paper_fleet
 from popdispatch.sweep.store import STEPS, SUMMARY
 
-from helpers import find_official_folder
+from helpers import MISSING_OFFICIAL, find_official_folder
 
 OFFICIAL = find_official_folder()
-pytestmark = pytest.mark.skipif(OFFICIAL is None, reason="official IEEE ELV profiles not found")
+pytestmark = pytest.mark.skipif(OFFICIAL is None, reason=MISSING_OFFICIAL)
 
 ISSUE_SPEC = """
 case = "ieee-elv"
