@@ -94,7 +94,7 @@ class ConstantsType(click.ParamType):
     """``NAME=VALUE,...``: the game's constants (:class:`popdispatch.game.fitness.
     FitnessParameters`: ``B``, ``m``, ``C``, ``gain``, ``price_rate``), each finite and >= 0."""
 
-    name = "B=1000,m=400,C=1000"
+    name = "NAME=VALUE,..."
     known = ("B", "m", "C", "gain", "price_rate")
 
     def convert(self, value, param, ctx) -> dict[str, float]:

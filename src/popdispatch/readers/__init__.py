@@ -1,4 +1,5 @@
-"""Readers of external data: the IEEE European LV Test Feeder's OpenDSS files and load profiles."""
+"""Readers of external data: networks (MATPOWER, pandapower, OpenDSS), the IEEE European LV Test
+Feeder's OpenDSS files and load profiles, load time series (CSV/Parquet tables, SimBench)."""
 
 from popdispatch.readers.matpower import read_matpower
 from popdispatch.readers.opendss import read_opendss_feeder
@@ -10,6 +11,7 @@ from popdispatch.readers.profiles import (
     read_profiles,
     resolve_profiles,
 )
+from popdispatch.readers.series import read_load_table, simbench_profiles
 
 __all__ = [
     "PROFILES_ENV",
@@ -18,6 +20,8 @@ __all__ = [
     "read_opendss_feeder",
     "read_opendss_master",
     "read_pandapower",
+    "read_load_table",
     "read_profiles",
     "resolve_profiles",
+    "simbench_profiles",
 ]
