@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import networkx as nx
 import numpy as np
@@ -175,7 +175,9 @@ class AgentRun:
     flight); ``final_imbalance_w``: of the inverters after the drain; ``open_transactions``:
     undecided or unacknowledged transactions left after the drain; ``prices``: exact mode,
     each controller's ``(line, z_up, z_down)`` EUR/MW; ``step_s``: the round's Euler step;
-    ``phase_ticks``: ticks per phase (paced rounds).
+    ``phase_ticks``: ticks per phase (paced rounds); ``stall_reason``: why a run at rest is
+    not at the DC-OPF (exact mode's KKT check, :func:`popdispatch.online.kkt_violations`, on
+    the set points and the controllers' prices), None otherwise.
     """
 
     generators: list[str]
@@ -197,9 +199,15 @@ class AgentRun:
     phase_ticks: int = 1
     prices: dict = field(default_factory=dict)
 
+    stall_reason: str | None = None
+
     @property
     def status(self) -> str:
-        return "converged" if self.rest_round is not None else "not_converged"
+        """``converged`` (at rest and, in exact mode, at a KKT point of the DC-OPF),
+        ``stalled`` (at rest elsewhere: ``stall_reason``) or ``not_converged``."""
+        if self.rest_round is None:
+            return "not_converged"
+        return "stalled" if self.stall_reason else "converged"
 
     @property
     def messages_per_agent_round(self) -> float:
@@ -305,6 +313,35 @@ def run_agents(
     faults = faults or Faults()
     agent_settings = agent_settings or AgentSettings()
     step_s = agent_settings.step_for(settings.mode, faults)
+    run = _run(problem, minute, settings, faults, agent_settings, step_s, on_round)
+    if run.rest_round is None or not get_mode(settings.mode).claims_dc_opf:
+        return run
+    return replace(run, stall_reason=_kkt_reason(problem, minute, settings, agent_settings,
+                                                 step_s, run))  # fmt: skip
+
+
+def _kkt_reason(problem, minute, settings, opts: AgentSettings, step_s: float, run) -> str | None:
+    """The engine's KKT check of the rest state: set points and each line's prices (the mean
+    of its two end controllers' copies), with the agents' rest tolerance."""
+    from popdispatch.integrate import Integrator
+    from popdispatch.online.kkt import KktTolerances, kkt_violations
+
+    n = len(problem.limit)
+    z, ends = np.zeros(2 * n), np.zeros(n)
+    for copies in run.prices.values():
+        for line, z_up, z_down in copies:
+            z[line] += z_up
+            z[n + line] += z_down
+            ends[line] += 1
+    z /= np.concatenate([ends, ends]).clip(min=1)
+    integrator = Integrator(dt=step_s, tol_kw=max(opts.tol_kw, 1e-9), window=opts.window)
+    tol = KktTolerances.of(integrator, settings.fitness.gain)
+    p_mw = run.setpoints_kw[None] / KW_PER_MW
+    return kkt_violations(problem, np.array([minute]), p_mw, z[None], tol, settings.fitness.C)[0]
+
+
+def _run(problem, minute, settings, faults, agent_settings, step_s, on_round) -> AgentRun:
+    """Build the agents and run them in mango's simulated world."""
     system = build_agents(problem, minute, settings, step_s, faults,
                           agent_settings.timeout_for(faults), agent_settings.lag_for(faults),
                           agent_settings.copies_for(faults),

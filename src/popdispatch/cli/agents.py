@@ -138,12 +138,14 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         settings=settings,
         generators=problem.generators,
         trajectory_kw=np.vstack([run.trajectory_kw, run.setpoints_kw]),
-        converged_at=run.rest_round,
+        converged_at=run.rest_round if run.status == "converged" else None,
         first_congestion=next((i for i, o in enumerate(overflow) if o), None),
         overflow_kw=overflow_kw(problem, final_mw, minute),
         flows_kw=limited_flows_mw(problem, final_mw, minute) * 1000.0,
         wall_seconds=run.wall_seconds,
         profile_source=problem.profile_source,
+        stall_reason=run.stall_reason,
+        rest_at=run.rest_round,
     )
     summary = snapshot_summary(problem, SnapshotComparison(result, solve_opf(problem, minute)),
                                limits)  # fmt: skip
@@ -180,10 +182,11 @@ def agents_text(s: dict) -> str:
         + (f"; rounds paced to {s['phase_ticks']} ticks per phase" if s["phase_ticks"] > 1 else ""),
         f"status: {s['dynamics_status']} after {s['rounds']} rounds of {s['step_s']:g} s"
         + (
-            f" (at rest from round {s['converged_iteration']})"
-            if s["converged_iteration"] is not None
+            f" (at rest from round {s['rest_iteration']})"
+            if s["rest_iteration"] is not None
             else ""
-        ),  # fmt: skip
+        )
+        + (f"\nstalled: {s['stall_reason']}" if s["stall_reason"] else ""),
         f"{'generator':>10} {'setpoint_kw':>12} {'opf_kw':>10}",
     ]
     for g in s["generators"]:
