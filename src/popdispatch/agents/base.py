@@ -33,18 +33,38 @@ class RoundAgent(Agent):
         self.crashed = False
         self.error: BaseException | None = None  # what stopped this agent's ticks, if any
         self.phase_ticks = 1  # ticks per phase (rounds paced to the network's latency)
+        self.t0 = 0.0  # clock time of round 0's first tick, s
+        self.tick_s = TICK_S  # clock seconds per tick
+        self.wall_clock = False  # real time (TCP): ticks at absolute deadlines, no drift
 
     #: The ticks of a round this agent acts at (each its own periodic task: an agent that
     #: woke at every tick only to find nothing to do cost the simulation a third of its time).
     PHASES: tuple[Phase, ...] = tuple(Phase)
 
     def on_ready(self) -> None:
+        if self.wall_clock:
+            for phase in self.PHASES:
+                self.schedule_instant_task(self._deadlines(phase))
+            return
         start = self.context.current_timestamp
         for phase in self.PHASES:
-            self.schedule_timestamp_task(self._start(), start + phase * self.phase_ticks * TICK_S)
+            self.schedule_timestamp_task(
+                self._start(), start + phase * self.phase_ticks * self.tick_s
+            )
 
     async def _start(self) -> None:
-        self.schedule_periodic_task(self._tick, delay=self.round_ticks * TICK_S)
+        self.schedule_periodic_task(self._tick, delay=self.round_ticks * self.tick_s)
+
+    async def _deadlines(self, phase: Phase) -> None:
+        """Real time: this phase's tick of every round at its absolute time from ``t0``."""
+        clock = self.context.clock
+        k = 0
+        while True:
+            due = self.t0 + (k * self.round_ticks + phase * self.phase_ticks) * self.tick_s
+            if due > clock.time:
+                await clock.sleep(due - clock.time)
+            await self._tick()
+            k += 1
 
     @property
     def round_ticks(self) -> int:
@@ -54,7 +74,7 @@ class RoundAgent(Agent):
     async def _tick(self) -> None:
         if self.crashed:
             return
-        rnd, phase = tick_of(self.context.current_timestamp / TICK_S, self.phase_ticks)
+        rnd, phase = self.now()
         try:
             self.act(rnd, phase)
         except Exception as exc:  # mango logs and drops it; the run must not go on quietly
@@ -66,6 +86,11 @@ class RoundAgent(Agent):
             copies = self.network.copies() if self.network is not None else 1
             for _ in range(copies):
                 await self.send_message(content, receiver_addr=self.addresses[aid])
+
+    def now(self) -> tuple[int, Phase]:
+        """``(round, phase)`` of the clock now."""
+        elapsed = (self.context.current_timestamp - self.t0) / self.tick_s
+        return tick_of(elapsed, self.phase_ticks)
 
     def send(self, content: Any, aid: str) -> None:
         """Queue ``content`` for agent ``aid`` (sent at the end of this tick)."""

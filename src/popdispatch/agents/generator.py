@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from popdispatch.agents.base import RoundAgent
-from popdispatch.agents.messages import Accept, Ack, Decision, Offer, Signals, Status
+from popdispatch.agents.messages import Accept, Ack, Decision, Offer, Output, Signals, Status
 from popdispatch.agents.plant import Inverters
 from popdispatch.agents.schedule import Phase
 from popdispatch.dynamics.fields import field_weights
@@ -96,6 +96,7 @@ class GeneratorAgent(RoundAgent):
         self.lag = int(lag)
         self.copies = int(copies)
         self.engine_limiter = bool(engine_limiter)
+        self.plant_id: str | None = None  # real time: whom to tell the inverter's output
         self.receiver_scale = 1.0
         self.pending_out: dict[str, tuple[float, int]] = {}  # committed: MW, effective round
         self.pending_in: dict[str, tuple[float, int]] = {}  # received: MW, effective round
@@ -161,9 +162,10 @@ class GeneratorAgent(RoundAgent):
             self.applied.add(decision.txid)
             self.reserved.pop(decision.txid, None)
             if decision.commit:
-                now = int(self.context.current_timestamp // self.round_ticks)
+                now = self.now()[0]
                 if now >= decision.effective_round:
                     self._set(self.p + decision.amount_mw)
+                    self._report()
                 else:
                     self.pending_in[decision.txid] = (decision.amount_mw, decision.effective_round)
         self.send(Ack(decision.txid), sender)
@@ -294,6 +296,16 @@ class GeneratorAgent(RoundAgent):
                 if effective <= rnd:
                     del pending[txid]
                     self._set(self.p + sign * amount)
+                    self._report()
+
+    def _report(self) -> None:
+        """Real time (TCP): tell the plant the inverter's new output at once (in the simulated
+        world the plant reads the inverters)."""
+        if self.plant_id is not None:
+            output = Output(self.aid, self.p)
+            self.schedule_instant_task(
+                self.send_message(output, receiver_addr=self.addresses[self.plant_id])
+            )
 
     @property
     def busy(self) -> bool:

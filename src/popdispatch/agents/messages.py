@@ -86,4 +86,14 @@ class Ack:
     txid: str
 
 
-ALL_MESSAGES = (Measurement, Signals, Status, Offer, Accept, Decision, Ack)
+@json_serializable
+@dataclass(frozen=True)
+class Output:
+    """Generator -> plant, real time only: the output its inverter now holds, MW (a physical
+    reading; in the simulated world the plant reads the inverters directly)."""
+
+    generator: str
+    p_mw: float
+
+
+ALL_MESSAGES = (Measurement, Signals, Status, Offer, Accept, Decision, Ack, Output)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from popdispatch.agents.base import RoundAgent
-from popdispatch.agents.messages import Measurement
+from popdispatch.agents.messages import Measurement, Output
 from popdispatch.agents.schedule import Phase
 from popdispatch.constants import KW_PER_MW
 from popdispatch.game.flows import limited_line_flows
@@ -54,6 +54,10 @@ class PlantAgent(RoundAgent):
         self.rng = np.random.default_rng(seed)
         self.flow = np.zeros(len(problem.limit))
         self.history: list[np.ndarray] = []
+
+    def receive(self, content, sender) -> None:
+        if isinstance(content, Output):  # real time: an inverter's reading
+            self.inverters.p[self.problem.generators.get_loc(content.generator)] = content.p_mw
 
     def act(self, rnd: int, phase: Phase) -> None:
         if phase != Phase.MEASURE:

@@ -20,7 +20,6 @@ from popdispatch.cli.options import (
     feeder_options,
     json_option,
     limit_option,
-    minute_option,
     option,
     profiles_option,
     quiet_option,
@@ -32,8 +31,12 @@ from popdispatch.cli.render import emit
 from popdispatch.report.progress import Progress
 
 
-@click.command(short_help="One minute dispatched by agents over a lossy network (mango).")
-@minute_option
+@click.group(
+    short_help="One minute dispatched by agents over a lossy network (mango).",
+    invoke_without_command=True,
+)
+@option("--minute", "--step", "minute", type=click.IntRange(1),
+        help="1-based minute of the day (566 = the peak); required.")  # fmt: skip
 @limit_option
 @run_options
 @option("--loss", type=click.FloatRange(0.0, 1.0, max_open=True), default=0.0,
@@ -56,14 +59,19 @@ from popdispatch.report.progress import Progress
 @feeder_options
 @json_option
 @quiet_option
-def agents(minute, limits, dynamics, mode, x0, graph, loss, delay_max, duplicate, noise_kw,
+@click.pass_context
+def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, duplicate, noise_kw,
            seed, step_s, max_rounds, pace, profiles, source, as_json, quiet,
            constants=None) -> int:  # fmt: skip
     """One minute dispatched by agents: one per generator, one per node controller and the
     plant, exchanging messages in mango's simulated world with seeded loss, delay and
     duplication; power moves only in pairwise transactions (offer, accept, commit), compared
-    with the DC-OPF.
+    with the DC-OPF. ``agents launch`` runs them as separate processes over TCP instead.
     """
+    if ctx.invoked_subcommand is not None:
+        return 0
+    if minute is None:
+        raise click.MissingParameter(param_hint="'--minute'", param_type="option")
     progress = Progress(quiet)
     settings = settings_from(dynamics, mode, x0, graph, None, constants)
     faults = _faults(loss, delay_max, duplicate, noise_kw, seed)
@@ -203,3 +211,61 @@ def agents_text(s: dict) -> str:
         f"transactions {s['open_transactions']}",
     ]
     return "\n".join(lines)
+
+
+@agents.command(short_help="The agents as separate processes over TCP on localhost.")
+@option("--minute", "--step", "minute", type=click.IntRange(1), required=True,
+        help="1-based minute of the day (566 = the peak).")  # fmt: skip
+@limit_option
+@option("--mode", type=click.Choice(["paper", "exact"]), default="exact", show_default=True,
+        help="How node controllers turn flows into fitness signals.")  # fmt: skip
+@option("--rounds", type=click.IntRange(1), default=60, show_default=True,
+        help="Rounds to run.")  # fmt: skip
+@option("--tick-ms", type=click.FloatRange(1.0), default=50.0, show_default=True,
+        help="Real time per tick, ms (6 ticks a round).")  # fmt: skip
+@option("--startup-s", type=click.FloatRange(1.0), default=40.0, show_default=True,
+        help="Seconds the processes get to load their data before round 0.")  # fmt: skip
+@json_option
+@quiet_option
+def launch(minute, limits, mode, rounds, tick_ms, startup_s, as_json, quiet) -> int:
+    """One OS process per agent (plant, node controllers, generators) on localhost, talking
+    over TCP (mango), on the built-in ieee-elv case; compared with the DC-OPF. Ctrl-C stops
+    every process (exit 130)."""
+    import numpy as np
+
+    from popdispatch.agents.launch import launch as run_launch
+    from popdispatch.opf import solve_opf
+    from popdispatch.runs import FeederSource, load_run
+
+    progress = Progress(quiet)
+    _faults(0.0, 0, 0.0, 0.0, 0)  # the agents extra is installed
+    problem, _ = load_run(FeederSource(), None, minute, limits, progress)
+    step = {"exact": 0.005, "paper": 1.0e-4}[mode]
+    with progress.step(f"minute {minute}: {rounds} rounds by agent processes over TCP"):
+        result = run_launch(minute, [list(x) for x in limits], mode=mode, rounds=rounds,
+                            tick_s=tick_ms / 1000.0, step_s=step, startup_s=startup_s)  # fmt: skip
+    opf = solve_opf(problem, minute)
+    final = result.trajectory_kw[-1]
+    error = float(np.abs(final - opf.p_kw).max()) if opf.status == "optimal" else None
+    summary = {
+        "minute": minute,
+        "mode": mode,
+        "rounds": len(result.trajectory_kw) - 1,
+        "processes": result.processes,
+        "generators": [
+            {"name": g, "setpoint_kw": float(p), "opf_kw": float(o)}
+            for g, p, o in zip(result.generators, final, opf.p_kw, strict=True)
+        ],
+        "max_abs_error_kw": error,
+        "wall_seconds": result.wall_seconds,
+    }
+    text = "\n".join(
+        [f"minute {minute}, {mode} mode: {summary['rounds']} rounds by agent processes over TCP"]
+        + [
+            f"{g['name']:>10} {g['setpoint_kw']:>10.3f} {g['opf_kw']:>10.3f}"
+            for g in summary["generators"]
+        ]
+        + ["max |error| vs DC-OPF: " + ("null" if error is None else f"{error:.4f} kW")]
+    )
+    emit(stamp(summary), as_json, text)
+    return 0

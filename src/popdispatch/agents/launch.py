@@ -1,0 +1,218 @@
+"""The agents as separate OS processes over TCP on localhost (``agents launch``).
+
+:func:`launch` starts one process per agent (``python -m popdispatch.agents.launch --id AID
+CONFIG``), each building the same problem and agents (:func:`popdispatch.agents.system.
+build_agents`) and keeping its own, in a mango TCP container on ``127.0.0.1:<port>`` with
+mango's real-time clock. Every agent acts at absolute deadlines from a start time the launcher
+fixes (after the processes have had time to load their data), ``tick_s`` seconds a tick; the
+plant learns the generators' outputs from ``Output`` messages (it shares no memory with the
+inverters). Every process stops after the agreed number of rounds; the plant prints its
+recorded set points as JSON. The launcher starts the children in their own process group and
+on Ctrl-C (or any error) terminates the group and waits for every child: no orphans.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+HOST = "127.0.0.1"
+
+
+@dataclass(frozen=True)
+class LaunchConfig:
+    """What every process of a launched run agrees on. Powers in kW where people give them.
+
+    ``limits``: path limits ``[a, b, kW]``; ``ports``: agent id -> TCP port; ``t0``: epoch
+    seconds of round 0's first tick; ``tick_s``: seconds per tick; ``rounds``: rounds to run;
+    ``step_s``: the round's Euler step (s)."""
+
+    minute: int
+    limits: list
+    mode: str
+    dynamics: str
+    graph: str
+    ports: dict
+    t0: float
+    tick_s: float
+    rounds: int
+    step_s: float
+
+
+def _codec():
+    from mango import JSON
+
+    from popdispatch.agents.messages import ALL_MESSAGES
+
+    codec = JSON()
+    for kind in ALL_MESSAGES:
+        codec.add_serializer(*kind.__serializer__())
+    return codec
+
+
+def _system(config: LaunchConfig):
+    """The problem and the agents, built the same way in every process."""
+    from popdispatch.agents.network import Faults
+    from popdispatch.agents.system import build_agents
+    from popdispatch.online import RunSettings
+    from popdispatch.runs import FeederSource, load_run
+
+    limits = [tuple(limit) for limit in config.limits]
+    problem, _ = load_run(FeederSource(), None, config.minute, limits)
+    settings = RunSettings(dynamics=config.dynamics, mode=config.mode, graph=config.graph)
+    system = build_agents(problem, config.minute, settings, config.step_s, Faults())
+    return problem, system
+
+
+def agent_ids(system) -> dict:
+    """Agent id -> agent of a built system (plant, controllers, generators by name)."""
+    ids = {"plant": system.plant, **system.controllers}
+    ids.update(zip(system.graph.nodes, system.generators, strict=True))
+    return ids
+
+
+async def _serve(aid: str, config: LaunchConfig) -> None:
+    from mango import AgentAddress, activate, create_tcp_container
+
+    problem, system = _system(config)
+    agent = agent_ids(system)[aid]
+    agent.network = None
+    agent.t0, agent.tick_s, agent.wall_clock = config.t0, config.tick_s, True
+    if aid in system.graph.nodes:
+        agent.plant_id = "plant"
+    container = create_tcp_container((HOST, config.ports[aid]), codec=_codec())
+    container.register(agent, suggested_aid=aid)
+    agent.addresses = {a: AgentAddress((HOST, port), a) for a, port in config.ports.items()}
+    end = config.t0 + (config.rounds + 1) * agent.round_ticks * config.tick_s
+    async with activate(container):
+        await asyncio.sleep(max(0.0, end - time.time()))
+    if agent.error is not None:
+        raise RuntimeError(f"agent {aid} failed: {agent.error!r}")
+    if aid == "plant":
+        print(json.dumps({"setpoints_mw": [list(map(float, p)) for p in agent.history]}))
+
+
+@dataclass(frozen=True)
+class LaunchResult:
+    """Set points (kW) the plant saw at the start of every round, the run's wall time (s,
+    start-up included) and the number of agent processes."""
+
+    generators: list
+    trajectory_kw: np.ndarray
+    wall_seconds: float
+    processes: int
+
+
+def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
+           graph: str = "complete", rounds: int = 60, tick_s: float = 0.05,
+           step_s: float = 0.005, base_port: int = 0,
+           startup_s: float = 30.0) -> LaunchResult:  # fmt: skip
+    """Run the agents of one minute as separate processes over TCP (module docstring).
+
+    ``base_port``: first TCP port (0: free ports the OS hands out); ``startup_s``: seconds
+    the processes get to load their data before round 0.
+    """
+    from popdispatch.runs import FeederSource, load_run
+
+    problem, _ = load_run(FeederSource(), None, minute, [tuple(x) for x in limits])
+    from popdispatch.agents.network import Faults
+    from popdispatch.agents.system import build_agents
+    from popdispatch.online import RunSettings
+
+    settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph)
+    ids = list(agent_ids(build_agents(problem, minute, settings, step_s, Faults())))
+    ports = _ports(len(ids), base_port)
+    config = LaunchConfig(minute, [list(x) for x in limits], mode, dynamics, graph,
+                          dict(zip(ids, ports, strict=True)), time.time() + startup_s, tick_s,
+                          rounds, step_s)  # fmt: skip
+    start = time.perf_counter()
+    outputs = _run_children(ids, config)
+    history = json.loads(outputs["plant"])["setpoints_mw"]
+    wall = time.perf_counter() - start
+    return LaunchResult(list(problem.generators), np.array(history) * 1000.0, wall, len(ids))
+
+
+def _ports(n: int, base: int) -> list[int]:
+    """``n`` TCP ports: ``base``, ``base + 1``, ... or free ones from the OS."""
+    if base:
+        return [base + i for i in range(n)]
+    import socket
+
+    sockets = [socket.socket() for _ in range(n)]
+    try:
+        for s in sockets:
+            s.bind((HOST, 0))
+        return [s.getsockname()[1] for s in sockets]
+    finally:
+        for s in sockets:
+            s.close()
+
+
+def _run_children(ids: list[str], config: LaunchConfig) -> dict[str, str]:
+    """Start one process per agent in a new process group; wait for all; on Ctrl-C or an
+    error terminate the group and wait, so no child outlives the launcher."""
+    with tempfile.TemporaryDirectory(prefix="popdispatch-launch-") as folder:
+        path = Path(folder) / "config.json"
+        path.write_text(json.dumps(asdict(config)))
+        children, group = {}, None
+        try:
+            for aid in ids:
+                child = subprocess.Popen(
+                    [sys.executable, "-m", "popdispatch.agents.launch", "--id", aid, str(path)],
+                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                    process_group=group or 0,
+                )  # fmt: skip
+                group = group or child.pid
+                children[aid] = child
+            outputs = {}
+            for aid, child in children.items():
+                out, err = child.communicate()
+                if child.returncode != 0:
+                    last = err.strip().splitlines()[-1] if err.strip() else "no message"
+                    raise RuntimeError(f"agent process {aid} exited {child.returncode}: {last}")
+                outputs[aid] = out
+            return outputs
+        finally:
+            _stop(children, group)
+
+
+def _stop(children: dict, group: int | None) -> None:
+    """Terminate what is still running in the group, then wait for every child."""
+    if group is not None and any(c.poll() is None for c in children.values()):
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(group, signal.SIGTERM)
+    for child in children.values():
+        try:
+            child.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
+
+
+def main(argv=None) -> int:
+    """A child process: ``--id AID CONFIG``."""
+    parser = argparse.ArgumentParser(description="one agent of a launched run")
+    parser.add_argument("--id", required=True)
+    parser.add_argument("config", type=Path)
+    args = parser.parse_args(argv)
+    config = LaunchConfig(**json.loads(args.config.read_text()))
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the launcher decides; it sends SIGTERM
+    asyncio.run(_serve(args.id, config))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

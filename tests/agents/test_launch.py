@@ -1,0 +1,60 @@
+"""``agents launch``: one OS process per agent over TCP on localhost; the congestion minute
+reaches the DC-OPF (solved here) within 0.01 kW and no process outlives the launcher."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+pytest.importorskip(
+    "mango", reason='the agents need mango-agents: pip install "popdispatch[agents]"'
+)
+
+from popdispatch.cli.agents import agents  # noqa: E402
+from popdispatch.opf import solve_opf  # noqa: E402
+
+
+def _children() -> int:
+    """Agent processes of a launch still running on this machine."""
+    found = subprocess.run(["pgrep", "-f", "popdispatch.agents.launch --id"],
+                           capture_output=True, text=True)  # fmt: skip
+    return len(found.stdout.split())
+
+
+def test_launched_congestion_minute_reaches_dc_opf(congestion_problem):
+    args = ["launch", "--minute", "566", "--limit", "505:666=28", "--rounds", "40", "--json",
+            "-q"]  # fmt: skip
+    result = CliRunner().invoke(agents, args)
+    assert result.exit_code == 0, result.output
+    s = json.loads(result.output)
+    assert s["processes"] == 12 and s["rounds"] >= 40
+    opf = solve_opf(congestion_problem, 566).p_kw
+    setpoints = np.array([g["setpoint_kw"] for g in s["generators"]])
+    assert np.abs(setpoints - opf).max() < 0.01  # kW
+    assert _children() == 0
+
+
+def test_ctrl_c_leaves_no_process():
+    """SIGINT to the launcher during start-up: exit 130 (as the CLI reports interruptions)
+    or a KeyboardInterrupt, and every agent process gone."""
+    code = (
+        "from popdispatch.agents.launch import launch\n"
+        "launch(566, [[505, 666, 28.0]], rounds=40, startup_s=60)\n"
+    )
+    launcher = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE)
+    deadline = time.time() + 60
+    while _children() < 12 and time.time() < deadline:
+        time.sleep(0.5)
+    assert _children() == 12
+    os.kill(launcher.pid, signal.SIGINT)
+    launcher.wait(timeout=60)
+    assert launcher.returncode != 0
+    assert _children() == 0
