@@ -6,7 +6,8 @@ the round's Euler step (``--step-s``). The output is the snapshot's (``--json``:
 keys, with ``iterations`` counting rounds) plus what the messages did: ``messages``, ``lost``,
 ``max_imbalance_w`` (committed state), ``max_transient_w`` (taken up by the source bus),
 ``final_imbalance_w``, ``open_transactions``, ``rounds``, ``agents`` and
-``messages_per_agent_round``. Register it in the main group with
+``messages_per_agent_round``. ``agents launch`` runs the agents as one OS process each over
+TCP on localhost (:mod:`popdispatch.agents.launch`). Register the group in the main one with
 ``cli.add_command(agents)`` (:mod:`popdispatch.cli.commands`).
 """
 
