@@ -31,6 +31,7 @@ def _children() -> int:
 
 def test_launched_congestion_minute_reaches_dc_opf(congestion_problem):
     args = ["launch", "--minute", "566", "--limit", "505:666=28", "--rounds", "40", "--json",
+            "--startup-s", "60",
             "-q"]  # fmt: skip
     result = CliRunner().invoke(agents, args)
     assert result.exit_code == 0, result.output

@@ -36,6 +36,7 @@ class RoundAgent(Agent):
         self.t0 = 0.0  # clock time of round 0's first tick, s
         self.tick_s = TICK_S  # clock seconds per tick
         self.wall_clock = False  # real time (TCP): ticks at absolute deadlines, no drift
+        self.missed_ticks = 0  # real time: deadlines already past when the agent got to them
 
     #: The ticks of a round this agent acts at (each its own periodic task: an agent that
     #: woke at every tick only to find nothing to do cost the simulation a third of its time).
@@ -61,10 +62,13 @@ class RoundAgent(Agent):
         k = 0
         while True:
             due = self.t0 + (k * self.round_ticks + phase * self.phase_ticks) * self.tick_s
+            k += 1
+            if due < clock.time - 0.5 * self.tick_s:
+                self.missed_ticks += 1  # started late or fell behind: that tick is gone
+                continue
             if due > clock.time:
                 await clock.sleep(due - clock.time)
             await self._tick()
-            k += 1
 
     @property
     def round_ticks(self) -> int:

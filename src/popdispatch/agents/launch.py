@@ -100,6 +100,9 @@ async def _serve(aid: str, config: LaunchConfig) -> None:
         await asyncio.sleep(max(0.0, end - time.time()))
     if agent.error is not None:
         raise RuntimeError(f"agent {aid} failed: {agent.error!r}")
+    if agent.missed_ticks:
+        print(f"agent {aid} missed {agent.missed_ticks} ticks (started late or fell behind; "
+              "a longer --startup-s or --tick-ms helps)", file=sys.stderr)  # fmt: skip
     if aid == "plant":
         print(json.dumps({"setpoints_mw": [list(map(float, p)) for p in agent.history]}))
 
