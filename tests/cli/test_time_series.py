@@ -171,3 +171,45 @@ def test_fleet_by_opendss_bus_name(tmp_path):
     assert p["pv"] == pytest.approx(500, abs=1e-3)
     assert p["reg"] == pytest.approx(1000, abs=1e-3)
     assert p["grid"] == pytest.approx(s["demand_kw"] - 1500, abs=1e-3)
+
+
+SIMBENCH = importlib.util.find_spec("simbench") is not None
+SB_FLEET = """bus,name,b_eur_per_mwh,c_eur_per_mw2h,pmin_kw,pmax_kw
+3,grid,60,0.5,0,400
+6,pv6,5,2,0,40
+10,pv10,6,2,0,78
+"""
+
+
+@pytest.mark.skipif(not SIMBENCH, reason="needs the optional simbench extra")
+def test_simbench_case_runs_on_its_year_across_the_clock_change(tmp_path):
+    """27 March 2016, German time: 01:45+01:00 is followed by 03:00+02:00 (a quarter hour
+    later); the demand of those steps is simbench's own absolute values."""
+    import simbench
+
+    from popdispatch.feeder.cases import simbench_net
+
+    fleet = tmp_path / "fleet.csv"
+    fleet.write_text(SB_FLEET)
+    result = run(
+        "day", "--case", "simbench:1-LV-rural1--0-sw", "--fleet", str(fleet), "--mode", "exact",
+        "--start", "2016-03-27T01:45", "--end", "2016-03-27T03:00", "--out", str(tmp_path / "o"),
+        "--json", "-q",
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    s = json.loads(result.stdout)
+    assert (s["first_time"], s["last_time"]) == (
+        "2016-03-27T01:45:00+01:00",
+        "2016-03-27T03:00:00+02:00",
+    )
+    assert s["steps"] == 2 and s["step_minutes"] == 15.0 and s["status"] == "converged"
+    net = simbench_net("1-LV-rural1--0-sw")
+    p_mw = simbench.get_absolute_values(net, profiles_instead_of_study_cases=True)[("load", "p_mw")]
+    expected_kw = p_mw.to_numpy().sum(axis=1)[s["first_step"] - 1 : s["last_step"]] * 1000.0
+    day = pd.read_csv(tmp_path / "o" / "day.csv")
+    np.testing.assert_allclose(day.demand_kw, expected_kw, rtol=1e-6)
+    ambiguous = run(
+        "day", "--case", "simbench:1-LV-rural1--0-sw", "--fleet", str(fleet),
+        "--start", "2016-10-30T02:30", "-q",
+    )  # fmt: skip
+    assert_one_line_error(ambiguous, 2, "--start", "ambiguous", "UTC offset")

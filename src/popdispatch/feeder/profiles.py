@@ -103,7 +103,14 @@ class Timeline:
             raise OptionError(f"{text!r} is not {kind}", option) from None
         zone = self.times.tz
         if zone is not None and when.tzinfo is None:
-            return when.tz_localize(zone)
+            try:
+                return when.tz_localize(zone)
+            except Exception:  # pytz's AmbiguousTimeError/NonExistentTimeError: a clock change
+                raise OptionError(
+                    f"{text!r} is ambiguous or does not exist in {zone} (a clock change): give "
+                    "its UTC offset, e.g. 2016-10-30T02:30+02:00",
+                    option,
+                ) from None
         if zone is None and when.tzinfo is not None:
             return when.tz_convert(None)
         return when
