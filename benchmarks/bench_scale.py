@@ -1,14 +1,16 @@
-"""Scaling benchmark on synthetic radial feeders: time per iteration and iterations to converge.
+"""Exact mode on every scale (issue 12): iterations, evaluations and distance to the DC-OPF.
 
-Usage: python benchmarks/bench_scale.py [--repeat N] [--sizes 1000,10000,100000]
-    [--generators 10,100,1000] [--limited 1.0] [--horizon 3000]
+Usage: python benchmarks/bench_scale.py [--cases SUBSTRING,...] [--sizes 1000,10000,100000]
+    [--horizon 3000] [--markdown]
 
-For every (buses, generators) pair: a seeded synthetic feeder (popdispatch.feeder.synthetic)
-with ``--limited`` of its candidate lines limited (1.0 = every line with a generator below
-it: the most controllers), reduced to key nodes; one exact-mode minute at peak load from
-uniform shares. Prints the medians of N runs (after one warm-up run that compiles the kernels)
-of the engine time per iteration over ``--iterations`` fixed iterations, and the iterations the
-run needs to converge (up to ``--horizon``), with the game/field evaluations per iteration.
+For every case of ``benchmarks/scale_cases.py`` (the built-in cases and MATPOWER radial cases
+without and with a binding limit, synthetic 1k/10k/100k feeders with every candidate line
+limited, the 1k feeder times 100): one exact-mode snapshot from uniform shares with the default
+settings (tolerance 1e-6 of demand) up to ``--horizon`` iterations, against the DC-OPF
+(``popdispatch.opf.solve_opf``). Prints one row per case: buses, limited lines (binding ones),
+iterations, game/field evaluations per iteration, the largest ``|p - p_opf|`` (kW) and its
+bound ``max(1e-6 * demand, 0.001 kW)``, the status and the engine's time (kernels compiled
+beforehand; one run, not a median: the iteration counts are the point).
 """
 
 from __future__ import annotations
@@ -16,77 +18,83 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
+import sys
 import time
+from dataclasses import replace
 from datetime import date
+from pathlib import Path
 
-from popdispatch.feeder.reduction import reduce_feeder
-from popdispatch.feeder.synthetic import synthetic_feeder, synthetic_load_kw
-from popdispatch.game.problem import build_problem_from_loads
-from popdispatch.integrate import Integrator, Status
-from popdispatch.modes import get_mode
-from popdispatch.online import Engine, RunSettings, initial_shares
+import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-def scale_problem(n_buses: int, n_generators: int, limited: float):
-    feeder = synthetic_feeder(n_buses, n_generators, seed=1, limited_lines=limited)
-    load = synthetic_load_kw(feeder).loc[feeder.loads.index].to_numpy()
-    return build_problem_from_loads(reduce_feeder(feeder), load[None, :], "synthetic peak")
+from scale_cases import all_cases  # noqa: E402
+
+from popdispatch.integrate import Status  # noqa: E402
+from popdispatch.online import Engine, RunSettings, initial_shares  # noqa: E402
+from popdispatch.opf import solve_opf  # noqa: E402
 
 
-def per_iteration(problem, iterations: int, repeat: int) -> tuple[float, float]:
-    """Median seconds per iteration over ``iterations`` fixed iterations, evaluations each."""
-    stepping = get_mode("exact").integrator
-    fixed = Integrator(**{**stepping.__dict__, "max_iterations": iterations, "tol_kw": 1e-12})
-    times, evaluations = [], []
-    for _ in range(repeat + 1):  # the first run compiles / loads the kernels
-        engine = Engine(problem, RunSettings(mode="exact", integrator=fixed))
-        x = initial_shares(problem, "uniform", 1)
-        start = time.perf_counter()
-        steps = engine.run_minute(x, 1, record=False).iterations
-        times.append((time.perf_counter() - start) / steps)
-        evaluations.append(engine.evaluations / steps)
-    return statistics.median(times[1:]), statistics.median(evaluations[1:])
-
-
-def to_converge(problem, horizon: int) -> tuple[int, bool]:
-    stepping = get_mode("exact").integrator
-    capped = Integrator(**{**stepping.__dict__, "max_iterations": horizon})
-    engine = Engine(problem, RunSettings(mode="exact", integrator=capped))
-    run = engine.run_minute(initial_shares(problem, "uniform", 1), 1, record=False)
-    return run.iterations, run.status == Status.CONVERGED
+def run_case(problem, horizon: int) -> dict:
+    """One exact-mode snapshot of minute 1 from uniform shares, and its DC-OPF."""
+    settings = RunSettings(mode="exact")
+    integrator = replace(settings.stepping, max_iterations=horizon)
+    settings = replace(settings, integrator=integrator)
+    engine = Engine(problem, settings)
+    x = initial_shares(problem, "uniform", 1)
+    engine.warm_up(x, 1)
+    start = engine.evaluations
+    began = time.perf_counter()
+    run = engine.run_minute(x, 1, record=False)
+    seconds = time.perf_counter() - began
+    p_mw = run.x * problem.demand[0]
+    status = Status(run.status).name.lower()
+    if run.status == Status.CONVERGED:
+        reason = engine.stall_reasons(np.array([1]), p_mw[None], engine.z[None],
+                                      np.array([True]))[0]  # fmt: skip
+        status = "converged" if reason is None else "stalled"
+    opf = solve_opf(problem, 1)
+    return {
+        "lines": len(problem.limit),
+        "binding": int(np.sum(np.abs(opf.line_price) > 1e-6)),
+        "iterations": run.iterations,
+        "evaluations": (engine.evaluations - start) / max(run.iterations, 1),
+        "error_kw": float(np.max(np.abs(p_mw * 1e3 - opf.p_kw))),
+        "bound_kw": max(1e-6 * opf.demand_kw, 1e-3),
+        "demand_kw": opf.demand_kw,
+        "status": status,
+        "seconds": seconds,
+    }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--cases", default="", help="comma-separated substrings of case names")
     parser.add_argument("--sizes", default="1000,10000,100000")
-    parser.add_argument("--generators", default="10,100,1000")
-    parser.add_argument("--limited", type=float, default=1.0)
-    parser.add_argument("--iterations", type=int, default=200)
     parser.add_argument("--horizon", type=int, default=3000)
     args = parser.parse_args()
+    wanted = [w for w in args.cases.split(",") if w]
+    sizes = tuple(int(s) for s in args.sizes.split(",") if s)
     print(
-        f"# popdispatch scale benchmark, {date.today()}, "
+        f"# popdispatch exact mode on every scale, {date.today()}, "
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-        f"Python {platform.python_version()}; exact mode, medians of {args.repeat}"
+        f"Python {platform.python_version()}"
     )
-    print("buses | generators | key nodes | limited lines | ms/iteration | evaluations/iteration"
-          " | iterations to converge")  # fmt: skip
-    for n_buses in map(int, args.sizes.split(",")):
-        for n_gen in map(int, args.generators.split(",")):
-            if n_gen * 4 > n_buses:
-                continue
-            problem = scale_problem(n_buses, n_gen, args.limited)
-            seconds, evaluations = per_iteration(problem, args.iterations, args.repeat)
-            steps, converged = to_converge(problem, args.horizon)
-            converge = f"{steps}" if converged else f">{args.horizon} (not converged)"
-            print(
-                f"{n_buses} | {n_gen} | {problem.feeder.n_nodes} | {len(problem.limit)} | "
-                f"{seconds * 1e3:.3f} | {evaluations:.1f} | {converge}",
-                flush=True,
-            )
-
+    print("| case | buses | limits | limited (binding) | iterations | evaluations/iteration "
+          "| max abs(p - p_opf), kW | bound, kW | status | engine ms |")  # fmt: skip
+    print("| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | --- | ---: |")
+    for name, limits, build in all_cases(sizes):
+        if wanted and not any(w in name for w in wanted):
+            continue
+        problem = build()
+        row = run_case(problem, args.horizon)
+        buses = problem.feeder.original.buses.shape[0]
+        print(
+            f"| {name} | {buses} | {limits} | {row['lines']} ({row['binding']}) | "
+            f"{row['iterations']} | {row['evaluations']:.1f} | {row['error_kw']:.2g} | "
+            f"{row['bound_kw']:.2g} | {row['status']} | {row['seconds'] * 1e3:.1f} |",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import sys
+from dataclasses import replace
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -11,9 +15,11 @@ from hypothesis import strategies as st
 from popdispatch.errors import OptionError
 from popdispatch.feeder.profiles import single_minute_profiles
 from popdispatch.feeder.reduction import reduce_feeder
+from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.problem import build_problem
-from popdispatch.integrate import Integrator
-from popdispatch.online import RunSettings, run_snapshot
+from popdispatch.integrate import Status
+from popdispatch.modes.exact import ExactConstants, scales
+from popdispatch.online import Engine, RunSettings, initial_shares, run_snapshot
 from popdispatch.opf import generation_cost, solve_opf
 from popdispatch.readers import read_profiles
 from popdispatch.scenarios import apply_path_limits, day_vs_opf, elv_problem
@@ -142,10 +148,10 @@ def test_random_feeders_exact_equilibrium_is_the_qp_solution(seed, n_buses, n_ge
     load *= rng.uniform(0.2, 0.9) * capacity / load.sum()
     problem = build_problem(reduce_feeder(feeder), single_minute_profiles(1, load, "random"))
     opf = solve_opf(problem, 1)
-    integrator = Integrator(
-        method="heun", tol_kw=1e-5, window=20, max_iterations=60000, extrapolate=True
-    )
+    # the mode's integrator (tolerance 1e-6 of demand), longer windows and a 10-minute horizon
+    integrator = replace(EXACT.stepping, window=20, max_iterations=60000)
     run = run_snapshot(problem, 1, RunSettings(mode="exact", integrator=integrator))
+    tol_kw = integrator.tol_mw(float(problem.demand[0])) * 1000.0
     if opf.status == "infeasible":
         # prices rise until they pass the cap; a tiny overflow may outlast the horizon
         assert run.status in ("infeasible", "not_converged")
@@ -163,7 +169,7 @@ def test_random_feeders_exact_equilibrium_is_the_qp_solution(seed, n_buses, n_ge
     # A converged run stops with every set point within tol_kw (window means and projected
     # tail); one judged at the horizon is held to the 1e-3 kW of the set-point check below.
     # Clarabel's own relative gap (1e-10) covers the yardstick's error.
-    d_mw = (integrator.tol_kw if run.status == "converged" else 1e-3) / 1000.0
+    d_mw = (tol_kw if run.status == "converged" else 1e-3) / 1000.0
     marginal = np.abs(problem.b + 2.0 * problem.c * opf.p_kw / 1000.0)
     allowed = float(marginal.sum() * d_mw + problem.c.sum() * d_mw**2) + 1e-10 * abs(opf.cost)
     assert run_cost - opf.cost <= allowed  # never costlier than the optimum beyond that
@@ -272,7 +278,7 @@ def test_degenerate_optima_converge_in_bounded_iterations(case):
     problem = line_feeder(generators, demand_kw)
     x0 = "capacity" if case.endswith("capacity") else "uniform"
     run = run_snapshot(problem, 1, RunSettings(mode="exact", x0=x0))
-    tol_kw = run.settings.stepping.tol_kw
+    tol_kw = run.settings.stepping.tol_mw(demand_kw / 1000.0) * 1000.0  # the run's tolerance
     assert run.status == "converged", run.stall_reason
     assert run.converged_at <= 100  # measured: 10 (cheap pair), 24 (tie at Pmax)
     # the optimum is known by construction: within the run's set-point tolerance
@@ -309,3 +315,98 @@ def test_zero_reduced_cost_at_pmin_is_reported_not_converged():
 
 #: G1 optimal exactly at Pmin = 0 with b = 1.4 EUR/MW = the marginal cost of G2 at 10 kW.
 TIE_AT_PMIN = [(1, 0, 1.4, 20.0, 0, 10), (2, 0, 1.0, 20.0, 0, 20), (3, 0, 5.0, 0.02, 0, 10)]
+
+
+# --- exact mode on every scale (issue 12) ---------------------------------------------------
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import scale_cases  # noqa: E402  (the benchmark's cases: one definition for both)
+
+#: Cases small enough for the test suite (the synthetic 10k/100k feeders are in the benchmark).
+SMALL_CASES = [
+    (name, limits, build)
+    for name, limits, build in scale_cases.all_cases(sizes=(1000,))
+    if not name.startswith("matpower:") or scale_cases.MATPOWER_DIR.is_dir()
+]
+
+
+def _exact_run(problem, horizon: int = 200):
+    """Exact snapshot of minute 1 from uniform shares: ``(status, iterations, evaluations per
+    iteration, set points kW, tolerance kW)``."""
+    settings = RunSettings(mode="exact")
+    settings = replace(settings, integrator=replace(settings.stepping, max_iterations=horizon))
+    engine = Engine(problem, settings)
+    x = initial_shares(problem, "uniform", 1)
+    engine.warm_up(x, 1)
+    start = engine.evaluations
+    run = engine.run_minute(x, 1, record=False)
+    p_mw = run.x * problem.demand[0]
+    status = "not converged"
+    if run.status == Status.CONVERGED:
+        reason = engine.stall_reasons(np.array([1]), p_mw[None], engine.z[None],
+                                      np.array([True]))[0]  # fmt: skip
+        status = "converged" if reason is None else f"stalled: {reason}"
+    evaluations = (engine.evaluations - start) / run.iterations
+    tol_kw = settings.stepping.tol_mw(float(problem.demand[0])) * 1e3
+    return status, run.iterations, evaluations, p_mw * 1e3, tol_kw
+
+
+@pytest.mark.parametrize(
+    ("name", "limits", "build"), SMALL_CASES, ids=[f"{n}-{lim}" for n, lim, _ in SMALL_CASES]
+)
+def test_every_case_converges_to_the_dc_opf_in_200_iterations(name, limits, build):
+    """Issue 12: from uniform shares, converged (KKT check passed) within 200 iterations and
+    equal to the DC-OPF within 1e-6 of demand or 0.001 kW; the binding variants bind."""
+    problem = build()
+    opf = solve_opf(problem, 1)
+    assert opf.status == "optimal"
+    if limits == "binding":
+        assert np.abs(opf.line_price).max() > 1e-6
+    status, iterations, _, p_kw, tol_kw = _exact_run(problem)
+    assert status == "converged"
+    assert iterations <= 200
+    assert np.abs(p_kw - opf.p_kw).max() <= max(1e-6 * opf.demand_kw, 1e-3)
+    # the run's own tolerance: a converged state is within a few tolerances of the optimum
+    assert tol_kw == pytest.approx(max(1e-6 * opf.demand_kw, 1e-3 * 1e-3))
+
+
+def test_a_feeder_scaled_by_100_takes_the_same_iterations():
+    """Loads, capacities and limits x100 (costs kept): iterations within 10 %, evaluations per
+    iteration within 2x, both at the DC-OPF within 1e-6 of their demand."""
+    runs = []
+    for factor in (1.0, 100.0):
+        problem = scale_cases.synthetic(1000, 10, factor)
+        opf = solve_opf(problem, 1)
+        status, iterations, evaluations, p_kw, _ = _exact_run(problem)
+        assert status == "converged"
+        assert np.abs(p_kw - opf.p_kw).max() <= max(1e-6 * opf.demand_kw, 1e-3)
+        runs.append((iterations, evaluations))
+    (it1, ev1), (it100, ev100) = runs
+    assert abs(it100 - it1) <= 0.1 * it1
+    assert 0.5 <= ev100 / ev1 <= 2.0
+
+
+def test_convergence_tolerance_is_relative_to_demand_with_a_floor():
+    stepping = RunSettings(mode="exact").stepping
+    assert stepping.tol_mw(8.6) == pytest.approx(8.6e-6)
+    assert stepping.tol_mw(1e-4) == pytest.approx(1e-9)  # the floor, 1e-6 kW
+    floor = RunSettings(mode="exact", tol_floor_kw=0.01).stepping
+    assert floor.tol_mw(1.0) == pytest.approx(1e-5)
+    with pytest.raises(OptionError, match="tolerance floor"):
+        RunSettings(mode="exact", tol_floor_kw=0.0)
+
+
+def test_exact_constants_are_scaled_by_the_spread_and_paper_constants_are_kept():
+    problem = elv_problem()
+    spread, demand = scales(problem)
+    marginal_top = problem.b + 2 * problem.c * problem.pmax
+    assert spread == pytest.approx(
+        marginal_top.max() - (problem.b + 2 * problem.c * problem.pmin).min()
+    )
+    assert demand == pytest.approx(problem.demand.max())
+    exact = RunSettings(mode="exact").game_constants(problem)
+    assert exact.gain == pytest.approx(ExactConstants().gain / spread)
+    paper = RunSettings(fitness=FitnessParameters.parse("B=900, C=500")).game_constants(problem)
+    assert (paper.B, paper.m, paper.C) == (900.0, 400.0, 500.0)
+    with pytest.raises(OptionError, match="'D=1'"):
+        FitnessParameters.parse("D=1")

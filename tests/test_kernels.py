@@ -130,7 +130,11 @@ def congested():
 def test_compiled_trajectories_equal_the_numpy_reference(congested, mode, dynamics, graph):
     integrator = Integrator(substeps=20, max_iterations=120) if mode == "paper" else None
     settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph, integrator=integrator)
-    trajectory = compare(congested, settings, PEAK_MINUTE, 120)
+    # exact mode on this congestion (four series lines at one limit: degenerate line prices)
+    # amplifies rounding differences about tenfold per 4 iterations (measured: 1e-18 MW at
+    # iteration 10, 1e-9 at 38, 1e-7 at 45), so its comparison at 1e-9 MW stops at 35
+    iterations = 120 if mode == "paper" else 35
+    trajectory = compare(congested, settings, PEAK_MINUTE, iterations)
     assert np.ptp(trajectory, axis=0).max() > 1e-4  # things moved: the comparison is not vacuous
 
 

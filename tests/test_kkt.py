@@ -60,6 +60,12 @@ def test_kkt_price_tolerance_is_the_integrators():
     assert tol.power_mw == pytest.approx(1e-6)
     assert tol.flow_gap == pytest.approx(1e-6 / (100.0 * 4 * 0.01))
     assert tol.price == pytest.approx(2e-2)
+    # relative to the minute's demand (floor tol_kw) and prices in units of the price scale
+    relative = Integrator(method="heun", tol_kw=1e-3, tol_rel=1e-6, price_atol=1e-2, window=4)
+    tol = KktTolerances.of(relative, 100.0, demand_mw=8.0, price_scale=4.0)
+    assert tol.power_mw == pytest.approx(8e-6)
+    assert tol.flow_gap == pytest.approx(8e-6 / (100.0 * 4 * 0.01))
+    assert tol.price == pytest.approx(8e-2)
 
 
 def test_a_day_on_a_ring_is_stalled_minute_by_minute(congested):

@@ -20,7 +20,7 @@ from popdispatch.dynamics import communication_graph, get_dynamics
 from popdispatch.dynamics.fields import Field
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
 from popdispatch.game.parameters import MinuteInputs
-from popdispatch.game.problem import KW_PER_MW, DispatchProblem
+from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import STABLE_STEP, Status
 from popdispatch.modes import ModeCode, get_mode
 
@@ -83,7 +83,8 @@ class ReferenceMinute:
 
     def __init__(self, problem: DispatchProblem, settings, minute: int):
         self.problem, self.minute = problem, minute
-        self.fp = settings.fitness
+        self.fp = settings.game_constants(problem)  # EUR/MW (exact mode: scaled, issue 12)
+        self.price_scale = settings.price_scale(problem)
         self.mode = get_mode(settings.mode)
         dynamics = get_dynamics(settings.dynamics)
         self.field = dynamics.bounded_field if self.mode.bounded else dynamics.field
@@ -91,7 +92,10 @@ class ReferenceMinute:
         self.graph = communication_graph(kind, list(problem.generators))
         inputs = MinuteInputs.of(problem, minute)
         self.active, self.demand, self.lo, self.hi = (
-            inputs.active, inputs.demand, inputs.lo, inputs.hi
+            inputs.active,
+            inputs.demand,
+            inputs.lo,
+            inputs.hi,
         )
         self.integrator = settings.stepping
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
@@ -147,7 +151,7 @@ class ReferenceMinute:
             second, _, _ = self.evaluate(x1, z1)
             x2, z2 = self.heun_combination(h, x, z, point, second)
             scale_x = it.atol + it.rtol * np.abs(x2)
-            scale_z = it.price_atol + it.rtol * np.abs(z2)
+            scale_z = it.price_atol * self.price_scale + it.rtol * np.abs(z2)
             err = max(
                 np.max(np.abs(x2 - x1) / scale_x), np.max(np.abs(z2 - z1) / scale_z, initial=0.0)
             )
@@ -167,7 +171,7 @@ class ReferenceMinute:
         scale = it.atol + it.rtol * np.abs(x)
         k1, k2 = (in1 - out1)[free] / scale[free], (in2 - out2)[free] / scale[free]
         open_ = z + h * zr1 >= 0.0
-        zscale = it.price_atol + it.rtol * np.abs(z)
+        zscale = it.price_atol * self.price_scale + it.rtol * np.abs(z)
         q1, q2 = zr1[open_] / zscale[open_], zr2[open_] / zscale[open_]
         moved = np.sum(k1**2) + np.sum(q1**2)
         turned = np.sum((k2 - k1) ** 2) + np.sum((q2 - q1) ** 2)
@@ -179,7 +183,7 @@ class ReferenceMinute:
         it = self.integrator
         horizon = max_iterations or it.max_iterations
         z = np.zeros(self.mode.controller_states(self.problem)) if z is None else z
-        tol = it.tol_kw / KW_PER_MW
+        tol = it.tol_mw(self.demand)
         need = (3 if it.extrapolate else 2) * it.window
         samples = [x * self.demand]
         h_try = it.dt

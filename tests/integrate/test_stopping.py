@@ -92,7 +92,8 @@ def _integrate(engine, integrator, history):
     x = np.clip(x, minute.lo, minute.hi)
     x /= x.sum()
     return integrate(
-        x, engine.z, engine.term, engine.params, minute, engine.ws, integrator.stepper(),
+        x, engine.z, engine.term, engine.params, minute, engine.ws,
+        integrator.stepper(engine.price_scale),
         integrator.stop_rule(engine.z_cap), engine.h_try, history,
     )  # fmt: skip
 
@@ -125,9 +126,13 @@ def test_paper_mode_stops_at_the_first_iteration_whose_windows_agree(congested):
 
 def test_exact_mode_stops_only_with_every_residual_of_the_last_window_within_tol(congested):
     """Exact mode: window means agree, the tail projection too, and the overflow (part of the
-    residual, evaluated at the start of each iteration) is within tol_kw over the last window."""
+    residual, evaluated at the start of each iteration) is within the minute's tolerance
+    (``max(tol_rel P_d, tol_kw)``) over the last window."""
     outcome, history, _, integrator = _run(congested, "exact")
-    steps, window, tol_kw = outcome.iterations, integrator.window, integrator.tol_kw
+    demand_mw = float(congested.demand[PEAK_MINUTE - 1])
+    steps, window = outcome.iterations, integrator.window
+    tol_kw = integrator.tol_mw(demand_mw) * 1000.0
+    assert tol_kw == pytest.approx(1e-6 * demand_mw * 1000.0)
     assert outcome.status == Status.CONVERGED
     assert 0 <= outcome.converged_at == steps - window and outcome.first_congestion >= 1
     assert steps >= 3 * window  # the extrapolating rule needs three windows
@@ -150,4 +155,3 @@ def test_a_price_past_its_cap_stops_the_run_as_infeasible(congested):
     outcome = _integrate(engine, engine.settings.stepping, np.empty((0, congested.n_generators)))
     assert outcome.status == Status.INFEASIBLE
     assert 1 <= outcome.first_congestion <= outcome.iterations and engine.z.max() > 1e-9
-

@@ -383,12 +383,6 @@ def test_exact_mode_on_kerber_lands_on_the_dc_opf(limit_kw):
     np.testing.assert_allclose(snap.setpoints_kw, opf.p_kw, atol=1e-3)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 12 open point (exact mode's absolute stopping tolerance): measured on "
-    "2026-12-01, status not_converged after 6000 iterations although 3.4e-5 kW from the DC-OPF "
-    "(line price -11.2 EUR/MWh); remove this mark when it converges",
-)
 def test_exact_mode_on_kerber_with_a_binding_limit_converges():
     fleet = make_fleet([(1, 0, 20.0, 0.5, 0, 200), (8, 0, 5.0, 20.0, 0, 60),
                         (14, 0, 8.0, 10.0, 0, 60)])  # fmt: skip

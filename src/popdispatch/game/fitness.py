@@ -38,6 +38,34 @@ class FitnessParameters:
             if not (value >= 0 and value < float("inf")):
                 raise ValueError(f"fitness constant {name} must be finite and >= 0, got {value}")
 
+    @classmethod
+    def parse(cls, text: str) -> FitnessParameters:
+        """The paper's constants from ``"B=1000,m=400,C=1000"`` (any subset, the others at
+        their defaults; a CLI's ``--constants``). A bad entry raises
+        :class:`~popdispatch.errors.OptionError` naming it."""
+        from popdispatch.errors import OptionError
+
+        known = ("B", "m", "C", "gain", "price_rate")
+        values: dict[str, float] = {}
+        for item in filter(None, (part.strip() for part in text.split(","))):
+            name, sep, value = item.partition("=")
+            name = name.strip()
+            if not sep or name not in known:
+                raise OptionError(
+                    f"constant {item!r} is not NAME=VALUE with NAME in {', '.join(known)}",
+                    "--constants",
+                )
+            try:
+                values[name] = float(value)
+            except ValueError:
+                raise OptionError(
+                    f"constant {name} has no number: {value!r}", "--constants"
+                ) from None
+        try:
+            return cls(**values)
+        except ValueError as error:
+            raise OptionError(str(error), "--constants") from None
+
 
 @nb.njit(cache=True, inline="always")
 def barrier_at(p: float, pmin: float, pmax: float, m: float) -> float:

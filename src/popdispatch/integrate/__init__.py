@@ -45,8 +45,13 @@ class Integrator:
         :mod:`popdispatch.integrate.steppers`.
     substeps : Euler steps per iteration (internal step ``dt / substeps``, s).
     rtol, atol : Heun error control: relative, and absolute on the shares (dimensionless).
-    price_atol : Heun error control: absolute on controller states, EUR/MW.
-    tol_kw : convergence tolerance on window means of the set points and on the residual, kW.
+    price_atol : Heun error control: absolute on controller states, in units of the mode's
+        price scale (exact mode: the marginal-cost spread, so dimensionless; see
+        :func:`popdispatch.modes.exact.scales`).
+    tol_kw : convergence tolerance on window means of the set points and on the residual, kW;
+        with ``tol_rel`` the absolute floor of the tolerance.
+    tol_rel : convergence tolerance relative to the minute's demand (dimensionless): a
+        minute's tolerance is ``max(tol_rel * P_d, tol_kw)`` (0: ``tol_kw`` alone).
     window : iterations per averaging window.
     max_iterations : horizon per run (per minute in the day loop); 6000 = one minute.
     extrapolate : also require the geometrically projected remaining motion to be within
@@ -60,6 +65,7 @@ class Integrator:
     atol: float = 1e-8
     price_atol: float = 1e-4
     tol_kw: float = 0.01
+    tol_rel: float = 0.0
     window: int = 20
     max_iterations: int = 6000
     extrapolate: bool = False
@@ -70,6 +76,8 @@ class Integrator:
         for name in ("dt", "tol_kw", "rtol", "atol", "price_atol"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"integrator {name} must be positive, got {getattr(self, name)}")
+        if not 0.0 <= self.tol_rel < 1.0:
+            raise ValueError(f"integrator tol_rel must be in [0, 1), got {self.tol_rel}")
         for name in ("substeps", "window", "max_iterations"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"integrator {name} must be >= 1, got {getattr(self, name)}")
@@ -78,17 +86,22 @@ class Integrator:
     def method_code(self) -> Method:
         return METHODS[self.method]
 
-    def stepper(self) -> StepperSettings:
-        """The stepper's settings for the compiled kernels."""
+    def stepper(self, price_scale: float = 1.0) -> StepperSettings:
+        """The stepper's settings for the compiled kernels; ``price_scale`` (EUR/MW) turns
+        ``price_atol`` into EUR/MW."""
         return StepperSettings(
             int(self.method_code), float(self.dt), int(self.substeps), float(self.rtol),
-            float(self.atol), float(self.price_atol),
+            float(self.atol), float(self.price_atol * price_scale),
         )  # fmt: skip
 
     def stop_rule(self, z_cap: float) -> StopRule:
         """The stopping rule's settings for the compiled kernels (``tol_kw`` in MW)."""
-        return StopRule(float(self.tol_kw / KW_PER_MW), int(self.window),
+        return StopRule(float(self.tol_kw / KW_PER_MW), float(self.tol_rel), int(self.window),
                         int(self.max_iterations), float(z_cap), bool(self.extrapolate))  # fmt: skip
+
+    def tol_mw(self, demand_mw: float) -> float:
+        """The convergence tolerance of a minute with demand ``demand_mw``, MW."""
+        return max(self.tol_rel * demand_mw, self.tol_kw / KW_PER_MW)
 
 
 __all__ = [

@@ -64,7 +64,7 @@ def integrate(x, z, term, params, minute, ws, stepper, rule, h_try, history):
                 history[k, i] = ring[row, i]
         if first_congestion < 0 and congested > 0.0:
             first_congestion = k
-        status, calm = check(rule, ring, k, z, residual, calm)
+        status, calm = check(rule, ring, k, z, residual, calm, demand)
         if status == Status.CONVERGED:
             return Outcome(k, status, k - rule.window, first_congestion, h_try)
         if status == Status.INFEASIBLE:

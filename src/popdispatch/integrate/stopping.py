@@ -1,11 +1,12 @@
 """The stopping rule: converged, not (yet) converged, or infeasible.
 
-Convergence (documented criterion): the mean set point of every generator over the last
-``window`` iterations differs by at most ``tol_kw`` kilowatts from its mean over the ``window``
-iterations before, and the controllers' residual (exact mode: overflow, or slack under a
-positive price) is at most ``tol_kw`` at every iteration of the last window; with
-``extrapolate`` (exact mode) the geometric tail of the window means must be within ``tol_kw``
-as well. Means, not samples, because a generator sliding along its limit chatters on the
+Convergence (documented criterion), with the minute's tolerance ``tol = max(tol_rel * P_d,
+tol_kw)`` (relative to the demand ``P_d``, with an absolute floor): the mean set point of every
+generator over the last ``window`` iterations differs by at most ``tol`` from its mean over the
+``window`` iterations before, and the controllers' residual (exact mode: overflow, or slack
+under a positive price) is at most ``tol`` at every iteration of the last window; with
+``extrapolate`` (exact mode) the geometric tail of the window means must be within ``tol`` as
+well. Means, not samples, because a generator sliding along its limit chatters on the
 scale of the internal step. The iteration of convergence is the first iteration of the last
 window. A controller state above ``z_cap`` means the controllers cannot relieve the
 congestion: the run is infeasible. Only the last ``3 * window`` samples are kept (a ring).
@@ -28,10 +29,12 @@ class Status(IntEnum):
 
 
 class StopRule(NamedTuple):
-    """The stopping rule's settings: ``tol_mw`` (``tol_kw`` in MW), ``window`` (iterations),
-    ``max_iterations`` (horizon), ``z_cap`` (EUR/MW) and ``extrapolate``."""
+    """The stopping rule's settings: ``tol_mw`` (the floor ``tol_kw`` in MW), ``tol_rel``
+    (relative to the demand), ``window`` (iterations), ``max_iterations`` (horizon), ``z_cap``
+    (EUR/MW) and ``extrapolate``."""
 
     tol_mw: float
+    tol_rel: float
     window: int
     max_iterations: int
     z_cap: float
@@ -72,18 +75,19 @@ def windows_agree(ring, last, window, tol, extrapolate):
 
 
 @nb.njit(cache=True, inline="always")
-def check(rule, ring, k, z, residual, calm):
+def check(rule, ring, k, z, residual, calm, demand):
     """The status after iteration ``k`` (its sample already in ``ring``) and the updated count
-    ``calm`` of iterations in a row with the residual within ``tol_mw``."""
+    ``calm`` of iterations in a row with the residual within the minute's tolerance
+    ``max(tol_rel * demand, tol_mw)`` (``demand`` in MW)."""
     if z.shape[0] > 0 and z.max() > rule.z_cap:
         return Status.INFEASIBLE, calm
+    tol = max(rule.tol_rel * demand, rule.tol_mw)
     # the residual within tolerance over the whole last window, not at one sample: the
     # price loop can oscillate with a period of 2-3 iterations whose window means agree
     # while every other sample overflows (issue 10: 1e-4 kW on random feeders)
-    calm = calm + 1 if residual <= rule.tol_mw else 0
+    calm = calm + 1 if residual <= tol else 0
     window = rule.window
     need = (3 if rule.extrapolate else 2) * window
-    if k >= need and calm >= window and windows_agree(ring, k, window, rule.tol_mw,
-                                                       rule.extrapolate):  # fmt: skip
+    if k >= need and calm >= window and windows_agree(ring, k, window, tol, rule.extrapolate):
         return Status.CONVERGED, calm
     return Status.NOT_CONVERGED, calm

@@ -3,15 +3,74 @@
 Capacity-constrained revision keeps the generator limits; a non-negative price per limited
 line and direction integrates its overflow and is broadcast like the paper's signals. Its
 equilibria are the KKT points of the DC-OPF (docs/exact-mode.md).
+
+Exact mode is dimensionless (issue 12): fitness is counted in units of the marginal-cost
+spread ``S`` (EUR/MW) and powers in units of the reference demand ``P`` (MW) (:func:`scales`),
+so its constants (:class:`ExactConstants`) are pure rates and the same feeder scaled by 100
+takes the same iterations. :func:`game_constants` turns them into the engine's EUR/MW units.
 """
 
 from __future__ import annotations
 
-import numba as nb
+from dataclasses import dataclass
 
-from popdispatch.game.fitness import fitness_into
+import numba as nb
+import numpy as np
+
+from popdispatch.game.fitness import FitnessParameters, fitness_into
 from popdispatch.game.flows import broadcast, limited_line_flows
+from popdispatch.game.problem import DispatchProblem
 from popdispatch.modes.mechanism import Mode, ModeCode
+
+#: Default dimensionless constants (:class:`ExactConstants`), measured on every case of
+#: benchmarks/bench_scale.py (docs/exact-mode.md, "Every scale").
+GAIN, WEIGHT, PRICE_RATE = 1000.0, 2.5, 1500.0
+
+
+@dataclass(frozen=True)
+class ExactConstants:
+    """Exact mode's constants, dimensionless: fitness in units of the marginal-cost spread
+    ``S`` and powers in units of the reference demand ``P`` (:func:`scales`); see
+    :func:`game_constants` for the EUR/MW values they give.
+
+    Attributes
+    ----------
+    gain : revision rate per unit of fitness difference, 1/s.
+    C : augmented-Lagrangian weight, ``S`` per unit of overflow.
+    price_rate : how fast a price (units of ``S``) integrates its overflow (units of ``P``), 1/s.
+    """
+
+    gain: float = GAIN
+    C: float = WEIGHT
+    price_rate: float = PRICE_RATE
+
+    def __post_init__(self) -> None:
+        for name in ("gain", "C", "price_rate"):
+            value = getattr(self, name)
+            if not (value > 0 and value < float("inf")):
+                raise ValueError(f"exact-mode constant {name} must be finite and > 0, got {value}")
+
+
+def scales(problem: DispatchProblem) -> tuple[float, float]:
+    """``(S, P)``: the spread of marginal costs over the generators' ranges, ``max(b + 2 c
+    Pmax) - min(b + 2 c Pmin)`` (EUR/MW; if zero, the largest marginal cost, at least 1), and
+    the reference demand, the problem's largest (MW)."""
+    top = problem.b + 2.0 * problem.c * problem.pmax
+    spread = float(top.max() - (problem.b + 2.0 * problem.c * problem.pmin).min())
+    if not spread > 0.0:
+        spread = max(float(np.abs(top).max()), 1.0)
+    return spread, float(np.max(problem.demand))
+
+
+def game_constants(problem: DispatchProblem, constants: ExactConstants) -> FitnessParameters:
+    """The EUR/MW constants of the game for ``problem``: ``gain = gain / S`` (fitness per unit
+    of spread), ``C = C S / P``, ``price_rate = price_rate S / P`` (:func:`scales`), ``B = 0``
+    (a common shift of fitness, which no pairwise comparison sees) and no barrier."""
+    spread, demand = scales(problem)
+    return FitnessParameters(
+        B=0.0, m=0.0, C=constants.C * spread / demand, gain=constants.gain / spread,
+        price_rate=constants.price_rate * spread / demand,
+    )  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
@@ -63,7 +122,16 @@ MODE = Mode(
     ModeCode.EXACT,
     lambda problem: 2 * len(problem.limit),
     bounded=True,
-    integrator_options={"method": "heun", "tol_kw": 1e-5, "window": 5, "extrapolate": True},
+    integrator_options={
+        "method": "heun",
+        "tol_kw": 1e-6,
+        "tol_rel": 1e-6,
+        "window": 5,
+        "extrapolate": True,
+        "price_atol": 2.5e-5,
+    },  # fmt: skip
     warm_start="setpoints",
     claims_dc_opf=True,
+    game_constants=lambda problem, settings: game_constants(problem, settings.exact),
+    price_scale=lambda problem: scales(problem)[0],
 )

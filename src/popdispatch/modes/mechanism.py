@@ -15,10 +15,20 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import TYPE_CHECKING
 
+from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.problem import DispatchProblem
 
 if TYPE_CHECKING:
     from popdispatch.integrate import Integrator
+    from popdispatch.online.settings import RunSettings
+
+
+def _paper_constants(problem: DispatchProblem, settings: RunSettings) -> FitnessParameters:
+    return settings.fitness
+
+
+def _unit_price_scale(problem: DispatchProblem) -> float:
+    return 1.0
 
 
 class ModeCode(IntEnum):
@@ -41,6 +51,9 @@ class Mode:
     ``claims_dc_opf``: whether a run that comes to rest claims the DC-OPF optimum, so that its
     end state is checked against the DC-OPF's KKT conditions
     (:func:`popdispatch.online.kkt_violations`) and reported ``stalled`` where they fail.
+    ``game_constants``: the game's EUR/MW constants for a problem and run settings (default:
+    the settings' ``fitness``, the paper's constants). ``price_scale``: EUR/MW per unit of the
+    integrator's ``price_atol`` (default 1).
     """
 
     name: str
@@ -50,6 +63,8 @@ class Mode:
     integrator_options: dict = field(default_factory=dict)
     warm_start: str = "shares"
     claims_dc_opf: bool = False
+    game_constants: Callable[[DispatchProblem, RunSettings], FitnessParameters] = _paper_constants
+    price_scale: Callable[[DispatchProblem], float] = _unit_price_scale
 
     @property
     def integrator(self) -> Integrator:

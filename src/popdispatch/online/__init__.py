@@ -84,7 +84,6 @@ class SnapshotResult:
         return len(self.trajectory_kw) - 1
 
 
-
 def run_snapshot(
     problem: DispatchProblem, minute: int, settings: RunSettings | None = None
 ) -> SnapshotResult:

@@ -51,7 +51,9 @@ class Engine:
                 "DC-OPF is out of reach whenever it uses one; use smith or distributed-smith"
             )
         self.term = Term.of(field, self.mode.code, *self._graph())
-        self.params = GameParameters.of(problem, settings.fitness)
+        self.constants = settings.game_constants(problem)  # EUR/MW
+        self.price_scale = settings.price_scale(problem)
+        self.params = GameParameters.of(problem, self.constants)
         self.z = np.zeros(self.mode.controller_states(problem))
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         integrator = settings.stepping
@@ -65,10 +67,11 @@ class Engine:
         """Evaluations of the game and field so far."""
         return int(self.ws.counters.evaluations[0])
 
-    @property
-    def kkt_tolerances(self) -> KktTolerances:
-        """Tolerances of the KKT check, from the integrator in force and the revision gain."""
-        return KktTolerances.of(self.settings.stepping, self.settings.fitness.gain)
+    def kkt_tolerances(self, demand_mw: float) -> KktTolerances:
+        """Tolerances of the KKT check of a minute with demand ``demand_mw`` (MW), from the
+        integrator in force, the revision gain and the price scale."""
+        return KktTolerances.of(self.settings.stepping, self.constants.gain, demand_mw,
+                                self.price_scale)  # fmt: skip
 
     def stall_reasons(
         self, minutes: np.ndarray, p_mw: np.ndarray, z: np.ndarray, rested: np.ndarray
@@ -79,8 +82,10 @@ class Engine:
         if not self.mode.claims_dc_opf or not np.any(rested):
             return reasons
         rows = np.flatnonzero(rested)
-        checked = kkt_violations(self.problem, minutes[rows], p_mw[rows], z[rows],
-                                 self.kkt_tolerances, self.settings.fitness.C)  # fmt: skip
+        demand = self.problem.demand[np.asarray(minutes)[rows] - 1]
+        tolerances = [self.kkt_tolerances(float(d)) for d in demand]
+        checked = kkt_violations(self.problem, minutes[rows], p_mw[rows], z[rows], tolerances,
+                                 self.constants.C)  # fmt: skip
         for r, reason in zip(rows, checked, strict=True):
             reasons[r] = reason
         return reasons
@@ -120,8 +125,9 @@ class Engine:
             integrator = replace(integrator, max_iterations=int(max_iterations))
         history = np.empty((integrator.max_iterations + 1 if record else 0, len(x)))
         outcome = integrate(
-            x, self.z, self.term, self.params, minute_inputs, self.ws, integrator.stepper(),
-            integrator.stop_rule(self.z_cap), self.h_try, history,
+            x, self.z, self.term, self.params, minute_inputs, self.ws,
+            integrator.stepper(self.price_scale), integrator.stop_rule(self.z_cap), self.h_try,
+            history,
         )  # fmt: skip
         self.h_try = outcome.h_try
         steps = outcome.iterations
@@ -140,7 +146,7 @@ class Engine:
         )  # fmt: skip
         integrator = self.settings.stepping
         self.h_try, out.last_demand = integrate_day(
-            x, self.z, self.term, self.params, day, self.ws, integrator.stepper(),
+            x, self.z, self.term, self.params, day, self.ws, integrator.stepper(self.price_scale),
             integrator.stop_rule(self.z_cap), self.h_try, out.outputs(),
         )  # fmt: skip
 
@@ -159,4 +165,3 @@ def overflow_kw(problem: DispatchProblem, p_mw: np.ndarray, minute: int) -> np.n
     """Overflow (kW) per limited line: ``max(|flow| - U, 0)`` for set points ``p_mw`` (MW)."""
     flows = limited_flows_mw(problem, p_mw, minute)
     return np.maximum(np.abs(flows) - problem.limit, 0.0) * KW_PER_MW
-

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,12 +23,15 @@ class KktTolerances:
     price: float
 
     @classmethod
-    def of(cls, integrator: Integrator, gain: float) -> KktTolerances:
-        """``power_mw = tol_kw``; ``flow_gap = tol_kw / (gain * window * dt)``; ``price =
-        2 price_atol`` (see :func:`kkt_violations`)."""
-        tol_mw = integrator.tol_kw / KW_PER_MW
+    def of(
+        cls, integrator: Integrator, gain: float, demand_mw: float = 0.0, price_scale: float = 1.0
+    ) -> KktTolerances:
+        """``power_mw`` = the minute's stopping tolerance ``max(tol_rel * demand_mw, tol_kw)``;
+        ``flow_gap = power_mw / (gain * window * dt)``; ``price = 2 price_atol * price_scale``
+        (EUR/MW; see :func:`kkt_violations`). ``gain``: the revision gain in force, per EUR/MW."""
+        tol_mw = integrator.tol_mw(demand_mw)
         flow_gap = tol_mw / (max(gain, 1e-300) * integrator.window * integrator.dt)
-        return cls(tol_mw, flow_gap, 2.0 * integrator.price_atol)
+        return cls(tol_mw, flow_gap, 2.0 * integrator.price_atol * price_scale)
 
 
 def kkt_violations(
@@ -35,8 +39,8 @@ def kkt_violations(
     minutes: np.ndarray,
     p_mw: np.ndarray,
     z: np.ndarray,
-    tol: KktTolerances,
-    C: float = 0.0,
+    tol: KktTolerances | Sequence[KktTolerances],
+    C: float | np.ndarray = 0.0,
 ) -> list[str | None]:
     """Per minute, why set points ``p_mw`` (minutes x generators, MW) and controller prices
     ``z`` (minutes x 2 limited lines, EUR/MW: upward then downward) are *not* a KKT point of the
@@ -44,7 +48,8 @@ def kkt_violations(
 
     The candidate duals are the prices the controllers broadcast, ``mu = max(0, z + C e)``
     per line-direction with excess ``e`` (``flow - U`` upward, ``-flow - U`` downward; ``C``
-    the proportional part, EUR/MW per MW: at a state within ``tol_kw`` of the limit it shifts
+    the proportional part, EUR/MW per MW, one value or one per minute and limited line: at a
+    state within ``tol_kw`` of the limit it shifts
     a price by up to ``C tol_kw``, which the dynamics do see). With ``nu = mu_up - mu_down``
     and ``D_ki = 1`` for generator ``i`` below line ``k``, the locational marginal cost is
     ``lmc_i = b_i + 2 c_i p_i - (D^T nu)_i`` (EUR/MW; the exact mode's fitness is
@@ -80,18 +85,22 @@ def kkt_violations(
     down = problem.down
     flow = problem.load_flow[rows] - p_mw @ down.T
     excess = np.concatenate([flow - problem.limit, -flow - problem.limit], axis=1)
+    C = np.asarray(C, dtype=float)
+    if C.ndim == 2:  # per minute and limited line, the same for both directions
+        C = np.concatenate([C, C], axis=1)
     mu = np.maximum(0.0, z + C * excess)
     nu = mu[:, :n_lines] - mu[:, n_lines:]
     lmc = problem.b + 2.0 * problem.c * p_mw - nu @ down
     online = problem.online[rows]
     lo = np.where(online, problem.pmin, 0.0)
     hi = np.where(online, problem.pmax, 0.0)
+    tols = [tol] * len(rows) if isinstance(tol, KktTolerances) else list(tol)
     reasons: list[str | None] = []
-    for r in range(len(rows)):
+    for r, t in enumerate(tols):
         reasons.append(
-            _bounds_violation(problem, p_mw[r], lo[r], hi[r], tol)
-            or _price_violation(problem, flow[r], mu[r], tol)
-            or _stationarity_violation(problem, p_mw[r], lmc[r], (lo[r], hi[r]), online[r], tol)
+            _bounds_violation(problem, p_mw[r], lo[r], hi[r], t)
+            or _price_violation(problem, flow[r], mu[r], t)
+            or _stationarity_violation(problem, p_mw[r], lmc[r], (lo[r], hi[r]), online[r], t)
         )
     return reasons
 
@@ -153,4 +162,3 @@ def _stationarity_violation(problem, p, lmc, limits, online, tol: KktTolerances)
         f"has marginal cost {lmc[j]:.6f} EUR/MWh (with line prices) above the "
         f"{lmc[i]:.6f} of {names[i]} {_where(p, lo, hi, i, tol)}, which could take more"
     )
-

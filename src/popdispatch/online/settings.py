@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import networkx as nx
 import numpy as np
@@ -14,6 +14,7 @@ from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import Integrator
 from popdispatch.modes import get_mode
+from popdispatch.modes.exact import ExactConstants
 from popdispatch.warm_start import WARM_STARTS
 
 SHARES_NAME = "shares"  # the paper's warm start, the only one for modes without limits
@@ -25,6 +26,13 @@ X0_CHOICES = ("uniform", "capacity")
 class RunSettings:
     """What to run: dynamics, mode, communication graph, initial state, constants, integrator,
     warm start between minutes (``None``: the mode's default; see :mod:`popdispatch.warm_start`).
+
+    Constants: ``fitness`` holds the paper's (EUR/MW; paper mode, scale-dependent, see
+    docs/paper-mode.md; :meth:`FitnessParameters.parse` reads ``"B=1000,m=400,C=1000"``),
+    ``exact`` exact mode's dimensionless ones (:class:`~popdispatch.modes.exact.ExactConstants`);
+    :meth:`game_constants` gives the EUR/MW values a run uses. ``tol_floor_kw``: the absolute
+    floor of the convergence tolerance (kW), replacing the integrator's ``tol_kw`` (exact
+    mode's tolerance is ``max(1e-6 P_d, tol_floor_kw)``).
 
     Construction validates the combination without touching any data, so a command line can
     check its options before loading a feeder: bad values or combinations raise
@@ -39,6 +47,8 @@ class RunSettings:
     fitness: FitnessParameters = field(default_factory=FitnessParameters)
     integrator: Integrator | None = None  # None: the mode's default
     warm_start: str | None = None
+    exact: ExactConstants = field(default_factory=ExactConstants)
+    tol_floor_kw: float | None = None
 
     def __post_init__(self) -> None:
         self.validate()
@@ -84,6 +94,10 @@ class RunSettings:
                 "--x0",
             )
         self._validate_warm_start(mode)
+        if self.tol_floor_kw is not None and not self.tol_floor_kw > 0:
+            raise OptionError(
+                f"tolerance floor must be positive, got {self.tol_floor_kw} kW", "--tol-floor-kw"
+            )
 
     def _validate_warm_start(self, mode) -> None:
         if self.warm_start is None:
@@ -102,8 +116,22 @@ class RunSettings:
 
     @property
     def stepping(self) -> Integrator:
-        """The integrator in force: the given one, else the mode's default."""
-        return self.integrator or get_mode(self.mode).integrator
+        """The integrator in force: the given one, else the mode's default, with
+        ``tol_floor_kw`` as its ``tol_kw`` when given."""
+        integrator = self.integrator or get_mode(self.mode).integrator
+        if self.tol_floor_kw is None:
+            return integrator
+        return replace(integrator, tol_kw=float(self.tol_floor_kw))
+
+    def game_constants(self, problem: DispatchProblem) -> FitnessParameters:
+        """The game's constants in EUR/MW for ``problem``: paper mode ``fitness``; exact mode
+        its dimensionless ``exact`` constants scaled by the problem
+        (:func:`popdispatch.modes.exact.game_constants`)."""
+        return get_mode(self.mode).game_constants(problem, self)
+
+    def price_scale(self, problem: DispatchProblem) -> float:
+        """EUR/MW per unit of the integrator's ``price_atol`` for ``problem``."""
+        return get_mode(self.mode).price_scale(problem)
 
     @property
     def warm_start_policy(self) -> str:
@@ -114,7 +142,6 @@ class RunSettings:
         if isinstance(self.x0, str):
             return self.x0
         return ",".join(f"{k}={v:g}" for k, v in self.x0.items())
-
 
 
 def _lookup(get: Callable, name: str, option: str):
@@ -149,4 +176,3 @@ def initial_shares(problem: DispatchProblem, x0: str | dict[str, float], minute:
     if x.sum() <= 0:
         raise ValueError("initial shares are all zero on the online generators")
     return x / x.sum()
-
