@@ -112,16 +112,23 @@ class AgentSettings:
         hold every transaction up for ``delay_max`` rounds; ``window`` in paced rounds)."""
         return self.window * (1 if self.paced else 1 + int(faults.delay_max))
 
-    def step_for(self, mode: str, faults: Faults | None = None) -> float:
-        """The Euler step in force: the given one, else the mode's default, halved in exact
-        mode on a faulty network (its price loop, stable at 0.005 s with fresh information,
-        kept oscillating 0.7-0.8 kW from the DC-OPF after a crash; at 0.0025 s the congestion
-        minute with a 10-round crash, 10 % or 20 % loss came within 0.01 kW in 25-46 rounds)."""
+    def step_for(self, mode: str, faults: Faults | None = None, gain: float = 100.0) -> float:
+        """The Euler step in force: the given one, else the mode's default; in exact mode
+        ``0.5 / gain`` s (0.005 s at the revision gain 100 per EUR/MW: stable on the
+        congestion minute with fresh information) and half that on a faulty network (at the
+        full step the price loop with room/offered acceptance kept a 0.7-0.8 kW limit cycle
+        after a crash; at half, a 10-round crash, 10 % or 20 % loss came within 0.01 kW of
+        the DC-OPF in 25-46 rounds)."""
         if self.step_s is not None:
             return self.step_s
+        if mode != "exact":
+            return DEFAULT_STEP_S[mode]
         faulty = faults is not None and not faults.perfect
-        return DEFAULT_STEP_S[mode] / (2.0 if faulty and mode == "exact" else 1.0)
+        return EXACT_STEP_GAIN / gain / (2.0 if faulty else 1.0)
 
+
+#: Exact mode's default round step times the revision gain (s EUR/MW): 0.005 s at gain 100.
+EXACT_STEP_GAIN = 0.5
 
 #: Default Euler step per mode, s (the engine's dt 0.01 s over 2 or 100 substeps).
 DEFAULT_STEP_S = {"exact": 0.005, "paper": 1.0e-4}
@@ -225,6 +232,16 @@ def initial_setpoints(problem: DispatchProblem, settings: RunSettings, minute: i
     return x * inputs.demand
 
 
+def game_constants(problem: DispatchProblem, settings: RunSettings):
+    """The game's constants (EUR/MW: ``B``, ``m``, ``C``, ``gain``, ``price_rate``) exactly as
+    the engine runs them for this problem and settings: read from the engine's own
+    :class:`~popdispatch.game.parameters.GameParameters`, so that a mode whose constants
+    depend on the problem (scaled ones) needs no copy of that rule here."""
+    from popdispatch.online import Engine
+
+    return Engine(problem, settings).params
+
+
 def generator_graph(problem: DispatchProblem, settings: RunSettings) -> nx.Graph:
     """The communication graph over generator names (complete for dynamics without one)."""
     names = list(problem.generators)
@@ -245,7 +262,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     mode = get_mode(settings.mode)
     dynamics = get_dynamics(settings.dynamics)
     field_code = dynamics.bounded_field if mode.bounded else dynamics.field
-    fp = settings.fitness
+    fp = game_constants(problem, settings)
     demand = float(problem.demand[minute - 1])
     network = LossyNetwork(faults)
     inverters = Inverters(initial_setpoints(problem, settings, minute))
@@ -312,7 +329,8 @@ def run_agents(
     settings = settings or RunSettings()
     faults = faults or Faults()
     agent_settings = agent_settings or AgentSettings()
-    step_s = agent_settings.step_for(settings.mode, faults)
+    gain = float(game_constants(problem, settings).gain)
+    step_s = agent_settings.step_for(settings.mode, faults, gain)
     run = _run(problem, minute, settings, faults, agent_settings, step_s, on_round)
     if run.rest_round is None or not get_mode(settings.mode).claims_dc_opf:
         return run
@@ -321,10 +339,11 @@ def run_agents(
 
 
 def _kkt_reason(problem, minute, settings, opts: AgentSettings, step_s: float, run) -> str | None:
-    """The engine's KKT check of the rest state: set points and each line's prices (the mean
-    of its two end controllers' copies), with the agents' rest tolerance."""
+    """The engine's own KKT check of the rest state (:meth:`popdispatch.online.Engine.
+    stall_reasons`, with the agents' step, rest tolerance and window): set points and each
+    line's prices (the mean of its two end controllers' copies)."""
     from popdispatch.integrate import Integrator
-    from popdispatch.online.kkt import KktTolerances, kkt_violations
+    from popdispatch.online import Engine
 
     n = len(problem.limit)
     z, ends = np.zeros(2 * n), np.zeros(n)
@@ -335,9 +354,9 @@ def _kkt_reason(problem, minute, settings, opts: AgentSettings, step_s: float, r
             ends[line] += 1
     z /= np.concatenate([ends, ends]).clip(min=1)
     integrator = Integrator(dt=step_s, tol_kw=max(opts.tol_kw, 1e-9), window=opts.window)
-    tol = KktTolerances.of(integrator, settings.fitness.gain)
+    engine = Engine(problem, replace(settings, integrator=integrator))
     p_mw = run.setpoints_kw[None] / KW_PER_MW
-    return kkt_violations(problem, np.array([minute]), p_mw, z[None], tol, settings.fitness.C)[0]
+    return engine.stall_reasons(np.array([minute]), p_mw, z[None], np.array([True]))[0]
 
 
 def _run(problem, minute, settings, faults, agent_settings, step_s, on_round) -> AgentRun:
