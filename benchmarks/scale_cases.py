@@ -157,11 +157,18 @@ def _matpower_feeder(name: str) -> Feeder:
     return read_matpower(path, fleet=test_fleet(placeholder))
 
 
+def matpower_missing(name: str) -> str | None:
+    """Why case ``name`` cannot be built here (a MATPOWER case without its file), else None."""
+    if name.startswith("matpower:") and not (MATPOWER_DIR / f"{name[9:]}.m").is_file():
+        return f"MATPOWER case {name[9:]}.m not found in {MATPOWER_DIR} (set POPDISPATCH_FEEDERS)"
+    return None
+
+
 def network_cases(matpower: bool = True) -> Iterator[tuple[str, Callable[[], Feeder]]]:
     """``(name, feeder builder)`` of the built-in cases and (if present) the MATPOWER files."""
     for name in BUILT_IN:
         yield name, lambda n=name: _case_feeder(n)
-    if matpower and MATPOWER_DIR.is_dir():
+    if matpower:  # building one needs MATPOWER_DIR (see matpower_missing)
         for name in MATPOWER_CASES:
             yield f"matpower:{name}", lambda n=name: _matpower_feeder(n)
 
