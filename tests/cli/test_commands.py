@@ -22,7 +22,10 @@ from popdispatch.modes import MODES
 from helpers import find_official_folder, official_folder
 
 SCRIPT = Path(sys.executable).with_name("popdispatch")
-COMMANDS = ["feeder", "opf", "snapshot", "day", "reproduce", "export"]
+COMMANDS = [
+    "agents", "cases", "day", "export", "feeder", "opf", "reproduce", "snapshot", "sweep",
+    "sweep-report",
+]
 
 
 def command(*args: str) -> list[str]:

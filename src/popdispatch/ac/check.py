@@ -321,13 +321,14 @@ class ACDay:
         table = loading_percent(self.network, self.flows)[:, rated]
         return pd.DataFrame(table, self.steps.index, self.network.feeder.lines.index[rated])
 
-    def summary(self) -> dict:
-        """The extremes over the steps, each with its step (minute), bus or line; energies over
-        the steps taken as one minute each (kWh = sum of kW / 60)."""
+    def summary(self, step_hours: np.ndarray | None = None) -> dict:
+        """The extremes over the steps, each with its step (minute), bus or line; energies
+        (kWh) = sum of kW x each step's duration ``step_hours`` (h; default one minute each)."""
         s = self.steps
+        hours = np.full(len(s), 1 / 60) if step_hours is None else np.asarray(step_hours, float)
         out: dict[str, Any] = {"steps": len(s)}
-        out["losses_kwh"] = float(s.losses_kw.sum() / 60.0)
-        out["source_extra_kwh"] = float(s.source_extra_kw.sum() / 60.0)
+        out["losses_kwh"] = float(s.losses_kw.to_numpy(float) @ hours)
+        out["source_extra_kwh"] = float(s.source_extra_kw.to_numpy(float) @ hours)
         for prefix, column, largest, where in _DAY_EXTREMES:
             values = s[column].astype(float)
             found = values.notna().any()

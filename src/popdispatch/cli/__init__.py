@@ -6,6 +6,7 @@ modules): numpy, pandas, numba, pandapower, scipy and matplotlib are imported by
 that use them, so ``--help`` and usage errors are quick.
 """
 
+from popdispatch.cli.agents import agents
 from popdispatch.cli.commands import cli
 from popdispatch.cli.process import (
     EXIT_INTERRUPTED,
@@ -18,7 +19,11 @@ from popdispatch.cli.process import (
     stamp,
 )
 from popdispatch.cli.render import infeasible_day_message, infeasible_minute_message
+from popdispatch.cli.sweep import sweep, sweep_report
 from popdispatch.constants import MINUTES_PER_DAY
+
+for _command in (sweep, sweep_report, agents):
+    cli.add_command(_command)
 
 __all__ = [
     "EXIT_INTERRUPTED",

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from popdispatch.cli.analyses import analysis_options, day_analyses, snapshot_analyses
 from popdispatch.cli.options import (
     MODE_CHOICE,
     EngineChoice,
@@ -121,11 +122,13 @@ def opf(minute: int, limits, profiles, source, as_json: bool, quiet: bool) -> in
 @series_options
 @feeder_options
 @out_option
+@analysis_options
 @json_option
 @quiet_option
 def snapshot(
-    minute, limits, dynamics, mode, x0, graph, constants, profiles, source, out, as_json, quiet
-) -> int:
+    minute, limits, dynamics, mode, x0, graph, constants, profiles, source, out, analyses,
+    as_json, quiet,
+) -> int:  # fmt: skip
     """One minute of dynamics: trajectory, convergence, comparison with the DC-OPF.
 
     A minute whose DC-OPF is infeasible is still run and reported (set points, overflow,
@@ -143,6 +146,7 @@ def snapshot(
     with progress.step(f"minute {minute}: {dynamics} dynamics and DC-OPF"):
         result = run_snapshot_vs_opf(problem, minute, settings)
     summary = snapshot_summary(problem, result, limits, series.timeline)
+    snapshot_analyses(analyses, problem, series, result, summary, progress)
     if out is not None:
         write_snapshot(out, summary, trajectory_table(result), result, progress)
     emit(stamp(summary), as_json, snapshot_text(summary))
@@ -173,11 +177,12 @@ def snapshot(
 @series_options
 @feeder_options
 @out_option
+@analysis_options
 @json_option
 @quiet_option
 def day(
     limits, dynamics, mode, x0, graph, constants, events, minutes, warm_start, profiles, source,
-    out, as_json, quiet,
+    out, analyses, as_json, quiet,
 ) -> int:  # fmt: skip
     """The online day: every minute continues from the last (warm start), against the DC-OPF.
 
@@ -205,8 +210,10 @@ def day(
     result = run_day_vs_opf(problem, settings, minutes.of(series), progress)
     labels = [event_label(event) for event in events]
     summary = day_summary(problem, result, limits, labels, series.timeline)
+    ac_steps = day_analyses(analyses, problem, series, result, summary, progress)
     if out is not None:
         table = day_table(result, problem, series.timeline)
+        table = table if ac_steps is None else table.join(ac_steps, on="minute")
         write_day(out, summary, table, result, problem, progress)
     emit(stamp(summary), as_json, day_text(summary))
     if summary["infeasible_minutes"]:

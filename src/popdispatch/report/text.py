@@ -145,8 +145,30 @@ def _run_line(s: dict) -> str:
     )
 
 
+def ac_text(ac: dict | None) -> str:
+    """The AC check's line (``--ac``): losses, voltage extremes, loading, source's extra supply;
+    empty without one. ``ac``: a snapshot's (``losses_kw``) or a day's (``losses_kwh``)."""
+    if not ac:
+        return ""
+    if "losses_kwh" in ac:
+        losses = f"losses {ac['losses_kwh']:.3f} kWh (at most {ac['max_losses_kw']:.3f} kW)"
+    else:
+        losses = f"losses {ac['losses_kw']:.3f} kW"
+    loading = ac.get("max_loading_percent")
+    rated = "no rated line" if loading is None else (
+        f"max loading {loading:.1f} % ({ac['max_loading_line']})")  # fmt: skip
+    return (
+        f"\nAC check: {losses}; voltage {ac['v_min_pu']:.4f} p.u. (bus {ac['v_min_bus']}) to "
+        f"{ac['v_max_pu']:.4f} p.u. (bus {ac['v_max_bus']}); {rated}"
+    )
+
+
 def snapshot_text(s: dict) -> str:
     """``popdispatch snapshot``."""
+    return _snapshot_text(s) + ac_text(s.get("ac"))
+
+
+def _snapshot_text(s: dict) -> str:
     head = (
         f"minute {s['minute']}{_when(s)}, demand {s['demand_kw']:.3f} kW: {s['dynamics']} "
         "dynamics, "
@@ -250,7 +272,8 @@ def day_text(s: dict) -> str:
     if s.get("step_minutes", 1.0) != 1.0:  # a series of other steps counts steps
         outcome = [line.replace(" minute", " step") for line in outcome]
     head = f"{_span(s)}: {s['dynamics']} dynamics, {s['mode']} mode"
-    return "\n".join([head, _inputs(s), events_text(s.get("events", [])), *outcome])
+    body = "\n".join([head, _inputs(s), events_text(s.get("events", [])), *outcome])
+    return body + ac_text(s.get("ac"))
 
 
 def cases_summary(table) -> dict:
