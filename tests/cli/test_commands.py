@@ -25,7 +25,7 @@ SCRIPT = Path(sys.executable).with_name("popdispatch")
 COMMANDS = [
     "agents", "cases", "day", "export", "feeder", "opf", "reproduce", "snapshot", "sweep",
     "sweep-report",
-]
+]  # fmt: skip
 
 
 def command(*args: str) -> list[str]:
