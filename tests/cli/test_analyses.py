@@ -70,3 +70,13 @@ def test_text_output_names_the_ac_check():
 def test_html_into_a_missing_folder_is_a_usage_error(tmp_path):
     result = run("day", "--minutes", "1-2", "--html", str(tmp_path / "no" / "r.html"))
     assert_one_line_error(result, 2, "--html", "does not exist")
+
+
+def test_reproduce_html_writes_both_reports(tmp_path):
+    out = tmp_path / "results"
+    result = run("reproduce", "--minutes", "560-565", "--html", "--out", str(out), "-q")
+    assert result.returncode == 0, result.stderr
+    for name in ("base_day.html", "congestion.html"):
+        text = (out / name).read_text(encoding="utf-8")
+        assert "Plotly" in text and len(text) > 3_000_000, name
+    assert (out / "summary.json").exists() and (out / "report.md").exists()

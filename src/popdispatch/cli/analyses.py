@@ -28,6 +28,18 @@ class Analyses(NamedTuple):
     vn_kv: float | None = None
     html: Path | None = None
 
+    def check(self) -> None:
+        """Before any work (see :func:`check_analyses`)."""
+        check_analyses(self)
+
+    def snapshot(self, problem, profiles, result, summary: dict, progress: Progress) -> None:
+        """See :func:`snapshot_analyses`."""
+        snapshot_analyses(self, problem, profiles, result, summary, progress)
+
+    def day(self, problem, profiles, result, summary: dict, progress: Progress):
+        """See :func:`day_analyses`."""
+        return day_analyses(self, problem, profiles, result, summary, progress)
+
     def model_options(self) -> dict:
         """Keyword arguments of :func:`popdispatch.ac.check_setpoints`."""
         return {} if self.vn_kv is None else {"vn_kv": self.vn_kv}

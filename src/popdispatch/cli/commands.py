@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from popdispatch.cli.analyses import analysis_options, day_analyses, snapshot_analyses
+from popdispatch.cli.analyses import Analyses, analysis_options
 from popdispatch.cli.options import (
     MODE_CHOICE,
     EngineChoice,
@@ -146,7 +146,7 @@ def snapshot(
     with progress.step(f"minute {minute}: {dynamics} dynamics and DC-OPF"):
         result = run_snapshot_vs_opf(problem, minute, settings)
     summary = snapshot_summary(problem, result, limits, series.timeline)
-    snapshot_analyses(analyses, problem, series, result, summary, progress)
+    analyses.snapshot(problem, series, result, summary, progress)
     if out is not None:
         write_snapshot(out, summary, trajectory_table(result), result, progress)
     emit(stamp(summary), as_json, snapshot_text(summary))
@@ -210,7 +210,7 @@ def day(
     result = run_day_vs_opf(problem, settings, minutes.of(series), progress)
     labels = [event_label(event) for event in events]
     summary = day_summary(problem, result, limits, labels, series.timeline)
-    ac_steps = day_analyses(analyses, problem, series, result, summary, progress)
+    ac_steps = analyses.day(problem, series, result, summary, progress)
     if out is not None:
         table = day_table(result, problem, series.timeline)
         table = table if ac_steps is None else table.join(ac_steps, on="minute")
@@ -238,9 +238,11 @@ def day(
     help="Dispatch mode of every experiment.",
 )
 @option("--minutes", type=MinutesType(), help="Base day over minutes START-END only (quick look).")
+@option("--html", is_flag=True, help="Also the interactive reports base_day.html and "
+        "congestion.html (needs the html extra).")  # fmt: skip
 @json_option
 @quiet_option
-def reproduce(profiles, out, mode, minutes, as_json, quiet) -> None:
+def reproduce(profiles, out, mode, minutes, html, as_json, quiet) -> None:
     """The paper's three experiments end to end: figures, summary.json, report.md."""
     import numpy as np
 
@@ -249,13 +251,14 @@ def reproduce(profiles, out, mode, minutes, as_json, quiet) -> None:
 
     progress = Progress(quiet)
     check_out(out)
+    Analyses(html=out if html else None).check()  # the extra; out itself checked above
     settings = settings_from("smith", mode, "uniform", "complete")
     announce_compile(progress)
     day_profiles = runs.load_profiles(profiles, None, progress)
     span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
     rep = run_reproduction(day_profiles, settings, span, progress)
     with staged_folder(out) as folder:
-        summary = write_reproduction(rep, folder, progress)
+        summary = write_reproduction(rep, folder, progress, day_profiles if html else None)
     progress.note(f"wrote {out}/report.md, summary.json and figures/")
     if as_json:
         click.echo(json_text(summary), nl=False)

@@ -167,8 +167,12 @@ def extinction_table(rep: Reproduction) -> pd.DataFrame:
     return table
 
 
-def write_reproduction(rep: Reproduction, folder: StagedFolder, progress: Progress) -> dict:
-    """Write figures, time series, ``summary.json`` and ``report.md``; returns the summary."""
+def write_reproduction(
+    rep: Reproduction, folder: StagedFolder, progress: Progress,
+    html_profiles: LoadProfiles | None = None,
+) -> dict:  # fmt: skip
+    """Write figures, time series, ``summary.json`` and ``report.md``; returns the summary.
+    With ``html_profiles`` (the base day's profiles) also the interactive reports."""
     from popdispatch.report.markdown import reproduction_report
 
     stems = make_figures(rep, folder, progress)
@@ -178,4 +182,25 @@ def write_reproduction(rep: Reproduction, folder: StagedFolder, progress: Progre
     folder.write_csv("extinction.csv", extinction_table(rep))
     folder.write_json("summary.json", summary)
     folder.write_text("report.md", reproduction_report(summary, stems, rep))
+    if html_profiles is not None:
+        write_reproduction_html(rep, folder, html_profiles, summary, progress)
     return summary
+
+
+def write_reproduction_html(
+    rep: Reproduction, folder: StagedFolder, profiles: LoadProfiles, summary: dict,
+    progress: Progress,
+) -> list[str]:  # fmt: skip
+    """The interactive reports of the base day and the congestion minute (``--html``):
+    ``base_day.html`` and ``congestion.html``; returns their names."""
+    from popdispatch.report.interactive import day_report_html, snapshot_report_html
+    from popdispatch.scenarios import peak_profiles
+
+    with progress.step("writing the interactive reports"):
+        day = day_report_html(rep.day, rep.day_problem, profiles, run_info=summary["base_day"])
+        folder.write_text("base_day.html", day)
+        congestion = snapshot_report_html(
+            rep.congestion, rep.congestion_problem, peak_profiles(), run_info=summary["congestion"]
+        )
+        folder.write_text("congestion.html", congestion)  # fmt: skip
+    return ["base_day.html", "congestion.html"]
