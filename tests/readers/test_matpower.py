@@ -72,6 +72,7 @@ def test_case33bw_reads_with_published_totals():
     assert feeder.lines.loc["L1-2", ["r_ohm", "x_ohm"]].tolist() == pytest.approx([0.0922, 0.047])
     assert (feeder.lines.length_km == 0).all() and np.isinf(feeder.lines.limit_kw).all()
     assert feeder.loads.loc["load18"].tolist() == pytest.approx([18, 90.0, 40.0])
+    assert (feeder.buses.vn_kv == 12.66).all()  # the file's BASE_KV (the AC check's base)
     g = feeder.generators.loc["G1"]
     assert (g.bus, g.a, g.b, g.c, g.pmin_kw, g.pmax_kw) == (1, 0.0, 20.0, 0.0, 0.0, 10000.0)
 

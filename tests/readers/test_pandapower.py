@@ -97,6 +97,7 @@ def test_lv_grids_read_with_pandapowers_totals(factory, kwargs):
     line = net.line.loc[int(feeder.lines.index[0].removeprefix("line"))]
     expected = SQRT3 * net.bus.vn_kv[line.from_bus] * line.max_i_ka * line.parallel * 1e3
     assert feeder.lines.limit_kw.iloc[0] == pytest.approx(expected)
+    assert (feeder.buses.vn_kv == net.bus.vn_kv[lv]).all()  # impedances on the LV side's base
     assert reduce_feeder(feeder).n_nodes >= 2
 
 

@@ -30,7 +30,8 @@ class Feeder:
     Attributes
     ----------
     name : case name, e.g. ``"ieee-elv"``.
-    buses : index ``bus`` (int id); columns ``x``, ``y`` (plot coordinates, m).
+    buses : index ``bus`` (int id); columns ``x``, ``y`` (plot coordinates, m); optional
+        ``vn_kv`` (nominal line-to-line voltage, kV: the AC check's base at the source bus).
     lines : index line name; columns ``from_bus``, ``to_bus``, ``length_km``, ``r_ohm``,
         ``x_ohm`` (series impedance of the whole line, ohm) and ``limit_kw`` (flow limit in kW,
         ``inf`` for no limit).

@@ -748,6 +748,7 @@ def read_matpower(
         index=pd.Index([f"load{b}" for b in loads_at.index], name="load"),
     )
     buses = _layout(keep_bus, from_bus, to_bus, source)
+    buses["vn_kv"] = bus_table.loc[buses.index, _COL["BASE_KV"] - 1].to_numpy(float)
     generators = _fleet(path, mpc, set(keep_bus.tolist())) if fleet is None else fleet
     return Feeder(path.stem, buses, lines, loads, source, generators)
 

@@ -186,6 +186,7 @@ def _read(net_or_path, fleet, root, ratings, name, placeholder: bool = False) ->
     kept = np.flatnonzero(keep)
     xy, schematic = _coordinates(net, bus_table, kept)
     buses = pd.DataFrame(xy, columns=["x", "y"], index=pd.Index(bus_ids[kept], name="bus"))
+    buses["vn_kv"] = v_src  # every impedance is referred to the source's nominal voltage
     loads = load_table[keep[load_table.pos.to_numpy()]]
     loads = pd.DataFrame(
         {
