@@ -298,7 +298,7 @@ def test_small_case_is_interpreted(tmp_path):
     assert fleet.index.tolist() == ["G1", "G3"]
     assert fleet.loc["G1", ["a", "b", "c", "pmax_kw"]].tolist() == [5.0, 20.0, 0.01, 50_000.0]
     assert fleet.loc["G3", ["a", "b", "c", "pmin_kw"]].tolist() == [0.0, 30.0, 0.0, 1000.0]
-    assert feeder.buses.loc[3].tolist() == [2.0, 0.0]  # schematic: two hops from the source
+    assert feeder.buses.loc[3, ["x", "y"]].tolist() == [2.0, 0.0]  # two hops from the source
 
 
 @pytest.mark.parametrize(
