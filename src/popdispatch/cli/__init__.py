@@ -18,9 +18,9 @@ from popdispatch.cli.process import (
     process_age_seconds,
     stamp,
 )
-from popdispatch.cli.render import infeasible_day_message, infeasible_minute_message
 from popdispatch.cli.sweep import sweep, sweep_report
 from popdispatch.constants import MINUTES_PER_DAY
+from popdispatch.report.text import infeasible_day_message, infeasible_minute_message
 
 for _command in (sweep, sweep_report, agents):
     cli.add_command(_command)

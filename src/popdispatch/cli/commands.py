@@ -37,8 +37,6 @@ from popdispatch.cli.process import Failure, stamp, start_clock
 from popdispatch.cli.render import (
     announce_compile,
     emit,
-    infeasible_day_message,
-    infeasible_minute_message,
     minute_loads,
     write_day,
     write_snapshot,
@@ -50,6 +48,8 @@ from popdispatch.report.text import (
     cases_text,
     day_text,
     feeder_text,
+    infeasible_day_message,
+    infeasible_minute_message,
     opf_text,
     snapshot_text,
 )

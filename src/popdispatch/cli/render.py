@@ -1,5 +1,5 @@
 """What the commands print and write: stdout (JSON or text), ``--out`` folders, the one-line
-messages of infeasible minutes."""
+messages of infeasible minutes (:mod:`popdispatch.report.text`)."""
 
 from __future__ import annotations
 
@@ -23,29 +23,6 @@ def announce_compile(progress: Progress) -> None:
 
     if kernels_cached() is False:
         progress.note(COMPILE_NOTICE)
-
-
-def infeasible_minute_message(summary: dict) -> str:
-    """One line: the DC-OPF of a minute is infeasible, with its demand and online capacity."""
-    return (
-        f"the DC-OPF of minute {summary['minute']} is infeasible: no dispatch meets the demand "
-        f"{summary['demand_kw']:.3f} kW within the generator limits (online capacity "
-        f"{summary['capacity_kw']:.3f} kW) and the given line limits"
-    )
-
-
-def infeasible_day_message(summary: dict, shown: int = 5) -> str:
-    """One line naming how many minutes, and which first, have no feasible DC-OPF."""
-    from popdispatch.report.text import minute_ranges
-
-    bad = summary["infeasible_minutes"]
-    ranges = minute_ranges(bad).split(", ")
-    listed = ", ".join(ranges[:shown]) + (", ..." if len(ranges) > shown else "")
-    return (
-        f"the DC-OPF is infeasible at {len(bad)} of {summary['minutes']} minutes ({listed}) "
-        "with the given limits and events; every minute was run and reported "
-        "(infeasible_minutes)"
-    )
 
 
 def write_snapshot(out: Path, summary: dict, table, result, progress: Progress) -> None:

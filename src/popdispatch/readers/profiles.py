@@ -307,3 +307,11 @@ def resolve_profiles(folder: str | Path | None = None) -> LoadProfiles:
     if env:
         return read_profiles(env)
     return default_profiles()
+
+
+def read_profile_file(path: Path, label: str) -> np.ndarray:
+    """One official profile file (kW per minute, 1440 values): the OpenDSS form (one value per
+    line) or the IEEE CSV form (a ``mult`` column), by suffix; ``label`` names it in errors."""
+    read = _read_profile_csv if Path(path).suffix.lower() == ".csv" else _read_mult_file
+    return read(Path(path), label)
+

@@ -291,3 +291,24 @@ def cases_text(table) -> str:
             f"{row.total_load_kw:>11.1f}  {row.source}"
         )
     return "\n".join(lines)
+
+
+def infeasible_minute_message(summary: dict) -> str:
+    """One line: the DC-OPF of a minute is infeasible, with its demand and online capacity."""
+    return (
+        f"the DC-OPF of minute {summary['minute']} is infeasible: no dispatch meets the demand "
+        f"{summary['demand_kw']:.3f} kW within the generator limits (online capacity "
+        f"{summary['capacity_kw']:.3f} kW) and the given line limits"
+    )
+
+
+def infeasible_day_message(summary: dict, shown: int = 5) -> str:
+    """One line naming how many minutes, and which first, have no feasible DC-OPF."""
+    bad = summary["infeasible_minutes"]
+    ranges = minute_ranges(bad).split(", ")
+    listed = ", ".join(ranges[:shown]) + (", ..." if len(ranges) > shown else "")
+    return (
+        f"the DC-OPF is infeasible at {len(bad)} of {summary['minutes']} minutes ({listed}) "
+        "with the given limits and events; every minute was run and reported "
+        "(infeasible_minutes)"
+    )

@@ -45,12 +45,11 @@ def _pool_files(folder: Path) -> dict[int, Path]:
 def profile_pool(folder: str) -> pd.DataFrame:
     """Every official profile of ``folder``: index ``minute`` 1..1440, one column per profile
     number (kW). Read once per process (cached)."""
-    from popdispatch.readers.profiles import _read_mult_file, _read_profile_csv
+    from popdispatch.readers.profiles import read_profile_file
 
     columns = {}
     for number, path in _pool_files(Path(folder)).items():
-        read = _read_profile_csv if path.suffix.lower() == ".csv" else _read_mult_file
-        columns[number] = read(path, f"profile {number}")
+        columns[number] = read_profile_file(path, f"profile {number}")
     table = pd.DataFrame(columns, index=pd.RangeIndex(1, 1441, name="minute"))
     table.columns.name = "profile"
     return table

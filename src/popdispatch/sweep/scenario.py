@@ -115,9 +115,9 @@ def steps_table(result, problem) -> pd.DataFrame:
 
 def run_scenario(scenario: Scenario, context: Context) -> tuple[dict, pd.DataFrame]:
     """``(summary row, steps table)`` of one scenario; raises whatever the run raises."""
-    from popdispatch.cli.render import infeasible_day_message
     from popdispatch.events import event_label
     from popdispatch.report.summaries import day_summary
+    from popdispatch.report.text import infeasible_day_message
     from popdispatch.runs import load_problem, run_day_vs_opf
 
     profiles, numbers = scenario_profiles(scenario, context)
