@@ -83,8 +83,8 @@ def congested():
 
 def test_infeasible_snapshot_title_claims_no_dc_opf(congested):
     congested.opf.status = "infeasible"
-    assert figures.congestion_figure(congested).axes[0].get_title().endswith(
-        "no DC-OPF (infeasible)"
+    assert (
+        figures.congestion_figure(congested).axes[0].get_title().endswith("no DC-OPF (infeasible)")
     )
     congested.opf.status = "optimal"
     assert figures.congestion_figure(congested).axes[0].get_title().endswith("DC-OPF (dashed)")

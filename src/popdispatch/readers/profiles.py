@@ -314,4 +314,3 @@ def read_profile_file(path: Path, label: str) -> np.ndarray:
     line) or the IEEE CSV form (a ``mult`` column), by suffix; ``label`` names it in errors."""
     read = _read_profile_csv if Path(path).suffix.lower() == ".csv" else _read_mult_file
     return read(Path(path), label)
-
