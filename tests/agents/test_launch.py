@@ -30,13 +30,13 @@ def _children() -> int:
 
 
 def test_launched_congestion_minute_reaches_dc_opf(congestion_problem):
-    args = ["launch", "--minute", "566", "--limit", "505:666=28", "--rounds", "40", "--json",
+    args = ["launch", "--minute", "566", "--limit", "505:666=28", "--rounds", "160", "--json",
             "--startup-s", "60",
             "-q"]  # fmt: skip
     result = CliRunner().invoke(agents, args)
     assert result.exit_code == 0, result.output
     s = json.loads(result.output)
-    assert s["processes"] == 12 and s["rounds"] >= 40
+    assert s["processes"] == 12 and s["rounds"] >= 160
     opf = solve_opf(congestion_problem, 566).p_kw
     setpoints = np.array([g["setpoint_kw"] for g in s["generators"]])
     assert np.abs(setpoints - opf).max() < 0.01  # kW

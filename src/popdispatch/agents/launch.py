@@ -72,7 +72,8 @@ def _system(config: LaunchConfig):
     limits = [tuple(limit) for limit in config.limits]
     problem, _ = load_run(FeederSource(), None, config.minute, limits)
     settings = RunSettings(dynamics=config.dynamics, mode=config.mode, graph=config.graph)
-    system = build_agents(problem, config.minute, settings, config.step_s, Faults())
+    system = build_agents(problem, config.minute, settings, config.step_s, Faults(),
+                          engine_limiter=False)  # fmt: skip
     return problem, system
 
 
@@ -119,13 +120,14 @@ class LaunchResult:
 
 
 def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
-           graph: str = "complete", rounds: int = 60, tick_s: float = 0.05,
-           step_s: float = 0.005, base_port: int = 0,
+           graph: str = "complete", rounds: int = 200, tick_s: float = 0.05,
+           step_s: float | None = None, base_port: int = 0,
            startup_s: float = 30.0) -> LaunchResult:  # fmt: skip
     """Run the agents of one minute as separate processes over TCP (module docstring).
 
     ``base_port``: first TCP port (0: free ports the OS hands out); ``startup_s``: seconds
-    the processes get to load their data before round 0.
+    the processes get to load their data before round 0; ``step_s``: the round's Euler step
+    (None: :meth:`popdispatch.agents.system.AgentSettings.step_for`).
     """
     from popdispatch.runs import FeederSource, load_run
 
@@ -135,6 +137,11 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
     from popdispatch.online import RunSettings
 
     settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph)
+    if step_s is None:
+        from popdispatch.agents.system import AgentSettings, game_constants
+
+        gain = float(game_constants(problem, settings).gain)
+        step_s = AgentSettings().step_for(mode, Faults(), gain)
     ids = list(agent_ids(build_agents(problem, minute, settings, step_s, Faults())))
     ports = _ports(len(ids), base_port)
     config = LaunchConfig(minute, [list(x) for x in limits], mode, dynamics, graph,
@@ -192,16 +199,19 @@ def _run_children(ids: list[str], config: LaunchConfig) -> dict[str, str]:
 
 
 def _stop(children: dict, group: int | None) -> None:
-    """Terminate what is still running in the group, then wait for every child."""
-    if group is not None and any(c.poll() is None for c in children.values()):
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(group, signal.SIGTERM)
+    """Terminate what is still running in the group (SIGTERM, then SIGKILL after 5 s), then
+    wait for every child."""
+    if group is None or all(c.poll() is not None for c in children.values()):
+        return
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(group, signal.SIGTERM)
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline and any(c.poll() is None for c in children.values()):
+        time.sleep(0.05)
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(group, signal.SIGKILL)
     for child in children.values():
-        try:
-            child.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
+        child.wait()
 
 
 def main(argv=None) -> int:
@@ -211,7 +221,9 @@ def main(argv=None) -> int:
     parser.add_argument("config", type=Path)
     args = parser.parse_args(argv)
     config = LaunchConfig(**json.loads(args.config.read_text()))
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    # stop at once on the launcher's SIGTERM (a clean asyncio shutdown of the container could
+    # take seconds, and the launcher waits for every child)
+    signal.signal(signal.SIGTERM, lambda *_: os._exit(143))
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the launcher decides; it sends SIGTERM
     asyncio.run(_serve(args.id, config))
     return 0

@@ -220,7 +220,7 @@ def agents_text(s: dict) -> str:
 @limit_option
 @option("--mode", type=click.Choice(["paper", "exact"]), default="exact", show_default=True,
         help="How node controllers turn flows into fitness signals.")  # fmt: skip
-@option("--rounds", type=click.IntRange(1), default=60, show_default=True,
+@option("--rounds", type=click.IntRange(1), default=200, show_default=True,
         help="Rounds to run.")  # fmt: skip
 @option("--tick-ms", type=click.FloatRange(1.0), default=50.0, show_default=True,
         help="Real time per tick, ms (6 ticks a round).")  # fmt: skip
@@ -241,10 +241,9 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, as_json, quiet) -> 
     progress = Progress(quiet)
     _faults(0.0, 0, 0.0, 0.0, 0)  # the agents extra is installed
     problem, _ = load_run(FeederSource(), None, minute, limits, progress)
-    step = {"exact": 0.005, "paper": 1.0e-4}[mode]
     with progress.step(f"minute {minute}: {rounds} rounds by agent processes over TCP"):
         result = run_launch(minute, [list(x) for x in limits], mode=mode, rounds=rounds,
-                            tick_s=tick_ms / 1000.0, step_s=step, startup_s=startup_s)  # fmt: skip
+                            tick_s=tick_ms / 1000.0, startup_s=startup_s)  # fmt: skip
     opf = solve_opf(problem, minute)
     final = result.trajectory_kw[-1]
     error = float(np.abs(final - opf.p_kw).max()) if opf.status == "optimal" else None
