@@ -6,6 +6,7 @@ from __future__ import annotations
 import functools
 import importlib
 import re
+from dataclasses import replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -91,27 +92,22 @@ class X0Type(click.ParamType):
 
 
 class ConstantsType(click.ParamType):
-    """``NAME=VALUE,...``: the game's constants (:class:`popdispatch.game.fitness.
-    FitnessParameters`: ``B``, ``m``, ``C``, ``gain``, ``price_rate``), each finite and >= 0."""
+    """``NAME=VALUE,...``: the game's constants, read by
+    :meth:`popdispatch.game.fitness.FitnessParameters.parse` (``B``, ``m``, ``C``, ``gain``,
+    ``price_rate``, each finite and >= 0; the others at their defaults)."""
 
     name = "NAME=VALUE,..."
-    known = ("B", "m", "C", "gain", "price_rate")
 
-    def convert(self, value, param, ctx) -> dict[str, float]:
-        if isinstance(value, dict):
+    def convert(self, value, param, ctx):
+        from popdispatch.errors import OptionError
+        from popdispatch.game.fitness import FitnessParameters
+
+        if isinstance(value, FitnessParameters):
             return value
-        constants: dict[str, float] = {}
-        for item in str(value).split(","):
-            key, sep, text = item.partition("=")
-            key, number = key.strip(), _float(text)
-            if key not in self.known:
-                self.fail(
-                    f"{item!r}: unknown constant (known: {', '.join(self.known)})", param, ctx
-                )
-            if not sep or number is None or number < 0:
-                self.fail(f"{item!r}: need {key}=VALUE with a finite VALUE >= 0", param, ctx)
-            constants[key] = number
-        return constants
+        try:
+            return FitnessParameters.parse(value)
+        except OptionError as exc:
+            self.fail(str(exc), param, ctx)
 
 
 class MinutesType(click.ParamType):
@@ -364,16 +360,12 @@ def feeder_options(func):
 def settings_from(
     dynamics: str, mode: str, x0, graph: str, warm_start: str | None = None, constants=None
 ):
-    """The run's :class:`~popdispatch.online.RunSettings`; ``constants`` (``--constants``)
-    replace those of the default fitness parameters."""
-    from dataclasses import replace
-
+    """The run's :class:`~popdispatch.online.RunSettings`; ``constants`` (``--constants``, a
+    :class:`~popdispatch.game.fitness.FitnessParameters`) replace the default ones."""
     from popdispatch.online import RunSettings
 
     settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0, warm_start=warm_start)
-    return (
-        replace(settings, fitness=replace(settings.fitness, **constants)) if constants else settings
-    )
+    return settings if constants is None else replace(settings, fitness=constants)
 
 
 def check_out(out: Path | None) -> None:

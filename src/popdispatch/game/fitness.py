@@ -6,6 +6,7 @@ signals generator ``i`` received from the node controllers.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba as nb
@@ -41,30 +42,35 @@ class FitnessParameters:
     @classmethod
     def parse(cls, text: str) -> FitnessParameters:
         """The paper's constants from ``"B=1000,m=400,C=1000"`` (any subset, the others at
-        their defaults; a CLI's ``--constants``). A bad entry raises
+        their defaults; a CLI's ``--constants``), each finite and >= 0. A bad entry raises
         :class:`~popdispatch.errors.OptionError` naming it."""
         from popdispatch.errors import OptionError
 
         known = ("B", "m", "C", "gain", "price_rate")
         values: dict[str, float] = {}
-        for item in filter(None, (part.strip() for part in text.split(","))):
+        for item in str(text).split(","):
             name, sep, value = item.partition("=")
             name = name.strip()
-            if not sep or name not in known:
+            if name not in known:
                 raise OptionError(
-                    f"constant {item!r} is not NAME=VALUE with NAME in {', '.join(known)}",
-                    "--constants",
+                    f"{item!r}: unknown constant (known: {', '.join(known)})", "--constants"
                 )
-            try:
-                values[name] = float(value)
-            except ValueError:
+            number = _finite(value) if sep else None
+            if number is None or number < 0:
                 raise OptionError(
-                    f"constant {name} has no number: {value!r}", "--constants"
-                ) from None
-        try:
-            return cls(**values)
-        except ValueError as error:
-            raise OptionError(str(error), "--constants") from None
+                    f"{item!r}: need {name}=VALUE with a finite VALUE >= 0", "--constants"
+                )
+            values[name] = number
+        return cls(**values)
+
+
+def _finite(text: str) -> float | None:
+    """``text`` as a finite float, else None."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
 
 
 @nb.njit(cache=True, inline="always")
