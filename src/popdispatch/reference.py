@@ -195,6 +195,9 @@ class ReferenceMinute:
                 return np.array(samples), x, z, Status.INFEASIBLE, -1
             calm = calm + 1 if residual <= tol else 0
             if k >= need and calm >= it.window and self._windows_agree(samples, tol):
+                if self.evaluate(x, z)[2] > tol:  # the end state's own residual
+                    calm = 0
+                    continue
                 return np.array(samples), x, z, Status.CONVERGED, k - it.window
         return np.array(samples), x, z, Status.NOT_CONVERGED, -1
 

@@ -8,7 +8,8 @@ import numba as nb
 import numpy as np
 
 from popdispatch.integrate.steppers import advance
-from popdispatch.integrate.stopping import Status, check
+from popdispatch.integrate.stopping import Status, check, tolerance
+from popdispatch.integrate.term import evaluate
 
 
 class Outcome(NamedTuple):
@@ -21,6 +22,17 @@ class Outcome(NamedTuple):
     converged_at: int
     first_congestion: int
     h_try: float
+
+
+@nb.njit(cache=True)
+def final_residual(x, z, term, params, minute, ws):
+    """The mode's residual (MW) at the state ``(x, z)`` itself, evaluated into the first
+    stage of the workspace ``ws`` (which the next step evaluates afresh anyway)."""
+    one = ws.first
+    ws.counters.evaluations[0] += 1
+    _, residual = evaluate(x, z, one.p, one.f, one.w, one.v, one.room, one.inflow, one.outflow,
+                           one.z_rate, one.order, term, params, minute, ws.game)  # fmt: skip
+    return residual
 
 
 @nb.njit(cache=True)
@@ -65,6 +77,12 @@ def integrate(x, z, term, params, minute, ws, stepper, rule, h_try, history):
         if first_congestion < 0 and congested > 0.0:
             first_congestion = k
         status, calm = check(rule, ring, k, z, residual, calm, demand)
+        if status == Status.CONVERGED and final_residual(
+            x, z, term, params, minute, ws
+        ) > tolerance(rule, demand):
+            # the steppers' residual is read where each step starts, so the last step's end
+            # state (the one reported, and checked against the KKT conditions) is read here
+            status, calm = Status.NOT_CONVERGED, 0
         if status == Status.CONVERGED:
             return Outcome(k, status, k - rule.window, first_congestion, h_try)
         if status == Status.INFEASIBLE:

@@ -75,13 +75,19 @@ def windows_agree(ring, last, window, tol, extrapolate):
 
 
 @nb.njit(cache=True, inline="always")
+def tolerance(rule, demand):
+    """The minute's tolerance ``max(tol_rel * demand, tol_mw)``, MW (``demand`` in MW)."""
+    return max(rule.tol_rel * demand, rule.tol_mw)
+
+
+@nb.njit(cache=True, inline="always")
 def check(rule, ring, k, z, residual, calm, demand):
     """The status after iteration ``k`` (its sample already in ``ring``) and the updated count
     ``calm`` of iterations in a row with the residual within the minute's tolerance
     ``max(tol_rel * demand, tol_mw)`` (``demand`` in MW)."""
     if z.shape[0] > 0 and z.max() > rule.z_cap:
         return Status.INFEASIBLE, calm
-    tol = max(rule.tol_rel * demand, rule.tol_mw)
+    tol = tolerance(rule, demand)
     # the residual within tolerance over the whole last window, not at one sample: the
     # price loop can oscillate with a period of 2-3 iterations whose window means agree
     # while every other sample overflows (issue 10: 1e-4 kW on random feeders)
