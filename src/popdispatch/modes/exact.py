@@ -81,15 +81,24 @@ def _dual_residual(excess, price):
 
 
 @nb.njit(cache=True, inline="always")
-def payoff(p, z, params, minute, work, fitness, z_rate):
-    """Line prices with integral and proportional parts, no barrier.
+def line_price(z_up, z_down, excess_up, excess_down, C):
+    """The net price of one limited line, EUR/MW: ``nu = mu_up - mu_down`` with the
+    augmented-Lagrangian multipliers ``mu = max(0, z + C * excess)`` of its two directions
+    (``z``: the integral parts, EUR/MW; ``excess``: flow beyond the limit, MW; ``C``: EUR/MW
+    per MW)."""
+    return max(0.0, z_up + C * excess_up) - max(0.0, z_down + C * excess_down)
+
+
+@nb.njit(cache=True, inline="always")
+def line_signals(p, z, params, minute, work, signal, z_rate):
+    """The line prices: their signal per generator into ``signal`` (EUR/MW, overwritten) and
+    the controllers' rates into ``z_rate``; returns ``(congestion, residual)``.
 
     For limited line ``k`` the controllers keep prices ``z[k]`` (flow above ``+U``) and
     ``z[L + k]`` (flow below ``-U``), integrating the excess at ``price_rate`` (``z_rate``).
-    The broadcast price is the augmented-Lagrangian multiplier ``mu = max(0, z + C * excess)``;
-    the net price ``nu = mu_up - mu_down`` goes as ``+nu / 2`` to the generators below the line
-    and ``-nu / 2`` to those above (incentive to the receiving side, penalty to the sending
-    side). Returns ``(congestion, residual)``: the largest ``|nu|`` (EUR/MW) and the largest
+    The broadcast price is :func:`line_price`; the net price ``nu`` goes as ``+nu / 2`` to the
+    generators below the line and ``-nu / 2`` to those above (incentive to the receiving side,
+    penalty to the sending side). Returns the largest ``|nu|`` (EUR/MW) and the largest
     distance from complementary slackness (MW).
     """
     flow, parent_side, child_side = work.flow, work.parent_side, work.child_side
@@ -106,12 +115,21 @@ def payoff(p, z, params, minute, work, fitness, z_rate):
         z_rate[n_lines + k] = price_rate * excess_down
         residual = max(residual, _dual_residual(excess_up, z[k]))
         residual = max(residual, _dual_residual(excess_down, z[n_lines + k]))
-        nu = max(0.0, z[k] + C * excess_up) - max(0.0, z[n_lines + k] + C * excess_down)
+        nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C)
         congestion = max(congestion, abs(nu))
         child_side[k] = 0.5 * nu
         parent_side[k] = -0.5 * nu
     broadcast(parent_side, child_side, params.generator_line, params.line_up,
-              params.line_preorder, work.path, fitness)  # fmt: skip
+              params.line_preorder, work.path, signal)  # fmt: skip
+    return congestion, residual
+
+
+@nb.njit(cache=True, inline="always")
+def payoff(p, z, params, minute, work, fitness, z_rate):
+    """Exact mode's payoff map: the line prices (:func:`line_signals`) and the marginal
+    costs, no barrier (``fitness``, EUR/MW, and ``z_rate`` overwritten); returns
+    ``(congestion, residual)`` (EUR/MW, MW)."""
+    congestion, residual = line_signals(p, z, params, minute, work, fitness, z_rate)
     fitness_into(p, params.b, params.c, params.pmin, params.pmax, params.B, params.m,
                  params.gain, fitness, False, fitness)  # fmt: skip
     return congestion, residual
