@@ -192,35 +192,27 @@ def _kw(value: float) -> str:
     return f"{value:.3g} kW" if np.isfinite(value) else "n/a (no DC-OPF)"
 
 
-def write_day_html(
+def write_html(
     path: str | Path,
-    comparison: DayComparison,
+    comparison: DayComparison | SnapshotComparison,
     problem: DispatchProblem,
     profiles: LoadProfiles,
     **options,
 ) -> Path:
-    """Write :func:`day_report_html` to ``path`` atomically (never a partial file)."""
+    """Write the report of ``comparison`` to ``path`` atomically (never a partial file):
+    :func:`day_report_html` for a day, :func:`snapshot_report_html` for a snapshot;
+    ``options`` go to that function."""
     from popdispatch.report.output import atomic_write_text
 
-    text = day_report_html(comparison, problem, profiles, **options)
-    return atomic_write_text(path, text)
+    render = day_report_html if isinstance(comparison, DayComparison) else snapshot_report_html
+    return atomic_write_text(path, render(comparison, problem, profiles, **options))
 
 
-def write_snapshot_html(
-    path: str | Path,
-    comparison: SnapshotComparison,
-    problem: DispatchProblem,
-    profiles: LoadProfiles,
-    **options,
-) -> Path:
-    """Write :func:`snapshot_report_html` to ``path`` atomically (never a partial file)."""
-    from popdispatch.report.output import atomic_write_text
-
-    text = snapshot_report_html(comparison, problem, profiles, **options)
-    return atomic_write_text(path, text)
+#: The day's and the snapshot's writers: :func:`write_html` under the names of what they write.
+write_day_html = write_snapshot_html = write_html
 
 
 __all__ = [
-    "day_report_html", "require_plotly", "snapshot_report_html", "write_day_html",
+    "day_report_html", "require_plotly", "snapshot_report_html", "write_day_html", "write_html",
     "write_snapshot_html",
 ]  # fmt: skip
