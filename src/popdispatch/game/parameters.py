@@ -32,6 +32,9 @@ class GameParameters(NamedTuple):
     generator_line: np.ndarray  # tree of limited lines (game/flows.py)
     line_up: np.ndarray
     line_preorder: np.ndarray
+    # per monitored bus and generator, d(v^2)/dp over the bus's scale (modes/voltage.py);
+    # (0, 0) without voltage limits
+    voltage_sens: np.ndarray
 
     @classmethod
     def of(cls, problem: DispatchProblem, fp: FitnessParameters) -> GameParameters:
@@ -39,13 +42,16 @@ class GameParameters(NamedTuple):
             problem.b, problem.c, problem.pmin, problem.pmax, float(fp.B), float(fp.m),
             float(fp.C), float(fp.gain), float(fp.price_rate), problem.limit,
             problem.generator_line, problem.line_up, problem.line_preorder,
+            np.ascontiguousarray(problem.voltage_sens, dtype=float),
         )  # fmt: skip
 
 
 class MinuteInputs(NamedTuple):
     """What changes from minute to minute: demand (MW), the loads-only flow of each limited
-    line (MW), the share bounds ``lo``/``hi`` (``Pmin / P_d``, ``Pmax / P_d`` online, 0
-    offline) and the online generators."""
+    line (MW; then the voltage rows' loads-only excesses, see
+    :attr:`~popdispatch.game.problem.DispatchProblem.load_flow`), the share bounds
+    ``lo``/``hi`` (``Pmin / P_d``, ``Pmax / P_d`` online, 0 offline) and the online
+    generators."""
 
     demand: float
     load_flow: np.ndarray

@@ -37,6 +37,7 @@ class ModeCode(IntEnum):
 
     PAPER = 0
     EXACT = 1
+    VOLTAGE = 2
 
 
 @dataclass(frozen=True)
