@@ -190,8 +190,8 @@ def test_exact_mode_ignores_nothing_silently(problems):
 
 @pytest.mark.parametrize(
     ("vmin", "vmax", "words"),
-    [(0.0, None, r"outside \(0, 2\)"), (None, 2.0, r"outside \(0, 2\)"), (math.nan, None, "outside"),
-     (0.95, 0.95, "not below"), (1.0, 0.9, "not below")],
+    [(0.0, None, r"outside \(0, 2\)"), (None, 2.0, r"outside \(0, 2\)"),
+     (math.nan, None, "outside"), (0.95, 0.95, "not below"), (1.0, 0.9, "not below")],
 )  # fmt: skip
 def test_bad_limits_are_refused(vmin, vmax, words):
     with pytest.raises(OptionError, match=words):
