@@ -31,6 +31,7 @@ class Analyses(NamedTuple):
     html: Path | None = None
     vmin: float | None = None
     vmax: float | None = None
+    ac_correct: bool = False
 
     def settings(self, settings):
         """``settings`` with the voltage limits (exact mode becomes the voltage mode;
@@ -67,8 +68,13 @@ def analysis_options(func):
     (:class:`Analyses`), checked before the command runs."""
 
     @functools.wraps(func)
-    def command(*args, ac, vn_kv, html, vmin, vmax, **kwargs):
-        analyses = Analyses(ac or vn_kv is not None, vn_kv, html, vmin, vmax)
+    def command(*args, ac, vn_kv, html, vmin, vmax, ac_correct, **kwargs):
+        if ac_correct and click.get_current_context().info_name != "snapshot":
+            raise click.BadParameter("runs on snapshot only", param_hint="'--ac-correct'")
+        if ac_correct and vmin is None and vmax is None:
+            raise click.BadParameter("needs --vmin or --vmax", param_hint="'--ac-correct'")
+        analyses = Analyses(ac or vn_kv is not None or ac_correct, vn_kv, html, vmin, vmax,
+                            ac_correct)  # fmt: skip
         check_analyses(analyses)
         return func(*args, analyses=analyses, **kwargs)
 
@@ -99,6 +105,13 @@ def analysis_options(func):
             "prices at the key nodes; compared with the LinDistFlow OPF (docs/voltage.md).",
         ),
         click.option("--vmax", type=float, metavar="PU", help="Highest bus voltage, p.u."),
+        click.option(
+            "--ac-correct",
+            is_flag=True,
+            help="snapshot with --vmin/--vmax: rerun the voltage-aware dispatch with voltage "
+            "offsets and loss factors from AC power flows until they settle (implies --ac; "
+            "reported under ac_correct).",
+        ),
     ]
     for decorate in reversed(decorators):
         command = decorate(command)
@@ -142,6 +155,8 @@ def snapshot_analyses(analyses, problem, profiles, result, summary: dict, progre
     if problem.n_voltage:
         summary["voltage"] = _voltage(problem, [result.run.minute], result.run.setpoints_kw,
                                       [result.opf], ac and ac.buses["v_pu"].min())  # fmt: skip
+    if analyses.ac_correct:
+        summary["ac_correct"] = _corrected(analyses, problem, profiles, result, progress)
     if analyses.html is not None:
         from popdispatch.report.interactive import write_snapshot_html
 
@@ -184,4 +199,22 @@ def _voltage(problem, minutes, p_kw, opf, ac_v_min_pu: float | None) -> dict:
     out = voltage_summary(problem, minutes, p_kw, opf)
     if ac_v_min_pu is not None:
         out.update(linearization_error(out, ac_v_min_pu))
+    return out
+
+
+def _corrected(analyses, problem, profiles, result, progress: Progress) -> dict:
+    """The ``ac_correct`` JSON object (:func:`popdispatch.ac.correct.ac_correct`)."""
+    import numpy as np
+
+    from popdispatch.ac.check import minute_loads
+    from popdispatch.ac.correct import ac_correct
+
+    run = result.run
+    loads = minute_loads(problem.feeder.original, profiles, np.array([run.minute]))
+    with progress.step("AC-corrected voltage-aware dispatch"):
+        corrected = ac_correct(problem, loads, run.minute, run.settings,
+                               **analyses.model_options())  # fmt: skip
+    out = corrected.summary()
+    if problem.vmin_pu > 0.0:
+        out["below_vmin_pu"] = max(problem.vmin_pu - out["ac_v_min_pu"], 0.0)
     return out

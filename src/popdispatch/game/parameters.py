@@ -14,6 +14,8 @@ import numpy as np
 from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.problem import DispatchProblem
 
+NO_VOLTAGE_ROWS = np.zeros((0, 0))  # empty: nothing in it to change
+
 
 class GameParameters(NamedTuple):
     """The game's parameters, the same for every minute of a problem (one layout for all modes,
@@ -33,8 +35,8 @@ class GameParameters(NamedTuple):
     line_up: np.ndarray
     line_preorder: np.ndarray
     # per monitored bus and generator, d(v^2)/dp over the bus's scale (modes/voltage.py);
-    # (0, 0) without voltage limits
-    voltage_sens: np.ndarray
+    # (0, 0) without voltage limits (the default, for records built by hand in tests)
+    voltage_sens: np.ndarray = NO_VOLTAGE_ROWS
 
     @classmethod
     def of(cls, problem: DispatchProblem, fp: FitnessParameters) -> GameParameters:

@@ -139,8 +139,6 @@ def make_figures(rep: Reproduction, folder: StagedFolder, progress: Progress) ->
         ),
         "fig6_extinction": lambda: figures.extinction_figure(rep.extinction),
     }
-    if rep.voltage is not None:
-        drawings["fig7_voltage_profile"] = lambda: voltage_figure(rep.voltage)
     for stem, draw in progress.iterate(drawings.items(), "figures", len(drawings)):
         figures.save_figure(draw(), folder.file(f"figures/{stem}"))
     return list(drawings)
@@ -193,6 +191,11 @@ def write_reproduction(
     from popdispatch.report.markdown import reproduction_report
 
     stems = make_figures(rep, folder, progress)
+    if rep.voltage is not None:
+        from popdispatch.report import figures
+
+        figures.save_figure(voltage_figure(rep.voltage), folder.file(f"figures/{VOLTAGE_FIGURE}"))
+        stems.append(VOLTAGE_FIGURE)
     summary = reproduction_summary(rep)
     folder.write_csv("base_day.csv", day_table(rep.day, rep.day_problem))
     folder.write_csv("congestion.csv", trajectory_table(rep.congestion))
@@ -228,6 +231,7 @@ def write_reproduction_html(
 # -- the voltage scenario -------------------------------------------------------------------
 
 DISPATCHES = ("DC exact", "voltage-aware", "AC OPF")
+VOLTAGE_FIGURE = "fig7_voltage_profile"
 
 
 def _ac_costs(result: VoltageResult) -> dict[str, float]:

@@ -186,9 +186,22 @@ def voltage_text(v: dict | None) -> str:
     return text
 
 
+def ac_correct_text(c: dict | None) -> str:
+    """The ``--ac-correct`` line: rounds, AC minimum voltage, cost; empty without."""
+    if not c:
+        return ""
+    points = ", ".join(f"{g} {kw:.3f}" for g, kw in c["setpoints_kw"].items())
+    return (
+        f"\nAC-corrected ({c['rounds']} rounds, {c['status']}): {points} kW; AC voltage "
+        f"{c['ac_v_min_pu']:.6f} p.u. (bus {c['ac_v_min_bus']}) and up; losses "
+        f"{c['losses_kw']:.3f} kW; cost {c['cost_eur_per_h']:.6f} EUR/h with the losses"
+    )
+
+
 def snapshot_text(s: dict) -> str:
     """``popdispatch snapshot``."""
-    return _snapshot_text(s) + ac_text(s.get("ac")) + voltage_text(s.get("voltage"))
+    extra = voltage_text(s.get("voltage")) + ac_correct_text(s.get("ac_correct"))
+    return _snapshot_text(s) + ac_text(s.get("ac")) + extra
 
 
 def _snapshot_text(s: dict) -> str:
