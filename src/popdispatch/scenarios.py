@@ -231,8 +231,10 @@ def voltage_problems(
 class VoltageResult:
     """The ``voltage`` scenario: the DC exact dispatch against the DC-OPF (``dc``), the
     voltage-aware one against the LinDistFlow OPF (``voltage``), their AC checks (``ac_dc``,
-    ``ac_voltage``; None without power-grid-model) and pandapower's AC OPF (``anchor``; None,
-    with ``anchor_error`` saying why, when it is skipped or fails)."""
+    ``ac_voltage``; None without power-grid-model), pandapower's AC OPF (``anchor``; None,
+    with ``anchor_error`` saying why, when it is skipped or fails) and the voltage-aware
+    dispatch corrected by AC power flows (``corrected``, :mod:`popdispatch.ac.correct`; with
+    the AC checks)."""
 
     plain: DispatchProblem
     problem: DispatchProblem
@@ -243,6 +245,7 @@ class VoltageResult:
     ac_voltage: object | None
     anchor: object | None
     anchor_error: str | None
+    corrected: object | None = None
 
 
 def voltage(settings: RunSettings | None = None, ac: bool = True, anchor: bool = True):
@@ -254,15 +257,18 @@ def voltage(settings: RunSettings | None = None, ac: bool = True, anchor: bool =
     aware = replace(base, vmin_pu=problem.vmin_pu, vmax_pu=problem.vmax_pu)
     dc = snapshot_vs_opf(plain, 1, base)
     limited = snapshot_vs_opf(problem, 1, aware)
-    ac_dc = ac_voltage = None
+    ac_dc = ac_voltage = corrected = None
     if ac:
         from popdispatch.ac import check_snapshot
+        from popdispatch.ac.correct import ac_correct
 
         ac_dc, ac_voltage = (
             check_snapshot(p, None, r) for p, r in ((plain, dc), (problem, limited))
         )
+        corrected = ac_correct(problem, load_kw[0], 1, aware)
     found, error = _anchor(problem, load_kw) if anchor else (None, "not asked for")
-    return VoltageResult(plain, problem, load_kw, dc, limited, ac_dc, ac_voltage, found, error)
+    return VoltageResult(plain, problem, load_kw, dc, limited, ac_dc, ac_voltage, found, error,
+                         corrected)  # fmt: skip
 
 
 def _anchor(problem: DispatchProblem, load_kw: np.ndarray):

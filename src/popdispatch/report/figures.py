@@ -566,9 +566,9 @@ def voltage_profile_figure(
     columns, kW) with its cost (``costs``, EUR/h). ``branches``: the x axis' label."""
     fig, axes = new_figure(DOUBLE, 2.6, ncols=2, width_ratios=[1.6, 1.0])
     ax, bars = axes[0]
-    styles = ["-o", "-s", "--^"]
+    styles = ["-o", "-s", "--^", ":x"]
     for k, column in enumerate(profile_pu.columns):
-        ax.plot(profile_pu.index, profile_pu[column], styles[k % 3], ms=2.5, label=column)
+        ax.plot(profile_pu.index, profile_pu[column], styles[k % 4], ms=2.5, label=column)
     ax.axhline(vmin_pu, color=PENALTY, lw=0.8, ls=":", label=f"vmin {vmin_pu:g} p.u.")
     ax.set_xlabel(branches)
     ax.set_ylabel("AC voltage (p.u.)")
@@ -577,8 +577,9 @@ def voltage_profile_figure(
     width = 0.8 / max(len(setpoints_kw.columns), 1)
     positions = np.arange(len(setpoints_kw.index))
     for k, column in enumerate(setpoints_kw.columns):
-        label = f"{column}: {costs[column]:.2f} EUR/h"
-        bars.bar(positions + (k - 1) * width, setpoints_kw[column], width, label=label)
+        label = f"{column}: {costs[column]:.3f} EUR/h"
+        offset = (k - (len(setpoints_kw.columns) - 1) / 2) * width
+        bars.bar(positions + offset, setpoints_kw[column], width, label=label)
     bars.set_xticks(positions, setpoints_kw.index)
     bars.set_yscale("symlog", linthresh=100.0)
     bars.set_ylabel("set point (kW)")
