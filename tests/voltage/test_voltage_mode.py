@@ -217,3 +217,42 @@ def test_cli_refuses_bad_limits_before_any_work(limits):
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "--vmin" in lines[0], result.stderr
+
+
+def cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "popdispatch.cli", *args], capture_output=True,
+                          text=True, timeout=600)  # fmt: skip
+
+
+def test_cli_ac_correct_is_refused_on_day():
+    result = cli("day", "--case", "case33bw", "--mode", "exact", "--vmin", "0.95", "--ac-correct")
+    assert result.returncode == 2, result.stderr
+    assert "--ac-correct" in result.stderr and "snapshot only" in result.stderr
+
+
+def test_cli_snapshot_reports_the_voltage_object(problems, tmp_path):
+    pytest.importorskip("power_grid_model", reason='--ac needs pip install "popdispatch[ac]"')
+    import json
+
+    from popdispatch.scenarios import VOLTAGE_FLEET, VOLTAGE_NAMES
+
+    fleet = tmp_path / "fleet.csv"
+    rows = [f"{bus},{name},{b},{c},{lo},{hi}" for (bus, _, b, c, lo, hi), name
+            in zip(VOLTAGE_FLEET, VOLTAGE_NAMES, strict=True)]  # fmt: skip
+    fleet.write_text("bus,name,b_eur_per_mwh,c_eur_per_mw2h,pmin_kw,pmax_kw\n" + "\n".join(rows))
+    result = cli("snapshot", "--case", "case33bw", "--fleet", str(fleet), "--minute", "1",
+                 "--mode", "exact", "--vmin", str(VMIN), "--vmax", str(VMAX), "--ac", "--json",
+                 "-q")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["mode"] == "voltage" and summary["status"] == "converged"
+    v = summary["voltage"]
+    _, problem, _ = problems
+    opf = solve_opf(problem, 1)
+    assert v["opf_v_min_pu"] == pytest.approx(float(np.min(opf.v_pu)), abs=1e-12)
+    assert {b["bus"] for b in v["binding"]} == set(
+        problem.voltage_buses[np.abs(opf.voltage_price) > 1e-6].tolist()
+    )
+    assert v["linearization_error_pu"] == pytest.approx(
+        v["v_min_pu"] - summary["ac"]["v_min_pu"], abs=1e-12
+    )
