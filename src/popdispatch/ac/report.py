@@ -50,14 +50,16 @@ def voltage_summary(
     problem: DispatchProblem, minutes: Sequence[int], p_kw: np.ndarray, opf: Sequence
 ) -> dict:
     """The ``voltage`` object: limits, monitored buses, the run's LinDistFlow extremes (with
-    their bus and minute), those of the LinDistFlow OPF, and the binding buses of the minute
-    (snapshot) or of the worst minute (day)."""
+    their bus and minute), the LinDistFlow OPF's lowest voltage, the minutes where a voltage
+    row binds in the OPF and the binding buses of the minute with the highest voltage price
+    (``binding_minute``; a snapshot: its minute if any binds)."""
     v = lindistflow_v_pu(problem, p_kw, minutes)
     low = np.unravel_index(np.argmin(v), v.shape)
     high = np.unravel_index(np.argmax(v), v.shape)
     feasible = [o for o in opf if o.status == "optimal"]
     opf_low = min((float(np.min(o.v_pu)) for o in feasible), default=None)
-    worst = min(feasible, key=lambda o: float(np.min(o.v_pu)), default=None)
+    priced = [float(np.max(np.abs(o.voltage_price), initial=0.0)) for o in feasible]
+    worst = feasible[int(np.argmax(priced))] if feasible else None
     return {
         "vmin_pu": problem.vmin_pu if problem.vmin_pu > 0.0 else None,  # None: no bound
         "vmax_pu": problem.vmax_pu if problem.vmax_pu < 2.0 else None,
@@ -69,6 +71,10 @@ def voltage_summary(
         "v_max_bus": int(problem.voltage_buses[high[1]]),
         "opf_v_min_pu": opf_low,
         "binding": [] if worst is None else binding_rows(problem, worst),
+        "binding_minute": None
+        if worst is None or not max(priced) > BINDING_PRICE
+        else int(worst.minute),
+        "binding_minutes": int(sum(p > BINDING_PRICE for p in priced)),
         "model": "LinDistFlow (key nodes; DGs at unity power factor, loads with their Q)",
     }
 
