@@ -1,4 +1,5 @@
-"""The DC-OPF's KKT conditions, checked at the end state of a mode that claims the DC-OPF."""
+"""The DC-OPF's KKT conditions, checked at the end state of a mode that claims the DC-OPF
+(with voltage limits: the LinDistFlow OPF's, its voltage rows included; docs/voltage.md)."""
 
 from __future__ import annotations
 
@@ -78,6 +79,13 @@ def kkt_violations(
     left 1.3e-5 EUR/MW across a binding line while its set points were within 4e-6 kW of the
     DC-OPF; the ring rest point of minute 566 leaves 1.0 EUR/MW). The powers' tolerance is
     the convergence criterion's residual, ``tol_kw``.
+
+    With voltage limits (``problem.n_voltage`` rows, docs/voltage.md) ``z`` continues with the
+    monitored buses' low then high prices; their excesses ``e`` are in MW equivalents
+    (:func:`voltage_prices`), checked like a line's (beyond its bound, or priced while slack,
+    against ``power_mw``), and ``lmc_i`` also subtracts ``sum_j (mu_lo_j - mu_hi_j) sens_ji``;
+    in 3 each priced bus separating a pair adds ``|sens_ji - sens_jk| price`` to the allowance.
+    A ``z`` without the voltage prices (a run of another mode) is checked with zero prices.
     """
     rows = np.asarray(minutes, dtype=np.int64) - 1
     p_mw, z = np.atleast_2d(p_mw), np.atleast_2d(z)
@@ -130,7 +138,10 @@ def voltage_prices(
         [load[:, n_lines : n_lines + n_v] - rise, load[:, n_lines + n_v :] + rise], axis=1
     )
     C_v = float(np.max(C)) if np.size(C) else 0.0
-    return excess, np.maximum(0.0, z[:, 2 * n_lines :] + C_v * excess)
+    states = z[:, 2 * n_lines :]
+    if states.shape[1] != 2 * n_v:  # a run without the voltage prices
+        states = np.zeros_like(excess)
+    return excess, np.maximum(0.0, states + C_v * excess)
 
 
 def _voltage_violation(problem, excess, mu, tol: KktTolerances) -> str | None:
