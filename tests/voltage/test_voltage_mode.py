@@ -256,3 +256,36 @@ def test_cli_snapshot_reports_the_voltage_object(problems, tmp_path):
     assert v["linearization_error_pu"] == pytest.approx(
         v["v_min_pu"] - summary["ac"]["v_min_pu"], abs=1e-12
     )
+
+
+def test_voltage_payoff_equals_a_dense_reference(problems):
+    """The compiled payoff (line prices, voltage prices, fitness) against plain numpy with the
+    voltage rows written from the problem's unscaled LinDistFlow model."""
+    from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs
+    from popdispatch.modes import get_mode
+    from popdispatch.modes.voltage import payoff
+    from popdispatch.reference import fitness
+
+    _, problem, _ = problems
+    mode = get_mode("voltage")
+    fp = RunSettings(mode="exact", vmin_pu=VMIN).game_constants(problem)
+    rng = np.random.default_rng(7)
+    p = problem.pmax * rng.uniform(0.0, 1.0, problem.n_generators)
+    n_states = mode.controller_states(problem)
+    z = rng.uniform(0.0, 5.0, n_states) * (rng.random(n_states) < 0.5)  # half of them priced
+    got_f, got_rate = np.empty(len(p)), np.empty(len(z))
+    congestion, residual = payoff(p, z, GameParameters.of(problem, fp), MinuteInputs.of(problem, 1),
+                                  GameWork.empty(len(problem.limit)), got_f, got_rate)  # fmt: skip
+    # dense: v^2 from the unscaled model, rows divided by the scales
+    scale = problem.voltage_scale
+    v_sq = problem.voltage_sq(p, 1)
+    excess = np.concatenate([(VMIN**2 - v_sq) / scale, (v_sq - VMAX**2) / scale])
+    n_v = problem.n_voltage
+    mu = np.maximum(0.0, z + fp.C * excess)  # no limited lines in this problem
+    net = mu[:n_v] - mu[n_v:]
+    signal = net @ problem.voltage_sens
+    np.testing.assert_allclose(got_f, fitness(problem, p, signal, fp, fp.gain, False), rtol=1e-9)
+    np.testing.assert_allclose(got_rate, fp.price_rate * excess, rtol=1e-9, atol=1e-9)
+    assert congestion == pytest.approx(np.abs(net).max(), rel=1e-12)
+    slack = np.where(z > 0.0, np.abs(excess), np.maximum(excess, 0.0))
+    assert residual == pytest.approx(slack.max(), rel=1e-12)
