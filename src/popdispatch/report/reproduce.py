@@ -203,7 +203,10 @@ def write_reproduction(
     if rep.voltage is not None:
         folder.write_csv("voltage.csv", voltage_tables(rep.voltage)[0].reset_index())
     folder.write_json("summary.json", summary)
-    folder.write_text("report.md", reproduction_report(summary, stems, rep))
+    report = reproduction_report(summary, stems, rep)
+    if summary.get("voltage") is not None:
+        report = report.rstrip("\n") + "\n\n" + voltage_markdown(summary["voltage"])
+    folder.write_text("report.md", report)
     if html_profiles is not None:
         write_reproduction_html(rep, folder, html_profiles, summary, progress)
     return summary
@@ -339,3 +342,37 @@ def voltage_summary(result: VoltageResult) -> dict:
                 result.corrected.cost_eur_per_h - anchor
             ) / anchor
     return out
+
+
+def voltage_markdown(v: dict) -> str:
+    """The voltage scenario's section of ``report.md`` (from its summary object)."""
+    rows = [
+        f"| {name} | {', '.join(f'{g} {_kw(kw)}' for g, kw in d['setpoints_kw'].items())} | "
+        f"{d['ac_v_min_pu']:.5f} (bus {d['ac_v_min_bus']}) | {d['cost_eur_per_h']:.3f} |"
+        for name, d in v["dispatches"].items()
+    ]
+    lines = [
+        "## Voltage limits: case33bw (issue 14, docs/voltage.md)",
+        "",
+        f"Source and four DGs, limits {v['vmin_pu']:g}-{v['vmax_pu']:g} p.u.; buses in MATPOWER "
+        "numbering; cost with the AC losses bought at the source.",
+        "",
+        "| dispatch | set points, kW | AC minimum, p.u. | cost, EUR/h |",
+        "| --- | --- | --- | --- |",
+        *rows,
+        "",
+        f"Voltage-aware dispatch ({v['voltage_aware_status']}) vs the LinDistFlow OPF: "
+        f"{v['voltage_aware_vs_lindistflow_opf_kw']:.2e} kW; linearization error "
+        f"{v.get('linearization_error_pu', float('nan')):.5f} p.u.",
+        "",
+        f"![voltage profile](figures/{VOLTAGE_FIGURE}.png)",
+        "",
+    ]
+    if v.get("anchor_error"):
+        lines.insert(-2, f"pandapower's AC OPF: {v['anchor_error']}")
+    return "\n".join(lines)
+
+
+def _kw(value: float) -> str:
+    """A set point to 0.1 kW, without the sign of a rounding residue ("-0.0")."""
+    return f"{value if abs(value) >= 0.05 else 0.0:.1f}"
