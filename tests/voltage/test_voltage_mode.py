@@ -11,8 +11,10 @@ checked as a KKT point of that problem with its own duals, and its cost against 
 from __future__ import annotations
 
 import math
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -289,3 +291,34 @@ def test_voltage_payoff_equals_a_dense_reference(problems):
     assert congestion == pytest.approx(np.abs(net).max(), rel=1e-12)
     slack = np.where(z > 0.0, np.abs(excess), np.maximum(excess, 0.0))
     assert residual == pytest.approx(slack.max(), rel=1e-12)
+
+
+FEEDERS = Path(
+    os.environ.get("POPDISPATCH_FEEDERS")
+    or Path(__file__).resolve().parents[3] / "shared" / "feeders"
+)
+CASE33 = FEEDERS / "matpower" / "case33bw.m"
+
+
+@pytest.mark.skipif(
+    not CASE33.is_file(),
+    reason=f"MATPOWER case33bw.m not found at {CASE33} (set POPDISPATCH_FEEDERS)",
+)
+def test_the_matpower_file_gives_the_same_lindistflow_opf(problems):
+    """The scenario on pandapower's case33bw (buses from 0) and on the MATPOWER file (buses
+    from 1, read by our own reader): the same monitored voltages and LinDistFlow optimum."""
+    from popdispatch.feeder.generators import make_fleet
+    from popdispatch.readers import read_matpower
+    from popdispatch.runs import network_profiles
+    from popdispatch.scenarios import VOLTAGE_FLEET, VOLTAGE_NAMES, elv_problem
+
+    _, problem, _ = problems
+    fleet = make_fleet([(bus + 1, *rest) for bus, *rest in VOLTAGE_FLEET], VOLTAGE_NAMES)
+    feeder = read_matpower(CASE33, fleet=fleet)
+    profiles = network_profiles(feeder)
+    other = with_voltage_limits(elv_problem(profiles, (), feeder, check=False),
+                                profiles.kw.to_numpy(float), VMIN, VMAX)  # fmt: skip
+    np.testing.assert_array_equal(other.voltage_buses, problem.voltage_buses + 1)
+    np.testing.assert_allclose(other.voltage_base, problem.voltage_base, atol=1e-12)
+    ours, theirs = solve_opf(problem, 1), solve_opf(other, 1)
+    np.testing.assert_allclose(theirs.p_kw, ours.p_kw, atol=1e-6)
