@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+import pandas as pd
 
 from popdispatch.constants import KW_PER_MW
 from popdispatch.game.problem import DispatchProblem
@@ -24,6 +25,16 @@ def lindistflow_v_pu(problem: DispatchProblem, p_kw: np.ndarray, minutes: Sequen
     p_mw = np.atleast_2d(np.asarray(p_kw, dtype=float)) / KW_PER_MW
     sq = [problem.voltage_sq(p, int(m)) for p, m in zip(p_mw, minutes, strict=True)]
     return np.sqrt(np.maximum(np.array(sq), 0.0))
+
+
+def voltage_columns(problem: DispatchProblem, minutes: Sequence[int], p_kw: np.ndarray):
+    """Per minute (index ``minute``): the lowest and highest LinDistFlow voltage of the
+    monitored buses, ``lindistflow_v_min_pu`` and ``lindistflow_v_max_pu`` (p.u.)."""
+    v = lindistflow_v_pu(problem, p_kw, minutes)
+    index = pd.Index(np.asarray(minutes), name="minute")
+    return pd.DataFrame(
+        {"lindistflow_v_min_pu": v.min(axis=1), "lindistflow_v_max_pu": v.max(axis=1)}, index
+    )
 
 
 def binding_rows(problem: DispatchProblem, opf) -> list[dict]:

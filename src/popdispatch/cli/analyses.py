@@ -167,8 +167,11 @@ def snapshot_analyses(analyses, problem, profiles, result, summary: dict, progre
 
 
 def day_analyses(analyses, problem, profiles, result, summary: dict, progress: Progress):
-    """The AC check of every step (into ``summary['ac']``) and the report of a day run.
-    Returns the AC check's per-step columns (index ``minute``) or ``None``."""
+    """The AC check of every step (into ``summary['ac']``), the voltage object and the report
+    of a day run. Returns the per-step columns for ``day.csv`` (index ``minute``): the AC
+    check's and, with voltage limits, the LinDistFlow ``v_min_pu``/``v_max_pu`` of the
+    monitored buses (:func:`popdispatch.ac.report.voltage_columns`); ``None`` without
+    either."""
     from popdispatch.ac import check_day
 
     ac = None
@@ -188,7 +191,13 @@ def day_analyses(analyses, problem, profiles, result, summary: dict, progress: P
         with progress.step(f"writing {analyses.html}"):
             write_day_html(analyses.html, result, problem, profiles, run_info=summary,
                            voltages_pu=voltages)  # fmt: skip
-    return None if ac is None else ac.steps
+    steps = None if ac is None else ac.steps
+    if problem.n_voltage:
+        from popdispatch.ac.report import voltage_columns
+
+        columns = voltage_columns(problem, result.run.minutes, result.run.setpoints_kw)
+        steps = columns if steps is None else steps.join(columns)
+    return steps
 
 
 def _voltage(problem, minutes, p_kw, opf, ac_v_min_pu: float | None) -> dict:
