@@ -27,7 +27,7 @@ from popdispatch.ac.lindistflow import check_voltage_limits, with_voltage_limits
 from popdispatch.ac.network import load_q_per_kw, nominal_kv  # noqa: E402
 from popdispatch.errors import OptionError  # noqa: E402
 from popdispatch.game.problem import KW_PER_MW  # noqa: E402
-from popdispatch.modes.voltage import TOL_REL  # noqa: E402
+from popdispatch.modes import get_mode  # noqa: E402
 from popdispatch.online import RunSettings  # noqa: E402
 from popdispatch.online.kkt import KktTolerances, kkt_violations  # noqa: E402
 from popdispatch.opf import solve_opf  # noqa: E402
@@ -148,7 +148,7 @@ def test_voltage_mode_equals_the_lindistflow_opf(problems):
     assert result.run.status == "converged", result.run.stall_reason
     demand_kw = float(problem.demand[0] * KW_PER_MW)
     error = np.max(np.abs(result.run.setpoints_kw - result.opf.p_kw))
-    assert error <= TOL_REL * demand_kw  # the mode's stopping tolerance ...
+    assert error <= get_mode("voltage").integrator.tol_rel * demand_kw  # the mode's tolerance
     assert error <= max(1e-6 * demand_kw, 1e-3)  # ... within the issue's target
     # the voltage limits bind: the DC-OPF's dispatch (all from the source) is far from it
     assert np.min(result.opf.v_pu) == pytest.approx(VMIN, abs=1e-9)
@@ -264,7 +264,6 @@ def test_voltage_payoff_equals_a_dense_reference(problems):
     """The compiled payoff (line prices, voltage prices, fitness) against plain numpy with the
     voltage rows written from the problem's unscaled LinDistFlow model."""
     from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs
-    from popdispatch.modes import get_mode
     from popdispatch.modes.voltage import payoff
     from popdispatch.reference import fitness
 
