@@ -201,7 +201,7 @@ def ac_correct_text(c: dict | None) -> str:
 def snapshot_text(s: dict) -> str:
     """``popdispatch snapshot``."""
     extra = voltage_text(s.get("voltage")) + ac_correct_text(s.get("ac_correct"))
-    return _snapshot_text(s) + ac_text(s.get("ac")) + extra
+    return _yardstick(s, _snapshot_text(s)) + ac_text(s.get("ac")) + extra
 
 
 def _snapshot_text(s: dict) -> str:
@@ -309,7 +309,13 @@ def day_text(s: dict) -> str:
         outcome = [line.replace(" minute", " step") for line in outcome]
     head = f"{_span(s)}: {s['dynamics']} dynamics, {s['mode']} mode"
     body = "\n".join([head, _inputs(s), events_text(s.get("events", [])), *outcome])
-    return body + ac_text(s.get("ac")) + voltage_text(s.get("voltage"))
+    return _yardstick(s, body) + ac_text(s.get("ac")) + voltage_text(s.get("voltage"))
+
+
+def _yardstick(s: dict, text: str) -> str:
+    """With voltage limits the yardstick is the LinDistFlow OPF: say so where the text says
+    DC-OPF."""
+    return text.replace("DC-OPF", "LinDistFlow OPF") if s.get("voltage") else text
 
 
 def cases_summary(table) -> dict:
