@@ -3,15 +3,19 @@
     min  sum_i a_i + b_i p_i + c_i p_i^2
     s.t. Pmin_i <= p_i <= Pmax_i,  sum_i p_i = P_d,  |flow_k| <= U_k on limited lines,
 
-with the lossless radial DC flows ``flow = load_flow - D p``. Solved with Clarabel (interior
-point, QP). The solver works in kW (better scaled than MW for these small generators); results
-are returned in kW. An infeasible problem is reported as infeasible, never as a solution.
+with the lossless radial DC flows ``flow = load_flow - D p``; a problem with voltage limits
+adds the LinDistFlow rows ``vmin^2 <= v0_j^2 + sum_i S_ji p_i <= vmax^2`` of its monitored
+buses (the LinDistFlow OPF, docs/voltage.md), scaled like the voltage mode's controllers
+(divided by ``s_j``, in MW equivalents) so that their duals are the prices the controllers
+broadcast. Solved with Clarabel (interior point, QP). The solver works in kW (better scaled
+than MW for these small generators); results are returned in kW. An infeasible problem is
+reported as infeasible, never as a solution.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import clarabel
 import numpy as np
@@ -33,6 +37,10 @@ class OpfResult:
     cost : total cost ``sum C_i(p_i)`` with p in MW, EUR (per hour, Table I's coefficients).
     line_price : dual of each limited line's constraint, EUR/MW (0 if not binding).
     marginal_price : dual of the power balance, EUR/MW.
+    voltage_price : per monitored bus, the dual of its lower bound minus that of its upper
+        bound, EUR/MW per MW equivalent (the voltage mode's net price ``m_j``; divide by
+        ``voltage_scale`` for EUR/h per p.u.^2); empty without voltage limits.
+    v_pu : per monitored bus, the LinDistFlow voltage at the optimum, p.u. (empty without).
     """
 
     status: str
@@ -42,6 +50,8 @@ class OpfResult:
     cost: float
     line_price: np.ndarray
     marginal_price: float
+    voltage_price: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    v_pu: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def generation_cost(problem: DispatchProblem, p_mw: np.ndarray, online: np.ndarray | None = None):
@@ -66,8 +76,12 @@ class OpfSolver:
         q = problem.b.astype(float)
         eye = sparse.eye(n)
         down = sparse.csr_matrix(problem.down)
-        A = sparse.vstack([sparse.csr_matrix(np.ones((1, n))), -eye, eye, -down, down]).tocsc()
-        cones = [clarabel.ZeroConeT(1), clarabel.NonnegativeConeT(2 * n + 2 * len(problem.limit))]
+        sens = sparse.csr_matrix(problem.voltage_sens.reshape(problem.n_voltage, n))
+        A = sparse.vstack(
+            [sparse.csr_matrix(np.ones((1, n))), -eye, eye, -down, down, -sens, sens]
+        ).tocsc()
+        rows = 2 * n + 2 * len(problem.limit) + 2 * problem.n_voltage
+        cones = [clarabel.ZeroConeT(1), clarabel.NonnegativeConeT(rows)]
         settings = clarabel.DefaultSettings()
         settings.verbose = False
         settings.presolve_enable = False  # keeps the data updatable
@@ -81,10 +95,16 @@ class OpfSolver:
         online = problem.online[minute - 1]
         pmin = np.where(online, problem.pmin, 0.0) * KW_PER_MW
         pmax = np.where(online, problem.pmax, 0.0) * KW_PER_MW
-        load_flow = problem.load_flow[minute - 1] * KW_PER_MW
+        n_lines, n_v = len(problem.limit), problem.n_voltage
+        loads = problem.load_flow[minute - 1] * KW_PER_MW
+        load_flow = loads[:n_lines]
         limit = problem.limit * KW_PER_MW
         demand = problem.demand[minute - 1] * KW_PER_MW
-        return np.concatenate([[demand], -pmin, pmax, limit - load_flow, limit + load_flow])
+        # voltage rows: e0_lo - sens p <= 0 and e0_hi + sens p <= 0 (kW equivalents)
+        v_lo, v_hi = -loads[n_lines : n_lines + n_v], -loads[n_lines + n_v :]
+        return np.concatenate(
+            [[demand], -pmin, pmax, limit - load_flow, limit + load_flow, v_lo, v_hi]
+        )
 
     def solve(self, minute: int) -> OpfResult:
         """Solve the DC-OPF of one 1-based minute (offline generators held at 0)."""
@@ -101,18 +121,24 @@ class OpfSolver:
         demand = float(rhs[0])
         if status in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
             nan = np.full(n, np.nan)
+            n_v = problem.n_voltage
             return OpfResult(
-                "infeasible", minute, demand, nan, np.nan, np.full(n_limits, np.nan), np.nan
-            )
+                "infeasible", minute, demand, nan, np.nan, np.full(n_limits, np.nan), np.nan,
+                np.full(n_v, np.nan), np.full(n_v, np.nan),
+            )  # fmt: skip
         if status not in ("Solved", "AlmostSolved"):
             raise RuntimeError(f"DC-OPF at minute {minute}: Clarabel returned {status}")
         p_kw = np.clip(np.asarray(solution.x), -rhs[1 : 1 + n], rhs[1 + n : 1 + 2 * n])
         dual = np.asarray(solution.z)
-        line_dual = dual[1 + 2 * n :]
+        line_dual = dual[1 + 2 * n : 1 + 2 * n + 2 * n_limits]
         line_price = line_dual[:n_limits] - line_dual[n_limits:]
+        v_dual = dual[1 + 2 * n + 2 * n_limits :]
+        n_v = problem.n_voltage
         online = problem.online[minute - 1]
         cost = float(generation_cost(problem, p_kw / KW_PER_MW, online))
-        return OpfResult("optimal", minute, demand, p_kw, cost, line_price, float(-dual[0]))
+        v_pu = np.sqrt(np.maximum(problem.voltage_sq(p_kw / KW_PER_MW, minute), 0.0))
+        return OpfResult("optimal", minute, demand, p_kw, cost, line_price, float(-dual[0]),
+                         v_dual[:n_v] - v_dual[n_v:], v_pu)  # fmt: skip
 
 
 def solve_opf(problem: DispatchProblem, minute: int) -> OpfResult:

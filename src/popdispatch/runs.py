@@ -364,12 +364,45 @@ def check_x0(x0: str | dict[str, float], names: Sequence[str] | None) -> list[st
     return [name for name in names if not x0.get(name)]
 
 
+def with_voltage(
+    problem: DispatchProblem,
+    profiles: LoadProfiles,
+    settings: RunSettings,
+    vn_kv: float | None = None,
+) -> DispatchProblem:
+    """``problem`` with the voltage rows of ``settings``' limits (``vmin_pu``/``vmax_pu``;
+    unchanged without them), from the per-load demand of ``profiles`` (the run's series):
+    :func:`popdispatch.ac.lindistflow.with_voltage_limits`. ``vn_kv``: the nominal voltage
+    where the network does not say (kV)."""
+    if not settings.voltage_limited:
+        return problem
+    from popdispatch.ac.lindistflow import with_voltage_limits
+
+    loads = profiles.for_loads(problem.feeder.original.loads.index).kw.to_numpy(float)
+    return with_voltage_limits(problem, loads, settings.vmin_pu, settings.vmax_pu, vn_kv=vn_kv)
+
+
+def check_voltage(problem: DispatchProblem, settings: RunSettings) -> None:
+    """:class:`OptionError` where the problem's voltage limits are not the settings' (a
+    problem built without :func:`with_voltage`, or for other limits)."""
+    want = (settings.vmin_pu or 0.0, settings.vmax_pu or 2.0) if settings.voltage_limited else None
+    have = (problem.vmin_pu, problem.vmax_pu) if not np.isnan(problem.vmin_pu) else None
+    if want != have:
+        raise OptionError(
+            f"the run's voltage limits {want or 'none'} are not the problem's {have or 'none'}: "
+            "build the problem with popdispatch.runs.with_voltage(problem, profiles, settings)",
+            "--vmin",
+        )
+
+
 def run_snapshot_vs_opf(
     problem: DispatchProblem, minute: int, settings: RunSettings | None = None
 ) -> SnapshotComparison:
-    """One minute of dynamics and its DC-OPF, once the initial shares are checked against the
-    problem's fleet and some generator is online at ``minute``."""
+    """One minute of dynamics and its DC-OPF (the LinDistFlow OPF with voltage limits), once
+    the initial shares are checked against the problem's fleet, the voltage limits against the
+    problem's (:func:`check_voltage`) and some generator is online at ``minute``."""
     settings = settings or RunSettings()
+    check_voltage(problem, settings)
     check_x0(settings.x0, problem.generators)
     check_online(problem, [minute])
     return snapshot_vs_opf(problem, minute, settings)
@@ -381,10 +414,11 @@ def run_day_vs_opf(
     minutes=None,
     progress: Progress | None = None,
 ) -> DayComparison:
-    """The online day over ``minutes`` (default all) and each minute's DC-OPF, once the
-    initial shares are checked against the problem's fleet and some generator is online at
-    every minute."""
+    """The online day over ``minutes`` (default all) and each minute's DC-OPF (LinDistFlow
+    OPF with voltage limits), once the initial shares are checked against the problem's fleet,
+    the voltage limits against the problem's and some generator is online at every minute."""
     settings = settings or RunSettings()
+    check_voltage(problem, settings)
     check_x0(settings.x0, problem.generators)
     check_online(problem, minutes)
     return day_vs_opf(problem, settings, minutes, progress)

@@ -5,6 +5,10 @@
   The paper reports detection at iteration 53 and convergence at iteration 201.
 - ``extinction``: replicator dynamics never use an efficient generator that starts at zero
   share (here Generator 2, bus 114, the cheapest), while Smith dynamics reach the optimum.
+- ``voltage`` (issue 14): ``case33bw`` with the source and four DGs whose cheapest dispatch
+  (all from the source) leaves the far end below 0.95 p.u.; the DC exact dispatch, the
+  voltage-aware dispatch (voltage mode, against the LinDistFlow OPF) and pandapower's AC OPF,
+  each checked in AC (docs/voltage.md).
 """
 
 from __future__ import annotations
@@ -184,4 +188,97 @@ def extinction(
     )
 
 
-SCENARIOS = ("base-day", "congestion", "extinction")
+#: The ``voltage`` scenario's feeder and fleet: case33bw (pandapower's, buses numbered from 0:
+#: MATPOWER bus k is bus k - 1) with the source priced below four DGs (bus, a EUR/h, b EUR/MWh,
+#: c EUR/(MW^2 h), Pmin kW, Pmax kW), named by their MATPOWER bus: the cheapest dispatch buys
+#: everything from the source and leaves bus 18 at 0.913 p.u. (AC).
+VOLTAGE_CASE = "case33bw"
+VOLTAGE_FLEET = (
+    (0, 0.0, 20.0, 0.5, 0.0, 5000.0),
+    (17, 0.0, 40.0, 2.0, 0.0, 600.0),
+    (32, 0.0, 45.0, 2.0, 0.0, 600.0),
+    (24, 0.0, 50.0, 2.0, 0.0, 500.0),
+    (29, 0.0, 55.0, 2.0, 0.0, 500.0),
+)
+VOLTAGE_NAMES = ("source", "DG18", "DG33", "DG25", "DG30")
+VOLTAGE_LIMITS = (0.95, 1.05)
+
+
+def voltage_feeder() -> Feeder:
+    """case33bw with the ``voltage`` scenario's fleet."""
+    from popdispatch.feeder.cases import load_case
+    from popdispatch.feeder.generators import make_fleet
+
+    return load_case(VOLTAGE_CASE, fleet=make_fleet(VOLTAGE_FLEET, VOLTAGE_NAMES))
+
+
+def voltage_problems(
+    vmin_pu: float | None = VOLTAGE_LIMITS[0], vmax_pu: float | None = VOLTAGE_LIMITS[1]
+) -> tuple[DispatchProblem, DispatchProblem, np.ndarray]:
+    """``(without, with voltage limits, per-load kW)`` of the ``voltage`` scenario (one step:
+    the case's own loads)."""
+    from popdispatch.ac.lindistflow import with_voltage_limits
+    from popdispatch.runs import network_profiles
+
+    feeder = voltage_feeder()
+    profiles = network_profiles(feeder)
+    load_kw = profiles.kw.to_numpy(float)
+    plain = elv_problem(profiles, (), feeder, check=True)
+    return plain, with_voltage_limits(plain, load_kw, vmin_pu, vmax_pu), load_kw
+
+
+@dataclass(frozen=True)
+class VoltageResult:
+    """The ``voltage`` scenario: the DC exact dispatch against the DC-OPF (``dc``), the
+    voltage-aware one against the LinDistFlow OPF (``voltage``), their AC checks (``ac_dc``,
+    ``ac_voltage``; None without power-grid-model), pandapower's AC OPF (``anchor``; None,
+    with ``anchor_error`` saying why, when it is skipped or fails) and the voltage-aware
+    dispatch corrected by AC power flows (``corrected``, :mod:`popdispatch.ac.correct`; with
+    the AC checks)."""
+
+    plain: DispatchProblem
+    problem: DispatchProblem
+    load_kw: np.ndarray
+    dc: SnapshotComparison
+    voltage: SnapshotComparison
+    ac_dc: object | None
+    ac_voltage: object | None
+    anchor: object | None
+    anchor_error: str | None
+    corrected: object | None = None
+
+
+def voltage(settings: RunSettings | None = None, ac: bool = True, anchor: bool = True):
+    """``voltage``: the scenario's three dispatches (see :class:`VoltageResult`); ``settings``
+    (their dynamics, graph, x0) run in exact mode, then with the scenario's voltage limits."""
+    base = replace(settings or RunSettings(), mode="exact", vmin_pu=None, vmax_pu=None,
+                   integrator=None, warm_start=None)  # fmt: skip
+    plain, problem, load_kw = voltage_problems()
+    aware = replace(base, vmin_pu=problem.vmin_pu, vmax_pu=problem.vmax_pu)
+    dc = snapshot_vs_opf(plain, 1, base)
+    limited = snapshot_vs_opf(problem, 1, aware)
+    ac_dc = ac_voltage = corrected = None
+    if ac:
+        from popdispatch.ac import check_snapshot
+        from popdispatch.ac.correct import ac_correct
+
+        ac_dc, ac_voltage = (
+            check_snapshot(p, None, r) for p, r in ((plain, dc), (problem, limited))
+        )
+        corrected = ac_correct(problem, load_kw[0], 1, aware)
+    found, error = _anchor(problem, load_kw) if anchor else (None, "not asked for")
+    return VoltageResult(plain, problem, load_kw, dc, limited, ac_dc, ac_voltage, found, error,
+                         corrected)  # fmt: skip
+
+
+def _anchor(problem: DispatchProblem, load_kw: np.ndarray):
+    """pandapower's AC OPF of the problem's feeder and limits, or ``(None, why not)``."""
+    from popdispatch.ac.runopp import ACOpfError, ac_opf
+
+    try:
+        return ac_opf(problem.feeder.original, load_kw[0], problem.vmin_pu, problem.vmax_pu), None
+    except ACOpfError as exc:
+        return None, str(exc)
+
+
+SCENARIOS = ("base-day", "congestion", "extinction", "voltage")

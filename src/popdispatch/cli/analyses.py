@@ -1,5 +1,7 @@
-"""``--ac`` and ``--html`` on ``snapshot`` and ``day``: the AC check of the dispatch
-(:mod:`popdispatch.ac`) and the interactive report (:mod:`popdispatch.report.interactive`).
+"""``--ac``, ``--html``, ``--vmin`` and ``--vmax`` on ``snapshot`` and ``day``: the AC check of
+the dispatch (:mod:`popdispatch.ac`), the interactive report
+(:mod:`popdispatch.report.interactive`) and the voltage limits (docs/voltage.md: the voltage
+mode, its problem's voltage rows and the ``voltage`` JSON object).
 
 Both are checked before any work (the optional extra installed, the report's folder writable)
 and run after the dynamics; the AC check's summary goes under the ``ac`` key of the command's
@@ -27,6 +29,22 @@ class Analyses(NamedTuple):
     ac: bool = False
     vn_kv: float | None = None
     html: Path | None = None
+    vmin: float | None = None
+    vmax: float | None = None
+    ac_correct: bool = False
+
+    def settings(self, settings):
+        """``settings`` with the voltage limits (exact mode becomes the voltage mode;
+        :class:`~popdispatch.errors.OptionError`, exit 2, for bad limits or another mode)."""
+        from dataclasses import replace
+
+        return replace(settings, vmin_pu=self.vmin, vmax_pu=self.vmax)
+
+    def problem(self, problem, profiles, settings):
+        """The run's problem with its voltage rows (:func:`popdispatch.runs.with_voltage`)."""
+        from popdispatch.runs import with_voltage
+
+        return with_voltage(problem, profiles, settings, self.vn_kv)
 
     def check(self) -> None:
         """Before any work (see :func:`check_analyses`)."""
@@ -50,8 +68,13 @@ def analysis_options(func):
     (:class:`Analyses`), checked before the command runs."""
 
     @functools.wraps(func)
-    def command(*args, ac, vn_kv, html, **kwargs):
-        analyses = Analyses(ac or vn_kv is not None, vn_kv, html)
+    def command(*args, ac, vn_kv, html, vmin, vmax, ac_correct, **kwargs):
+        if ac_correct and click.get_current_context().info_name != "snapshot":
+            raise click.BadParameter("runs on snapshot only", param_hint="'--ac-correct'")
+        if ac_correct and vmin is None and vmax is None:
+            raise click.BadParameter("needs --vmin or --vmax", param_hint="'--ac-correct'")
+        analyses = Analyses(ac or vn_kv is not None or ac_correct, vn_kv, html, vmin, vmax,
+                            ac_correct)  # fmt: skip
         check_analyses(analyses)
         return func(*args, analyses=analyses, **kwargs)
 
@@ -74,6 +97,21 @@ def analysis_options(func):
             help="Write an interactive, self-contained HTML report (the feeder map over time "
             "and linked panels) to this file.",
         ),
+        click.option(
+            "--vmin",
+            type=float,
+            metavar="PU",
+            help="Lowest bus voltage, p.u. (e.g. 0.95): exact mode adds LinDistFlow voltage "
+            "prices at the key nodes; compared with the LinDistFlow OPF (docs/voltage.md).",
+        ),
+        click.option("--vmax", type=float, metavar="PU", help="Highest bus voltage, p.u."),
+        click.option(
+            "--ac-correct",
+            is_flag=True,
+            help="snapshot with --vmin/--vmax: rerun the voltage-aware dispatch with voltage "
+            "offsets and loss factors from AC power flows until they settle (implies --ac; "
+            "reported under ac_correct).",
+        ),
     ]
     for decorate in reversed(decorators):
         command = decorate(command)
@@ -87,6 +125,10 @@ def check_analyses(analyses: Analyses) -> None:
 
     from popdispatch.cli.options import check_out
 
+    if analyses.vmin is not None or analyses.vmax is not None:
+        from popdispatch.ac.lindistflow import check_voltage_limits
+
+        check_voltage_limits(analyses.vmin, analyses.vmax)  # OptionError: exit 2
     wanted = [name for name, on in (("ac", analyses.ac), ("html", analyses.html)) if on]
     for name in wanted:
         module, extra = EXTRAS[name]
@@ -110,6 +152,11 @@ def snapshot_analyses(analyses, problem, profiles, result, summary: dict, progre
         with progress.step("AC power flow of the dispatch"):
             ac = check_snapshot(problem, profiles, result, **analyses.model_options())
         summary["ac"] = ac.summary()
+    if problem.n_voltage:
+        summary["voltage"] = _voltage(problem, [result.run.minute], result.run.setpoints_kw,
+                                      [result.opf], ac and ac.buses["v_pu"].min())  # fmt: skip
+    if analyses.ac_correct:
+        summary["ac_correct"] = _corrected(analyses, problem, profiles, result, progress)
     if analyses.html is not None:
         from popdispatch.report.interactive import write_snapshot_html
 
@@ -120,8 +167,11 @@ def snapshot_analyses(analyses, problem, profiles, result, summary: dict, progre
 
 
 def day_analyses(analyses, problem, profiles, result, summary: dict, progress: Progress):
-    """The AC check of every step (into ``summary['ac']``) and the report of a day run.
-    Returns the AC check's per-step columns (index ``minute``) or ``None``."""
+    """The AC check of every step (into ``summary['ac']``), the voltage object and the report
+    of a day run. Returns the per-step columns for ``day.csv`` (index ``minute``): the AC
+    check's and, with voltage limits, the LinDistFlow ``v_min_pu``/``v_max_pu`` of the
+    monitored buses (:func:`popdispatch.ac.report.voltage_columns`); ``None`` without
+    either."""
     from popdispatch.ac import check_day
 
     ac = None
@@ -130,6 +180,10 @@ def day_analyses(analyses, problem, profiles, result, summary: dict, progress: P
             ac = check_day(problem, profiles, result, **analyses.model_options())
         hours = profiles.timeline.hours[ac.steps.index.to_numpy() - 1]
         summary["ac"] = ac.summary(hours)
+    if problem.n_voltage:
+        run = result.run
+        summary["voltage"] = _voltage(problem, run.minutes, run.setpoints_kw, result.opf,
+                                      ac and float(ac.flows.v_pu.min()))  # fmt: skip
     if analyses.html is not None:
         from popdispatch.report.interactive import write_day_html
 
@@ -137,4 +191,39 @@ def day_analyses(analyses, problem, profiles, result, summary: dict, progress: P
         with progress.step(f"writing {analyses.html}"):
             write_day_html(analyses.html, result, problem, profiles, run_info=summary,
                            voltages_pu=voltages)  # fmt: skip
-    return None if ac is None else ac.steps
+    steps = None if ac is None else ac.steps
+    if problem.n_voltage:
+        from popdispatch.ac.report import voltage_columns
+
+        columns = voltage_columns(problem, result.run.minutes, result.run.setpoints_kw)
+        steps = columns if steps is None else steps.join(columns)
+    return steps
+
+
+def _voltage(problem, minutes, p_kw, opf, ac_v_min_pu: float | None) -> dict:
+    """The ``voltage`` JSON object (:func:`popdispatch.ac.report.voltage_summary`), with the
+    linearization error where the AC check ran."""
+    from popdispatch.ac.report import linearization_error, voltage_summary
+
+    out = voltage_summary(problem, minutes, p_kw, opf)
+    if ac_v_min_pu is not None:
+        out.update(linearization_error(out, ac_v_min_pu))
+    return out
+
+
+def _corrected(analyses, problem, profiles, result, progress: Progress) -> dict:
+    """The ``ac_correct`` JSON object (:func:`popdispatch.ac.correct.ac_correct`)."""
+    import numpy as np
+
+    from popdispatch.ac.check import minute_loads
+    from popdispatch.ac.correct import ac_correct
+
+    run = result.run
+    loads = minute_loads(problem.feeder.original, profiles, np.array([run.minute]))
+    with progress.step("AC-corrected voltage-aware dispatch"):
+        corrected = ac_correct(problem, loads, run.minute, run.settings,
+                               **analyses.model_options())  # fmt: skip
+    out = corrected.summary()
+    if problem.vmin_pu > 0.0:
+        out["below_vmin_pu"] = max(problem.vmin_pu - out["ac_v_min_pu"], 0.0)
+    return out

@@ -139,10 +139,11 @@ def snapshot(
 
     progress = Progress(quiet)
     check_out(out)
-    settings = settings_from(dynamics, mode, x0, graph, None, constants)
+    settings = analyses.settings(settings_from(dynamics, mode, x0, graph, None, constants))
     check_shares(x0, progress, source)
     announce_compile(progress)
     problem, series = build(source, profiles, minute, limits, progress)
+    problem = analyses.problem(problem, series, settings)
     with progress.step(f"minute {minute}: {dynamics} dynamics and DC-OPF"):
         result = run_snapshot_vs_opf(problem, minute, settings)
     summary = snapshot_summary(problem, result, limits, series.timeline)
@@ -203,10 +204,11 @@ def day(
 
     progress = Progress(quiet)
     check_out(out)
-    settings = settings_from(dynamics, mode, x0, graph, warm_start, constants)
+    settings = analyses.settings(settings_from(dynamics, mode, x0, graph, warm_start, constants))
     check_shares(x0, progress, source)
     announce_compile(progress)
     problem, series = build(source, profiles, None, limits, progress, events, minutes)
+    problem = analyses.problem(problem, series, settings)
     result = run_day_vs_opf(problem, settings, minutes.of(series), progress)
     labels = [event_label(event) for event in events]
     summary = day_summary(problem, result, limits, labels, series.timeline)

@@ -14,6 +14,8 @@ import numpy as np
 from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.problem import DispatchProblem
 
+NO_VOLTAGE_ROWS = np.zeros((0, 0))  # empty: nothing in it to change
+
 
 class GameParameters(NamedTuple):
     """The game's parameters, the same for every minute of a problem (one layout for all modes,
@@ -32,6 +34,9 @@ class GameParameters(NamedTuple):
     generator_line: np.ndarray  # tree of limited lines (game/flows.py)
     line_up: np.ndarray
     line_preorder: np.ndarray
+    # per monitored bus and generator, d(v^2)/dp over the bus's scale (modes/voltage.py);
+    # (0, 0) without voltage limits (the default, for records built by hand in tests)
+    voltage_sens: np.ndarray = NO_VOLTAGE_ROWS
 
     @classmethod
     def of(cls, problem: DispatchProblem, fp: FitnessParameters) -> GameParameters:
@@ -39,13 +44,16 @@ class GameParameters(NamedTuple):
             problem.b, problem.c, problem.pmin, problem.pmax, float(fp.B), float(fp.m),
             float(fp.C), float(fp.gain), float(fp.price_rate), problem.limit,
             problem.generator_line, problem.line_up, problem.line_preorder,
+            np.ascontiguousarray(problem.voltage_sens, dtype=float),
         )  # fmt: skip
 
 
 class MinuteInputs(NamedTuple):
     """What changes from minute to minute: demand (MW), the loads-only flow of each limited
-    line (MW), the share bounds ``lo``/``hi`` (``Pmin / P_d``, ``Pmax / P_d`` online, 0
-    offline) and the online generators."""
+    line (MW; then the voltage rows' loads-only excesses, see
+    :attr:`~popdispatch.game.problem.DispatchProblem.load_flow`), the share bounds
+    ``lo``/``hi`` (``Pmin / P_d``, ``Pmax / P_d`` online, 0 offline) and the online
+    generators."""
 
     demand: float
     load_flow: np.ndarray

@@ -9,7 +9,7 @@ engine never forms ``D``: it works on the tree of limited lines (:mod:`popdispat
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -38,9 +38,24 @@ class DispatchProblem:
     line_preorder : the limited lines in tree pre-order (every line after the one above it).
     generator_line : per generator, the nearest limited line above its node, -1 if none.
     demand : total demand per minute, MW, shape (minutes,) (1440 for a day).
-    load_flow : flow on each limited line caused by the loads alone, MW, (minutes, lines).
+    load_flow : the loads-only value of every controller's measurement, (minutes, lines + 2
+        voltage rows): the flow on each limited line caused by the loads alone (MW), then, in
+        a problem with voltage limits, each monitored bus's loads-only excess over its lower
+        and its upper bound, ``(vmin^2 - v0^2) / s`` and ``(v0^2 - vmax^2) / s`` (MW
+        equivalents, ``s`` = :attr:`voltage_scale`; :mod:`popdispatch.modes.voltage`). The
+        voltage columns ride in this array so that every per-minute record the engine builds
+        (``MinuteInputs``, the day loop's rows) carries them unchanged.
     online : per minute and generator, whether it is available, (minutes, generators).
     profile_source : where the loads come from.
+    voltage_buses : original bus ids of the buses whose voltage is kept within limits (empty
+        without voltage limits; :func:`popdispatch.ac.lindistflow.with_voltage_limits`).
+    voltage_sens : ``(voltage rows, generators)``: LinDistFlow ``d(v_j^2)/d(p_i)`` divided by
+        ``voltage_scale[j]`` (per MW over p.u.^2 per MW: dimensionless, largest spread 1).
+    voltage_scale : per voltage row, ``s_j`` = the spread of ``d(v_j^2)/d(p_i)`` over the
+        generators, p.u.^2 per MW.
+    voltage_base : per minute and voltage row, the loads-only squared voltage ``v0_j^2``,
+        p.u.^2 (LinDistFlow, loads at their reactive power).
+    vmin_pu, vmax_pu : the voltage limits, p.u. (NaN without).
     """
 
     feeder: ReducedFeeder
@@ -59,10 +74,34 @@ class DispatchProblem:
     load_flow: np.ndarray
     online: np.ndarray
     profile_source: str
+    voltage_buses: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    voltage_sens: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    voltage_scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    voltage_base: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    vmin_pu: float = float("nan")
+    vmax_pu: float = float("nan")
 
     @property
     def n_generators(self) -> int:
         return len(self.generators)
+
+    @property
+    def n_voltage(self) -> int:
+        """Monitored buses (voltage rows; 0 without voltage limits)."""
+        return len(self.voltage_buses)
+
+    @property
+    def line_load_flow(self) -> np.ndarray:
+        """``(minutes, limited lines)``: the loads-only flows of the limited lines, MW."""
+        return self.load_flow[:, : len(self.limit)]
+
+    def voltage_sq(self, p: np.ndarray, minute: int) -> np.ndarray:
+        """LinDistFlow squared voltages (p.u.^2) of the monitored buses for set points ``p``
+        (MW, shape (..., generators)) at a 1-based minute."""
+        if not self.n_voltage:
+            return np.zeros(np.shape(p)[:-1] + (0,))
+        sens = self.voltage_sens * self.voltage_scale[:, None]
+        return self.voltage_base[minute - 1] + np.asarray(p) @ sens.T
 
     @cached_property
     def down(self) -> np.ndarray:
@@ -73,7 +112,7 @@ class DispatchProblem:
 
     def flows(self, p: np.ndarray, minute: int) -> np.ndarray:
         """Flows (MW) on the limited lines for set points ``p`` (MW) at a 1-based minute."""
-        return self.load_flow[minute - 1] - self.down @ p
+        return self.line_load_flow[minute - 1] - self.down @ p
 
     def all_line_flows_mw(self, p: np.ndarray, minute: int, load_kw: np.ndarray) -> np.ndarray:
         """Flows (MW) on every reduced line for set points ``p`` (MW) and per-load kW."""

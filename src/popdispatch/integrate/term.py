@@ -19,6 +19,7 @@ from popdispatch.dynamics.pairwise import pairwise_flows, sort_by_fitness
 from popdispatch.modes import ModeCode
 from popdispatch.modes.exact import payoff as exact_payoff
 from popdispatch.modes.paper import payoff as paper_payoff
+from popdispatch.modes.voltage import payoff as voltage_payoff
 
 
 class Term(NamedTuple):
@@ -84,8 +85,10 @@ def evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, param
     # records on once more, and numba reference-counts their arrays at every inlined call
     if term.mode == ModeCode.PAPER:
         congestion, residual = paper_payoff(p, z, params, minute, work, f, z_rate)
-    else:
+    elif term.mode == ModeCode.EXACT:
         congestion, residual = exact_payoff(p, z, params, minute, work, f, z_rate)
+    else:
+        congestion, residual = voltage_payoff(p, z, params, minute, work, f, z_rate)
     field_weights(term.field, x, minute.lo, minute.hi, minute.active, w, v, room)
     complete = term.complete
     if complete:

@@ -3,6 +3,8 @@
 - ``paper`` (:mod:`popdispatch.modes.paper`): the paper's barrier and overflow signal.
 - ``exact`` (:mod:`popdispatch.modes.exact`): capacity-constrained revision and integrating
   line prices; its equilibria are the KKT points of the DC-OPF.
+- ``voltage`` (:mod:`popdispatch.modes.voltage`): exact mode plus voltage prices at the
+  monitored buses (LinDistFlow); its equilibria are the KKT points of the LinDistFlow OPF.
 
 Each mode is a payoff mechanism (:class:`Mode`, :mod:`popdispatch.modes.mechanism`) in its own
 module: the compiled payoff kernel ``payoff`` and the mode's record ``MODE`` with its
@@ -19,10 +21,10 @@ recompiles in every process).
 
 from __future__ import annotations
 
-from popdispatch.modes import exact, paper
+from popdispatch.modes import exact, paper, voltage
 from popdispatch.modes.mechanism import Mode, ModeCode
 
-MODES = {mode.name: mode for mode in (paper.MODE, exact.MODE)}
+MODES = {mode.name: mode for mode in (paper.MODE, exact.MODE, voltage.MODE)}
 
 
 def get_mode(name: str) -> Mode:

@@ -4,8 +4,9 @@ A mode turns set points into fitness and its node controllers' state into a rate
 map* ``(p, z) -> fitness`` and the *controller-state map* ``(p, z) -> z'``, with ``z`` of the
 mode's dimension (:attr:`Mode.controller_states`). Both maps are one compiled kernel per mode,
 ``payoff(p, z, params, minute, work, fitness, z_rate) -> (congestion, residual)``, in the mode's
-own module (:mod:`popdispatch.modes.paper`, :mod:`popdispatch.modes.exact`), reached by the
-mode's :class:`ModeCode` in :func:`popdispatch.integrate.term.evaluate`.
+own module (:mod:`popdispatch.modes.paper`, :mod:`popdispatch.modes.exact`,
+:mod:`popdispatch.modes.voltage`), reached by the mode's :class:`ModeCode` in
+:func:`popdispatch.integrate.term.evaluate`.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ class ModeCode(IntEnum):
 
     PAPER = 0
     EXACT = 1
+    VOLTAGE = 2
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
-"""The DC-OPF's KKT conditions, checked at the end state of a mode that claims the DC-OPF."""
+"""The DC-OPF's KKT conditions, checked at the end state of a mode that claims the DC-OPF
+(with voltage limits: the LinDistFlow OPF's, its voltage rows included; docs/voltage.md)."""
 
 from __future__ import annotations
 
@@ -78,19 +79,30 @@ def kkt_violations(
     left 1.3e-5 EUR/MW across a binding line while its set points were within 4e-6 kW of the
     DC-OPF; the ring rest point of minute 566 leaves 1.0 EUR/MW). The powers' tolerance is
     the convergence criterion's residual, ``tol_kw``.
+
+    With voltage limits (``problem.n_voltage`` rows, docs/voltage.md) ``z`` continues with the
+    monitored buses' low then high prices; their excesses ``e`` are in MW equivalents
+    (:func:`voltage_prices`), checked like a line's (beyond its bound, or priced while slack,
+    against ``power_mw``), and ``lmc_i`` also subtracts ``sum_j (mu_lo_j - mu_hi_j) sens_ji``;
+    in 3 each priced bus separating a pair adds ``|sens_ji - sens_jk| price`` to the allowance.
+    A ``z`` without the voltage prices (a run of another mode) is checked with zero prices.
     """
     rows = np.asarray(minutes, dtype=np.int64) - 1
     p_mw, z = np.atleast_2d(p_mw), np.atleast_2d(z)
     n_lines = len(problem.limit)
     down = problem.down
-    flow = problem.load_flow[rows] - p_mw @ down.T
+    flow = problem.line_load_flow[rows] - p_mw @ down.T
     excess = np.concatenate([flow - problem.limit, -flow - problem.limit], axis=1)
     C = np.asarray(C, dtype=float)
     if C.ndim == 2:  # per minute and limited line, the same for both directions
         C = np.concatenate([C, C], axis=1)
-    mu = np.maximum(0.0, z + C * excess)
+    mu = np.maximum(0.0, z[:, : 2 * n_lines] + C * excess)
     nu = mu[:, :n_lines] - mu[:, n_lines:]
+    v_excess, v_mu = voltage_prices(problem, rows, p_mw, z, C)
+    n_v = problem.n_voltage
     lmc = problem.b + 2.0 * problem.c * p_mw - nu @ down
+    if n_v:
+        lmc = lmc - (v_mu[:, :n_v] - v_mu[:, n_v:]) @ problem.voltage_sens
     online = problem.online[rows]
     lo = np.where(online, problem.pmin, 0.0)
     hi = np.where(online, problem.pmax, 0.0)
@@ -100,9 +112,61 @@ def kkt_violations(
         reasons.append(
             _bounds_violation(problem, p_mw[r], lo[r], hi[r], t)
             or _price_violation(problem, flow[r], mu[r], t)
-            or _stationarity_violation(problem, p_mw[r], lmc[r], (lo[r], hi[r]), online[r], t)
+            or _voltage_violation(problem, v_excess[r], v_mu[r], t)
+            or _stationarity_violation(
+                problem, p_mw[r], lmc[r], (lo[r], hi[r]), online[r], t, v_mu[r]
+            )
         )
     return reasons
+
+
+def voltage_prices(
+    problem: DispatchProblem, rows: np.ndarray, p_mw: np.ndarray, z: np.ndarray, C
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(excess, mu)`` of the voltage rows (modes/voltage.py): per minute, each monitored
+    bus's excess over its lower then its upper bound (MW equivalents, ``(vmin^2 - v^2) / s_j``
+    and ``(v^2 - vmax^2) / s_j``) and the broadcast prices ``mu = max(0, z + C e)`` (EUR/MW per
+    MW equivalent; ``z``: the full controller states, lines first). ``C``: a scalar here (the
+    voltage rows take the game's one value)."""
+    n_v, n_lines = problem.n_voltage, len(problem.limit)
+    if not n_v:
+        empty = np.zeros((len(rows), 0))
+        return empty, empty
+    rise = p_mw @ problem.voltage_sens.T
+    load = problem.load_flow[rows]
+    excess = np.concatenate(
+        [load[:, n_lines : n_lines + n_v] - rise, load[:, n_lines + n_v :] + rise], axis=1
+    )
+    C_v = float(np.max(C)) if np.size(C) else 0.0
+    states = z[:, 2 * n_lines :]
+    if states.shape[1] != 2 * n_v:  # a run without the voltage prices
+        states = np.zeros_like(excess)
+    return excess, np.maximum(0.0, states + C_v * excess)
+
+
+def _voltage_violation(problem, excess, mu, tol: KktTolerances) -> str | None:
+    """A voltage row beyond its bound, or priced while slack (MW equivalents against
+    ``power_mw``); the message in p.u."""
+    n_v = problem.n_voltage
+    for r in range(2 * n_v):
+        j = r % n_v
+        bound = "vmin" if r < n_v else "vmax"
+        if excess[r] <= tol.power_mw and not (mu[r] > 0.0 and excess[r] < -tol.power_mw):
+            continue
+        v_pu = np.sqrt(max(_v_sq(problem, excess, j), 0.0))
+        bus = int(problem.voltage_buses[j])
+        if excess[r] > tol.power_mw:
+            return f"bus {bus} is at {v_pu:.6f} p.u., beyond {bound} (LinDistFlow)"
+        return (
+            f"bus {bus} has a {bound} price {mu[r]:.4g} EUR/MWh but is at {v_pu:.6f} p.u., "
+            "inside its limits"
+        )
+    return None
+
+
+def _v_sq(problem, excess, j: int) -> float:
+    """The squared voltage (p.u.^2) of voltage row ``j`` from its low-bound excess."""
+    return problem.vmin_pu**2 - excess[j] * problem.voltage_scale[j]
 
 
 def _bounds_violation(problem, p, lo, hi, tol: KktTolerances) -> str | None:
@@ -142,7 +206,9 @@ def _where(p, lo, hi, i, tol: KktTolerances) -> str:
     return "at Pmin" if p[i] <= lo[i] + tol.power_mw else "interior"
 
 
-def _stationarity_violation(problem, p, lmc, limits, online, tol: KktTolerances) -> str | None:
+def _stationarity_violation(
+    problem, p, lmc, limits, online, tol: KktTolerances, v_mu=None
+) -> str | None:
     lo, hi = limits
     givers = online & (p > lo + tol.power_mw)
     takers = online & (p < hi - tol.power_mw)
@@ -150,6 +216,11 @@ def _stationarity_violation(problem, p, lmc, limits, online, tol: KktTolerances)
         return None
     i = int(np.flatnonzero(takers)[np.argmin(lmc[takers])])
     separating = np.abs(problem.down - problem.down[:, [i]]).sum(axis=0)
+    if problem.n_voltage and v_mu is not None:  # each priced bus: known to 2 price_atol too
+        n_v = problem.n_voltage
+        priced = (v_mu[:n_v] > 0.0) | (v_mu[n_v:] > 0.0)
+        sens = problem.voltage_sens[priced]
+        separating = separating + np.abs(sens - sens[:, [i]]).sum(axis=0)
     movable = np.maximum(p - lo, tol.power_mw)
     allowed = separating * tol.price + tol.flow_gap / movable
     excess = np.where(givers, lmc - lmc[i] - allowed, -np.inf)
@@ -159,6 +230,6 @@ def _stationarity_violation(problem, p, lmc, limits, online, tol: KktTolerances)
     names = problem.generators
     return (
         f"rest point is not a KKT point of the DC-OPF: {names[j]} {_where(p, lo, hi, j, tol)} "
-        f"has marginal cost {lmc[j]:.6f} EUR/MWh (with line prices) above the "
+        f"has marginal cost {lmc[j]:.6f} EUR/MWh (with line and voltage prices) above the "
         f"{lmc[i]:.6f} of {names[i]} {_where(p, lo, hi, i, tol)}, which could take more"
     )

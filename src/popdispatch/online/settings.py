@@ -32,7 +32,10 @@ class RunSettings:
     ``exact`` exact mode's dimensionless ones (:class:`~popdispatch.modes.exact.ExactConstants`);
     :meth:`game_constants` gives the EUR/MW values a run uses. ``tol_floor_kw``: the absolute
     floor of the convergence tolerance (kW), replacing the integrator's ``tol_kw`` (exact
-    mode's tolerance is ``max(1e-6 P_d, tol_floor_kw)``).
+    mode's tolerance is ``max(1e-6 P_d, tol_floor_kw)``). ``vmin_pu``/``vmax_pu``: voltage
+    limits (p.u., ``None``: no bound; docs/voltage.md): with either given, exact mode becomes
+    the ``voltage`` mode (its line prices plus LinDistFlow voltage prices), and the problem a
+    run takes must carry the same limits (:func:`popdispatch.runs.with_voltage`).
 
     Construction validates the combination without touching any data, so a command line can
     check its options before loading a feeder: bad values or combinations raise
@@ -49,9 +52,18 @@ class RunSettings:
     warm_start: str | None = None
     exact: ExactConstants = field(default_factory=ExactConstants)
     tol_floor_kw: float | None = None
+    vmin_pu: float | None = None
+    vmax_pu: float | None = None
 
     def __post_init__(self) -> None:
+        if self.voltage_limited and self.mode == "exact":
+            object.__setattr__(self, "mode", "voltage")
         self.validate()
+
+    @property
+    def voltage_limited(self) -> bool:
+        """Whether a voltage limit is given."""
+        return self.vmin_pu is not None or self.vmax_pu is not None
 
     def validate(self) -> None:
         """Raise :class:`OptionError` for an unknown name or a combination that cannot run or
@@ -94,10 +106,27 @@ class RunSettings:
                 "--x0",
             )
         self._validate_warm_start(mode)
+        self._validate_voltage(mode)
         if self.tol_floor_kw is not None and not self.tol_floor_kw > 0:
             raise OptionError(
                 f"tolerance floor must be positive, got {self.tol_floor_kw} kW", "--tol-floor-kw"
             )
+
+    def _validate_voltage(self, mode) -> None:
+        """Limits in (0, 2) with ``vmin < vmax``, only in the voltage mode (exact mode becomes
+        it), which needs them (``--vmin``/``--vmax``, ``--mode``)."""
+        if self.voltage_limited:
+            from popdispatch.ac.lindistflow import check_voltage_limits
+
+            check_voltage_limits(self.vmin_pu, self.vmax_pu)
+            if mode.name != "voltage":
+                raise OptionError(
+                    f"voltage limits need exact mode (its voltage prices); {mode.name} mode "
+                    "has none",
+                    "--vmin",
+                )
+        elif mode.name == "voltage":
+            raise OptionError("voltage mode needs --vmin and/or --vmax (p.u.)", "--mode")
 
     def _validate_warm_start(self, mode) -> None:
         if self.warm_start is None:

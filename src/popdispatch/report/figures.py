@@ -553,3 +553,36 @@ def extinction_figure(result: ExtinctionResult) -> Figure:
     fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncols=6)
     fig.suptitle("Extinction: set points (solid), DC-OPF (dashed)", fontsize=9)
     return fig
+
+
+@styled
+def voltage_profile_figure(
+    profile_pu, setpoints_kw, costs: dict[str, float], vmin_pu: float, title: str,
+    branches: str = "bus",
+) -> Figure:  # fmt: skip
+    """The ``voltage`` scenario: the AC voltage of every bus (``profile_pu``: index bus number,
+    one column per dispatch, p.u.; a NaN row breaks the line between two branches) with the
+    lower limit, and each dispatch's set points (``setpoints_kw``: index generator, same
+    columns, kW) with its cost (``costs``, EUR/h). ``branches``: the x axis' label."""
+    fig, axes = new_figure(DOUBLE, 2.6, ncols=2, width_ratios=[1.6, 1.0])
+    ax, bars = axes[0]
+    styles = ["-o", "-s", "--^", ":x"]
+    for k, column in enumerate(profile_pu.columns):
+        ax.plot(profile_pu.index, profile_pu[column], styles[k % 4], ms=2.5, label=column)
+    ax.axhline(vmin_pu, color=PENALTY, lw=0.8, ls=":", label=f"vmin {vmin_pu:g} p.u.")
+    ax.set_xlabel(branches)
+    ax.set_ylabel("AC voltage (p.u.)")
+    ax.set_title(title)
+    ax.legend(loc="lower left")
+    width = 0.8 / max(len(setpoints_kw.columns), 1)
+    positions = np.arange(len(setpoints_kw.index))
+    for k, column in enumerate(setpoints_kw.columns):
+        label = f"{column}: {costs[column]:.3f} EUR/h"
+        offset = (k - (len(setpoints_kw.columns) - 1) / 2) * width
+        bars.bar(positions + offset, setpoints_kw[column], width, label=label)
+    bars.set_xticks(positions, setpoints_kw.index)
+    bars.set_yscale("symlog", linthresh=100.0)
+    bars.set_ylabel("set point (kW)")
+    bars.set_title("set points; cost with the losses")
+    bars.legend(loc="upper right")
+    return fig

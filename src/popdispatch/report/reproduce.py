@@ -2,16 +2,20 @@
 
 1. minute 566 without limits and the whole base day (Smith, no line limits) against the DC-OPF,
 2. the congestion scenario (minute 566, the 505-666 path limited to 28 kW),
-3. the extinction comparison (replicator and Smith, generator G114 starting at zero share).
+3. the extinction comparison (replicator and Smith, generator G114 starting at zero share),
+4. the ``voltage`` scenario on case33bw (issue 14; with power-grid-model installed): the DC
+   exact dispatch, the voltage-aware dispatch and pandapower's AC OPF, checked in AC.
 
 Minute 566 always uses the official loads (pandapower's snapshot); the day uses the profiles it
 is given. Outputs: ``figures/*.png|pdf``, ``base_day.csv``, ``congestion.csv``,
-``extinction.csv``, ``summary.json`` and ``report.md``.
+``extinction.csv``, ``voltage.csv`` (bus voltages of the voltage scenario), ``summary.json``
+and ``report.md``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from importlib.util import find_spec
 
 import numpy as np
 import pandas as pd
@@ -34,12 +38,14 @@ from popdispatch.scenarios import (
     DayComparison,
     ExtinctionResult,
     SnapshotComparison,
+    VoltageResult,
     congestion,
     day_vs_opf,
     elv_problem,
     extinction,
     peak_profiles,
     snapshot_vs_opf,
+    voltage,
 )
 
 FITNESS_GENERATOR = "G739"  # the generator the paper's congestion scenario penalises
@@ -57,6 +63,7 @@ class Reproduction:
     extinction: ExtinctionResult
     day_problem: DispatchProblem
     day: DayComparison
+    voltage: VoltageResult | None = None  # None without power-grid-model
 
 
 def run_reproduction(
@@ -72,9 +79,16 @@ def run_reproduction(
         congested = congestion(settings=settings)
         extinct = extinction(settings=settings)  # sets its own x0
     day = day_vs_opf(day_problem, settings, minutes, progress)
+    limited = None
+    if find_spec("power_grid_model") is not None:
+        with progress.step("voltage scenario (case33bw, AC checks and pandapower's AC OPF)"):
+            limited = voltage(replace(settings, dynamics="smith", graph="complete"))
+    else:
+        progress.note('voltage scenario skipped: it needs pip install "popdispatch[ac]"')
     return Reproduction(
-        settings, peak_problem, peak, congestion_problem, congested, extinct, day_problem, day
-    )
+        settings, peak_problem, peak, congestion_problem, congested, extinct, day_problem, day,
+        limited,
+    )  # fmt: skip
 
 
 def peak_load_kw(problem: DispatchProblem) -> np.ndarray:
@@ -151,6 +165,7 @@ def reproduction_summary(rep: Reproduction) -> dict:
         "congestion": snapshot_summary(rep.congestion_problem, rep.congestion, limits),
         "extinction": extinction_summary(rep),
         "base_day": day_summary(rep.day_problem, rep.day),
+        "voltage": None if rep.voltage is None else voltage_summary(rep.voltage),
     }
 
 
@@ -176,12 +191,22 @@ def write_reproduction(
     from popdispatch.report.markdown import reproduction_report
 
     stems = make_figures(rep, folder, progress)
+    if rep.voltage is not None:
+        from popdispatch.report import figures
+
+        figures.save_figure(voltage_figure(rep.voltage), folder.file(f"figures/{VOLTAGE_FIGURE}"))
+        stems.append(VOLTAGE_FIGURE)
     summary = reproduction_summary(rep)
     folder.write_csv("base_day.csv", day_table(rep.day, rep.day_problem))
     folder.write_csv("congestion.csv", trajectory_table(rep.congestion))
     folder.write_csv("extinction.csv", extinction_table(rep))
+    if rep.voltage is not None:
+        folder.write_csv("voltage.csv", voltage_tables(rep.voltage)[0].reset_index())
     folder.write_json("summary.json", summary)
-    folder.write_text("report.md", reproduction_report(summary, stems, rep))
+    report = reproduction_report(summary, stems, rep)
+    if summary.get("voltage") is not None:
+        report = report.rstrip("\n") + "\n\n" + voltage_markdown(summary["voltage"])
+    folder.write_text("report.md", report)
     if html_profiles is not None:
         write_reproduction_html(rep, folder, html_profiles, summary, progress)
     return summary
@@ -204,3 +229,150 @@ def write_reproduction_html(
         )
         folder.write_text("congestion.html", congestion)  # fmt: skip
     return ["base_day.html", "congestion.html"]
+
+
+# -- the voltage scenario -------------------------------------------------------------------
+
+DISPATCHES = ("DC exact", "voltage-aware", "AC OPF", "AC-corrected")
+VOLTAGE_FIGURE = "fig7_voltage_profile"
+
+
+def _ac_costs(result: VoltageResult) -> dict[str, float]:
+    """Each dispatch's cost, EUR/h, with the losses the AC check finds bought at the source
+    (the AC OPF's source already includes them)."""
+    from popdispatch.opf import generation_cost
+
+    costs = {}
+    for name, run, ac in _checked(result):
+        p_kw = np.array(run.run.setpoints_kw, dtype=float)
+        p_kw[_source_row(result)] += float(ac.totals["source_extra_kw"])
+        costs[name] = float(generation_cost(result.plain, p_kw / KW_PER_MW))
+    if result.anchor is not None:
+        costs[DISPATCHES[2]] = result.anchor.cost
+    if result.corrected is not None:
+        costs[DISPATCHES[3]] = result.corrected.cost_eur_per_h
+    return costs
+
+
+def _checked(result: VoltageResult):
+    pairs = ((DISPATCHES[0], result.dc, result.ac_dc), (DISPATCHES[1], result.voltage,
+             result.ac_voltage))  # fmt: skip
+    return [(name, run, ac) for name, run, ac in pairs if ac is not None]
+
+
+def _source_row(result: VoltageResult) -> int:
+    buses = result.plain.feeder.original.generators.loc[result.plain.generators, "bus"]
+    return int(np.flatnonzero(buses.to_numpy() == result.plain.feeder.original.source_bus)[0])
+
+
+def voltage_tables(result: VoltageResult) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """``(profile, setpoints)``: AC voltage per bus (index ``bus``, MATPOWER numbering) and
+    set points per generator (kW; the AC OPF's source with the losses), one column per
+    dispatch that ran."""
+    feeder = result.plain.feeder.original
+    profile = pd.DataFrame(index=pd.Index(feeder.buses.index + 1, name="bus"))
+    points = pd.DataFrame(index=result.plain.generators)
+    for name, run, ac in _checked(result):
+        profile[name] = ac.buses["v_pu"].to_numpy()
+        points[name] = run.run.setpoints_kw
+    if result.anchor is not None:
+        profile[DISPATCHES[2]] = result.anchor.v_pu.to_numpy()
+        points[DISPATCHES[2]] = result.anchor.p_kw.loc[result.plain.generators].to_numpy()
+    if result.corrected is not None:  # its source with what it supplied beyond its set point
+        profile[DISPATCHES[3]] = result.corrected.ac.buses["v_pu"].to_numpy()
+        summary = result.corrected.summary()
+        p_kw = np.array(result.corrected.result.run.setpoints_kw, dtype=float)
+        p_kw[_source_row(result)] += summary["source_extra_kw"]
+        points[DISPATCHES[3]] = p_kw
+    return profile, points
+
+
+def voltage_figure(result: VoltageResult):
+    """``fig7_voltage_profile``: :func:`popdispatch.report.figures.voltage_profile_figure`."""
+    from popdispatch.report import figures
+
+    profile, points = voltage_tables(result)
+    tree = result.plain.feeder.original.bus_tree()
+    buses = result.plain.feeder.original.buses.index.to_numpy()
+    parent = {int(buses[c]) + 1: int(buses[p]) + 1 for c, p in enumerate(tree.parent) if p >= 0}
+    starts = [b for b in profile.index if b in parent and parent[b] != b - 1]
+    gaps = pd.DataFrame(np.nan, index=[b - 0.5 for b in starts], columns=profile.columns)
+    label = "bus (MATPOWER number; branches from " + ", ".join(
+        f"{parent[b]}: {b}-" for b in starts) + ")"  # fmt: skip
+    title = "case33bw: AC voltage profile of each dispatch"
+    return figures.voltage_profile_figure(pd.concat([profile, gaps]).sort_index(), points,
+                                          _ac_costs(result), result.problem.vmin_pu, title,
+                                          label)  # fmt: skip
+
+
+def voltage_summary(result: VoltageResult) -> dict:
+    """The ``voltage`` object of ``summary.json``: per dispatch its set points (kW), cost
+    (EUR/h, with the AC losses), lowest AC voltage (p.u., bus in MATPOWER numbering); the
+    voltage-aware dispatch against the LinDistFlow OPF; the linearization error."""
+    profile, points = voltage_tables(result)
+    costs = _ac_costs(result)
+    run, opf = result.voltage.run, result.voltage.opf
+    error_kw = float(np.max(np.abs(run.setpoints_kw - opf.p_kw)))
+    dispatches = {
+        name: {
+            "setpoints_kw": {str(g): float(v) for g, v in points[name].items()},
+            "cost_eur_per_h": costs[name],
+            "ac_v_min_pu": float(profile[name].min()),
+            "ac_v_min_bus": int(profile[name].idxmin()),
+        }
+        for name in profile.columns
+    }
+    lindist = float(np.min(opf.v_pu))
+    out = {
+        "case": "case33bw", "vmin_pu": result.problem.vmin_pu, "vmax_pu": result.problem.vmax_pu,
+        "dispatches": dispatches,
+        "voltage_aware_status": run.status,
+        "voltage_aware_vs_lindistflow_opf_kw": error_kw,
+        "voltage_aware_vs_lindistflow_opf_rel": error_kw / float(opf.p_kw.sum()),
+        "lindistflow_v_min_pu": lindist,
+        "anchor_error": result.anchor_error,
+    }  # fmt: skip
+    if DISPATCHES[1] in dispatches:
+        out["linearization_error_pu"] = lindist - dispatches[DISPATCHES[1]]["ac_v_min_pu"]
+    if result.corrected is not None:
+        out["ac_correct"] = result.corrected.summary()
+        if result.anchor is not None:
+            anchor = result.anchor.cost
+            out["ac_correct_cost_vs_ac_opf_rel"] = (
+                result.corrected.cost_eur_per_h - anchor
+            ) / anchor
+    return out
+
+
+def voltage_markdown(v: dict) -> str:
+    """The voltage scenario's section of ``report.md`` (from its summary object)."""
+    rows = [
+        f"| {name} | {', '.join(f'{g} {_kw(kw)}' for g, kw in d['setpoints_kw'].items())} | "
+        f"{d['ac_v_min_pu']:.5f} (bus {d['ac_v_min_bus']}) | {d['cost_eur_per_h']:.3f} |"
+        for name, d in v["dispatches"].items()
+    ]
+    lines = [
+        "## Voltage limits: case33bw (issue 14, docs/voltage.md)",
+        "",
+        f"Source and four DGs, limits {v['vmin_pu']:g}-{v['vmax_pu']:g} p.u.; buses in MATPOWER "
+        "numbering; cost with the AC losses bought at the source.",
+        "",
+        "| dispatch | set points, kW | AC minimum, p.u. | cost, EUR/h |",
+        "| --- | --- | --- | --- |",
+        *rows,
+        "",
+        f"Voltage-aware dispatch ({v['voltage_aware_status']}) vs the LinDistFlow OPF: "
+        f"{v['voltage_aware_vs_lindistflow_opf_kw']:.2e} kW; linearization error "
+        f"{v.get('linearization_error_pu', float('nan')):.5f} p.u.",
+        "",
+        f"![voltage profile](figures/{VOLTAGE_FIGURE}.png)",
+        "",
+    ]
+    if v.get("anchor_error"):
+        lines.insert(-2, f"pandapower's AC OPF: {v['anchor_error']}")
+    return "\n".join(lines)
+
+
+def _kw(value: float) -> str:
+    """A set point to 0.1 kW, without the sign of a rounding residue ("-0.0")."""
+    return f"{value if abs(value) >= 0.05 else 0.0:.1f}"

@@ -163,9 +163,45 @@ def ac_text(ac: dict | None) -> str:
     )
 
 
+def voltage_text(v: dict | None) -> str:
+    """The voltage limits' line (``--vmin``/``--vmax``): the run's LinDistFlow extremes, the
+    binding buses with their prices, the linearization error with ``--ac``; empty without."""
+    if not v:
+        return ""
+    limits = " to ".join(f"{v[k]:g}" if v[k] is not None else "-" for k in ("vmin_pu", "vmax_pu"))
+    binding = ", ".join(
+        f"bus {b['bus']} at {b['bound']} ({b['price_eur_per_mwh']:.4g} EUR/MWh)"
+        for b in v["binding"]
+    )
+    text = (
+        f"\nVoltage limits {limits} p.u. (LinDistFlow, {v['monitored_buses']} key nodes): "
+        f"{v['v_min_pu']:.4f} p.u. (bus {v['v_min_bus']}) to {v['v_max_pu']:.4f} p.u. "
+        f"(bus {v['v_max_bus']}); binding: {binding or 'none'}"
+    )
+    if "linearization_error_pu" in v:
+        text += (
+            f"\nAC minimum {v['ac_v_min_pu']:.4f} p.u.: linearization error "
+            f"{v['linearization_error_pu']:.4f} p.u."
+        )
+    return text
+
+
+def ac_correct_text(c: dict | None) -> str:
+    """The ``--ac-correct`` line: rounds, AC minimum voltage, cost; empty without."""
+    if not c:
+        return ""
+    points = ", ".join(f"{g} {kw:.3f}" for g, kw in c["setpoints_kw"].items())
+    return (
+        f"\nAC-corrected ({c['rounds']} rounds, {c['status']}): {points} kW; AC voltage "
+        f"{c['ac_v_min_pu']:.6f} p.u. (bus {c['ac_v_min_bus']}) and up; losses "
+        f"{c['losses_kw']:.3f} kW; cost {c['cost_eur_per_h']:.6f} EUR/h with the losses"
+    )
+
+
 def snapshot_text(s: dict) -> str:
     """``popdispatch snapshot``."""
-    return _snapshot_text(s) + ac_text(s.get("ac"))
+    extra = voltage_text(s.get("voltage")) + ac_correct_text(s.get("ac_correct"))
+    return _yardstick(s, _snapshot_text(s)) + ac_text(s.get("ac")) + extra
 
 
 def _snapshot_text(s: dict) -> str:
@@ -273,7 +309,13 @@ def day_text(s: dict) -> str:
         outcome = [line.replace(" minute", " step") for line in outcome]
     head = f"{_span(s)}: {s['dynamics']} dynamics, {s['mode']} mode"
     body = "\n".join([head, _inputs(s), events_text(s.get("events", [])), *outcome])
-    return body + ac_text(s.get("ac"))
+    return _yardstick(s, body) + ac_text(s.get("ac")) + voltage_text(s.get("voltage"))
+
+
+def _yardstick(s: dict, text: str) -> str:
+    """With voltage limits the yardstick is the LinDistFlow OPF: say so where the text says
+    DC-OPF."""
+    return text.replace("DC-OPF", "LinDistFlow OPF") if s.get("voltage") else text
 
 
 def cases_summary(table) -> dict:
