@@ -48,17 +48,3 @@ def test_delayed_network_reaches_dc_opf_in_paced_rounds(congestion_problem, faul
     assert run.rest_round is not None
     assert np.abs(run.setpoints_kw - opf.p_kw).max() < 0.01  # kW
     assert abs(run.max_imbalance_w) < 1.0 and run.open_transactions == 0
-
-
-def test_ring_rest_is_reported_stalled_like_the_engine(congestion_problem):
-    """Distributed Smith on a ring rests away from the DC-OPF (a saturated generator cannot
-    relay, docs/agents.md); the agents' run says so, as the engine's own run does."""
-    from popdispatch.online import run_snapshot
-
-    settings = RunSettings(mode="exact", dynamics="distributed-smith", graph="ring")
-    run = run_agents(congestion_problem, PEAK_MINUTE, settings, Faults())
-    engine = run_snapshot(congestion_problem, PEAK_MINUTE, settings)
-    assert engine.status == "stalled"
-    assert run.status == "stalled" and "G739" in run.stall_reason
-    opf = solve_opf(congestion_problem, PEAK_MINUTE).p_kw
-    assert np.abs(run.setpoints_kw - opf).max() > 0.5  # kW: really away from the optimum

@@ -286,10 +286,26 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
                 rule, i, inverters, neighbours, timeout, lag, copies, engine_limiter, network
             )  # fmt: skip
         )
+    relay = not _complete(graph)
+    for gen in generators:
+        gen.relay = relay
     controllers, line_ends = _controllers(problem, mode.bounded, fp, step_s, network)
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
                        network)  # fmt: skip
     return AgentSystem(plant, controllers, generators, inverters, network, graph, demand)
+
+
+def _complete(graph: nx.Graph) -> bool:
+    n = graph.number_of_nodes()
+    return graph.number_of_edges() == n * (n - 1) // 2
+
+
+def relay_phase_ticks(n_generators: int, delay_max: int) -> int:
+    """Ticks per phase that let a relayed message cross the longest chain of relays: at
+    most ``n - 1`` hops, each half a tick plus up to ``delay_max`` rounds of
+    :data:`TICKS_PER_ROUND` ticks (relays pass messages on as they arrive)."""
+    hops = max(n_generators - 1, 1)
+    return int(hops * (0.5 + TICKS_PER_ROUND * int(delay_max))) + 1
 
 
 def controller_id(bus) -> str:
@@ -369,8 +385,11 @@ def _run(problem, minute, settings, faults, agent_settings, step_s, on_round) ->
                           agent_settings.timeout_for(faults), agent_settings.lag_for(faults),
                           agent_settings.copies_for(faults),
                           agent_settings.engine_limiter_for(faults))  # fmt: skip
+    ticks = agent_settings.phase_ticks_for(faults)
+    if system.generators[0].relay:
+        ticks = max(ticks, relay_phase_ticks(len(system.generators), faults.delay_max))
     for agent in system.agents:
-        agent.phase_ticks = agent_settings.phase_ticks_for(faults)
+        agent.phase_ticks = ticks
     window = agent_settings.rest_window(faults)
     return asyncio.run(_simulate(system, agent_settings, window, on_round))
 
