@@ -24,7 +24,7 @@ from popdispatch.scenarios import PEAK_MINUTE  # noqa: E402
 def test_lossy_network_reaches_dc_opf(congestion_problem, faults):
     opf = solve_opf(congestion_problem, PEAK_MINUTE)
     run = run_agents(congestion_problem, PEAK_MINUTE, RunSettings(mode="exact"), faults,
-                     AgentSettings(max_rounds=600))  # fmt: skip
+                     AgentSettings(max_rounds=900))  # fmt: skip
     assert run.lost > 0.05 * run.messages
     assert run.rest_round is not None
     assert np.abs(run.setpoints_kw - opf.p_kw).max() < 0.01  # kW
@@ -43,7 +43,7 @@ def test_delayed_network_reaches_dc_opf_in_paced_rounds(congestion_problem, faul
     0.01 kW of the DC-OPF; the rounds wait for the longest delay (paced, the default)."""
     opf = solve_opf(congestion_problem, PEAK_MINUTE)
     run = run_agents(congestion_problem, PEAK_MINUTE, RunSettings(mode="exact"), faults,
-                     AgentSettings(max_rounds=600))  # fmt: skip
+                     AgentSettings(max_rounds=900))  # fmt: skip
     assert run.phase_ticks == 1 + 6 * faults.delay_max
     assert run.rest_round is not None
     assert np.abs(run.setpoints_kw - opf.p_kw).max() < 0.01  # kW

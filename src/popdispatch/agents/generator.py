@@ -130,6 +130,10 @@ class GeneratorAgent(RoundAgent):
         self.forwarded: set[str] = set()  # origins whose status this relay passed on
         self.routes: dict[str, tuple] = {}  # relayed txid: hops to the counterparty
         self.relayed_messages = 0  # messages this generator passed on as a relay
+        self.stale_rounds = 10  # rounds of silence after which a line or neighbour is stale
+        self.unwatched: set[str] = set()  # lines whose price is older than stale_rounds
+        self.events: list[dict] = []  # what this generator noticed (stale prices)
+        self.tripped = False
 
     @property
     def p(self) -> float:
@@ -347,8 +351,42 @@ class GeneratorAgent(RoundAgent):
         elif phase == Phase.COMMIT:
             self._commit(rnd)
 
+    def _watch_signals(self, rnd: int) -> None:
+        """Report each line whose latest price is more than ``stale_rounds`` rounds old (its
+        controller is silent; the last price is kept), and when it is fresh again."""
+        for line, (heard, _) in self.signals.items():
+            stale = rnd - heard > self.stale_rounds
+            if stale and line not in self.unwatched:
+                self.unwatched.add(line)
+                self.events.append({"round": rnd, "event": "stale_price", "agent": self.aid,
+                                    "line": int(line), "last_round": heard})  # fmt: skip
+            elif not stale and line in self.unwatched:
+                self.unwatched.discard(line)
+                self.events.append({"round": rnd, "event": "fresh_price", "agent": self.aid,
+                                    "line": int(line)})  # fmt: skip
+
+    def forget(self, aid: str) -> None:
+        """A neighbour that tripped (the protection's report): drop its status, the offers
+        to it and from it, and the decisions it will never acknowledge (the source bus
+        carries what they moved, :func:`popdispatch.agents.system.trip`)."""
+        self.neighbours = [n for n in self.neighbours if n != aid]
+        self.statuses.pop(aid, None)
+
+        def other(txid: str) -> str:
+            sender, _, receiver = txid.split("/")[:3]
+            return receiver if sender == self.aid else sender
+
+        for book in (self.open_offers, self.undelivered, self.reserved, self.accepted,
+                     self.committed, self.pending_out, self.pending_in):  # fmt: skip
+            for txid in [t for t in book if other(t) == aid]:
+                del book[txid]
+        self.offers_in = [(s, o) for s, o in self.offers_in if s != aid]
+
     def _status(self, rnd: int) -> None:
         """Fitness and weights at the own set point; status to the neighbours."""
+        self._watch_signals(rnd)
+        for aid in [a for a, st in self.statuses.items() if rnd - st.round > self.stale_rounds]:
+            del self.statuses[aid]  # a neighbour silent that long takes no part
         r = self.rule
         one = np.ones(1)
         p = np.array([self.p])  # the inverter's output: what the lines carry

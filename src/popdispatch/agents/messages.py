@@ -99,6 +99,16 @@ class Output:
 
 @json_serializable
 @dataclass(frozen=True)
+class Heartbeat:
+    """Node controller -> the controller at the other end of limited line ``line``: alive
+    at ``round`` (a silent partner's lines are taken over, docs/agents.md)."""
+
+    round: int
+    line: int
+
+
+@json_serializable
+@dataclass(frozen=True)
 class Relayed:
     """A message passed on by relays (generators that cannot take part in a comparison,
     dynamics/pairwise.py ``relay_flows``): ``content`` from ``origin``.
@@ -115,4 +125,15 @@ class Relayed:
     path: tuple = ()
 
 
-ALL_MESSAGES = (Measurement, Signals, Status, Offer, Accept, Decision, Ack, Output, Relayed)
+ALL_MESSAGES = (
+    Measurement,
+    Signals,
+    Status,
+    Offer,
+    Accept,
+    Decision,
+    Ack,
+    Output,
+    Relayed,
+    Heartbeat,
+)
