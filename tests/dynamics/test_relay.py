@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy import sparse
 
-from popdispatch.dynamics.pairwise import graph_flows, relay_flows
+from popdispatch.dynamics.pairwise import RELAY_MASS, graph_flows, relay_flows
 from popdispatch.feeder.profiles import single_minute_profiles
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.game.problem import build_problem
@@ -34,7 +34,7 @@ def reference_relay(f, w, v, graph: nx.Graph):
     ``f`` among ``w > 0``, lowest index on ties) and ``w_b v_a [f_b - f_a]_+`` from every member
     ``a``."""
     n = len(f)
-    blocked = [k for k in range(n) if not (w[k] > 0 and v[k] > 0)]
+    blocked = [k for k in range(n) if not (w[k] > 0 and v[k] > RELAY_MASS)]
     flows = np.zeros((n, n))  # [receiver, sender]
     for members in nx.connected_components(graph.subgraph(blocked)):
         group = set(members) | {b for k in members for b in graph.neighbors(k)}
@@ -85,7 +85,7 @@ def test_compiled_relay_equals_the_reference(graph, seed):
     n = graph.number_of_nodes()
     f = rng.normal(size=n).round(1)  # ties too
     w = np.where(rng.random(n) < 0.4, 0.0, 1.0)
-    v = np.where(rng.random(n) < 0.3, 0.0, rng.random(n))
+    v = np.where(rng.random(n) < 0.3, rng.choice([0.0, RELAY_MASS / 2], n), rng.random(n))
     indptr, indices = csr(graph, n)
     inflow, outflow = np.zeros(n), np.zeros(n)
     relay_flows(f, w, v, indptr, indices, np.empty(n, dtype=np.int64), inflow, outflow)
@@ -163,9 +163,10 @@ def test_distributed_smith_reaches_the_dc_opf_on_any_connected_graph(graph, seed
     settings_ = RunSettings(mode="exact", dynamics="distributed-smith", graph=graph,
                             integrator=integrator)  # fmt: skip
     run = run_snapshot(problem, 1, settings_)
-    assert run.status in ("converged", "not_converged"), run.stall_reason  # never stalled
+    error = np.abs(run.setpoints_kw - opf.p_kw).max()
+    assert run.status in ("converged", "not_converged"), (run.stall_reason, sorted(graph.edges))
     if reduced_cost_margin(problem, opf) >= 0.02:
-        assert np.abs(run.setpoints_kw - opf.p_kw).max() <= OPF_ATOL_KW
+        assert error <= OPF_ATOL_KW
 
 
 @pytest.mark.parametrize("graph", ["ring", "path"])

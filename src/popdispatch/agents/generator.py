@@ -54,7 +54,7 @@ from popdispatch.agents.messages import (
 from popdispatch.agents.plant import Inverters
 from popdispatch.agents.schedule import Phase
 from popdispatch.dynamics.fields import field_weights
-from popdispatch.dynamics.pairwise import graph_flows
+from popdispatch.dynamics.pairwise import RELAY_MASS, graph_flows
 from popdispatch.game.fitness import fitness_into
 from popdispatch.game.parameters import share_bounds
 
@@ -183,7 +183,7 @@ class GeneratorAgent(RoundAgent):
     def blocked(self) -> bool:
         """Whether this generator cannot take part in a comparison this round (at a limit:
         ``w = 0`` or ``v = 0``): it relays."""
-        return self.own is not None and not (self.own[1] > 0.0 and self.own[2] > 0.0)
+        return self.own is not None and not (self.own[1] > 0.0 and self.own[2] > RELAY_MASS)
 
     def _flood(self, origin: str, status: Status, route: tuple) -> None:
         """A blocked generator passes every status of this round on to its other
@@ -255,7 +255,7 @@ class GeneratorAgent(RoundAgent):
             parent[find(a)] = find(b)
 
         def is_blocked(st: Status) -> bool:
-            return not (st.w > 0.0 and st.v > 0.0)
+            return not (st.w > 0.0 and st.v > RELAY_MASS)
 
         comps: set[str] = set()
         members: dict[str, dict[str, Status]] = {}
