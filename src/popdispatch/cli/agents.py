@@ -260,9 +260,18 @@ def _event_text(e: dict) -> str:
         help="Real time per tick, ms (6 ticks a round).")  # fmt: skip
 @option("--startup-s", type=click.FloatRange(1.0), default=40.0, show_default=True,
         help="Seconds the processes get to load their data before round 0.")  # fmt: skip
+@option(
+    "--loss",
+    type=click.FloatRange(0.0, 1.0, max_open=True),
+    default=0.0,
+    show_default=True,
+    help="Probability that a message is dropped by its sender (0-1).",
+)
+@option("--seed", type=int, default=0, show_default=True, help="Seed of the drops.")
 @json_option
 @quiet_option
-def launch(minute, limits, mode, rounds, tick_ms, startup_s, as_json, quiet) -> int:
+def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, as_json,
+           quiet) -> int:  # fmt: skip
     """One OS process per agent (plant, node controllers, generators) on localhost, talking
     over TCP (mango), on the built-in ieee-elv case; compared with the DC-OPF. Ctrl-C stops
     every process (exit 130)."""
@@ -277,7 +286,8 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, as_json, quiet) -> 
     problem, _ = load_run(FeederSource(), None, minute, limits, progress)
     with progress.step(f"minute {minute}: {rounds} rounds by agent processes over TCP"):
         result = run_launch(minute, [list(x) for x in limits], mode=mode, rounds=rounds,
-                            tick_s=tick_ms / 1000.0, startup_s=startup_s)  # fmt: skip
+                            tick_s=tick_ms / 1000.0, startup_s=startup_s, loss=loss,
+                            seed=seed)  # fmt: skip
     opf = solve_opf(problem, minute)
     final = result.trajectory_kw[-1]
     error = float(np.abs(final - opf.p_kw).max()) if opf.status == "optimal" else None
@@ -292,6 +302,10 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, as_json, quiet) -> 
         ],
         "max_abs_error_kw": error,
         "wall_seconds": result.wall_seconds,
+        "loss": loss,
+        "seed": seed,
+        "messages": result.messages,
+        "lost": result.lost,
     }
     text = "\n".join(
         [f"minute {minute}, {mode} mode: {summary['rounds']} rounds by agent processes over TCP"]
@@ -300,6 +314,7 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, as_json, quiet) -> 
             for g in summary["generators"]
         ]
         + ["max |error| vs DC-OPF: " + ("null" if error is None else f"{error:.4f} kW")]
+        + [f"messages {result.messages} ({result.lost} dropped, loss {loss:g})"]
     )
     emit(stamp(summary), as_json, text)
     return 0
