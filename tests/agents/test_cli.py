@@ -51,3 +51,39 @@ def test_bad_fault_options_are_usage_errors(args, option):
     result = CliRunner().invoke(agents, [*CONGESTION, *args])
     assert result.exit_code == 2
     assert option in result.output
+
+
+def test_fault_options_reach_the_json(congestion_problem):
+    result = CliRunner().invoke(agents, [*CONGESTION, "--json", "--controller-crash",
+                                         "C666@20", "--crash", "G1@5+5"])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    s = json.loads(result.output)
+    assert {(f["kind"], f["agent"]) for f in s["faults"]} == {
+        ("controller-crash", "C666"),
+        ("crash", "G1"),
+    }
+    kinds = {e["event"] for e in s["events"]}
+    assert {"crash", "restart", "controller-crash", "stale_price"} <= kinds
+    assert abs(s["max_imbalance_w"]) < 1.0 and s["source_kw"] == 0.0
+
+
+def test_a_trip_is_compared_with_the_dc_opf_without_it():
+    args = ["--minute", "566", "--mode", "exact", "-q", "--json", "--trip", "G578@20"]
+    result = CliRunner().invoke(agents, args)
+    assert result.exit_code == 0, result.output
+    s = json.loads(result.output)
+    g578 = next(g for g in s["generators"] if g["name"] == "G578")
+    assert g578["setpoint_kw"] == 0.0 and g578["opf_kw"] == pytest.approx(0.0, abs=1e-6)
+    assert s["max_abs_error_kw"] < 0.01 and abs(s["max_imbalance_w"]) < 1.0
+
+
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [(["--trip", "G578@3+2"], "--trip"), (["--controller-crash", "C1@3"], "--controller-crash"),
+     (["--crash", "G1"], "--crash")],
+)  # fmt: skip
+def test_bad_agent_faults_are_usage_errors(args, option, capsys):
+    from popdispatch.cli import main
+
+    assert main(["agents", *CONGESTION, *args]) == 2
+    assert option in capsys.readouterr().err

@@ -24,7 +24,7 @@ from popdispatch.scenarios import PEAK_MINUTE  # noqa: E402
 def test_lossy_network_reaches_dc_opf(congestion_problem, faults):
     opf = solve_opf(congestion_problem, PEAK_MINUTE)
     run = run_agents(congestion_problem, PEAK_MINUTE, RunSettings(mode="exact"), faults,
-                     AgentSettings(max_rounds=600))  # fmt: skip
+                     AgentSettings(max_rounds=900))  # fmt: skip
     assert run.lost > 0.05 * run.messages
     assert run.rest_round is not None
     assert np.abs(run.setpoints_kw - opf.p_kw).max() < 0.01  # kW
@@ -43,22 +43,8 @@ def test_delayed_network_reaches_dc_opf_in_paced_rounds(congestion_problem, faul
     0.01 kW of the DC-OPF; the rounds wait for the longest delay (paced, the default)."""
     opf = solve_opf(congestion_problem, PEAK_MINUTE)
     run = run_agents(congestion_problem, PEAK_MINUTE, RunSettings(mode="exact"), faults,
-                     AgentSettings(max_rounds=600))  # fmt: skip
+                     AgentSettings(max_rounds=900))  # fmt: skip
     assert run.phase_ticks == 1 + 6 * faults.delay_max
     assert run.rest_round is not None
     assert np.abs(run.setpoints_kw - opf.p_kw).max() < 0.01  # kW
     assert abs(run.max_imbalance_w) < 1.0 and run.open_transactions == 0
-
-
-def test_ring_rest_is_reported_stalled_like_the_engine(congestion_problem):
-    """Distributed Smith on a ring rests away from the DC-OPF (a saturated generator cannot
-    relay, docs/agents.md); the agents' run says so, as the engine's own run does."""
-    from popdispatch.online import run_snapshot
-
-    settings = RunSettings(mode="exact", dynamics="distributed-smith", graph="ring")
-    run = run_agents(congestion_problem, PEAK_MINUTE, settings, Faults())
-    engine = run_snapshot(congestion_problem, PEAK_MINUTE, settings)
-    assert engine.status == "stalled"
-    assert run.status == "stalled" and "G739" in run.stall_reason
-    opf = solve_opf(congestion_problem, PEAK_MINUTE).p_kw
-    assert np.abs(run.setpoints_kw - opf).max() > 0.5  # kW: really away from the optimum

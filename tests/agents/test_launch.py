@@ -43,6 +43,22 @@ def test_launched_congestion_minute_reaches_dc_opf(congestion_problem):
     assert _children() == 0
 
 
+def test_launched_minute_with_loss_over_tcp(congestion_problem):
+    """Fault injection over TCP: every process drops 10 % of its messages (seeded); the
+    launched congestion minute still lands within 0.01 kW of the DC-OPF (the simulated one
+    is within 0.01 kW from round 151, benchmarks/fault_table.py)."""
+    args = ["launch", "--minute", "566", "--limit", "505:666=28", "--rounds", "300", "--json",
+            "--startup-s", "60", "--loss", "0.1", "--seed", "1", "-q"]  # fmt: skip
+    result = CliRunner().invoke(agents, args)
+    assert result.exit_code == 0, result.output
+    s = json.loads(result.output)
+    assert 0.07 < s["lost"] / s["messages"] < 0.13
+    opf = solve_opf(congestion_problem, 566).p_kw
+    setpoints = np.array([g["setpoint_kw"] for g in s["generators"]])
+    assert np.abs(setpoints - opf).max() < 0.01  # kW
+    assert _children() == 0
+
+
 def test_ctrl_c_leaves_no_process():
     """SIGINT to the launcher during start-up: exit 130 (as the CLI reports interruptions)
     or a KeyboardInterrupt, and every agent process gone."""

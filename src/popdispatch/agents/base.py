@@ -37,6 +37,10 @@ class RoundAgent(Agent):
         self.tick_s = TICK_S  # clock seconds per tick
         self.wall_clock = False  # real time (TCP): ticks at absolute deadlines, no drift
         self.missed_ticks = 0  # real time: deadlines already past when the agent got to them
+        self.loss = 0.0  # real time: probability that this agent's outgoing message is dropped
+        self.drop = None  # real time: the seeded random.Random of those drops
+        self.sent = 0  # real time: messages this agent sent (dropped ones included)
+        self.dropped = 0
 
     #: The ticks of a round this agent acts at (each its own periodic task: an agent that
     #: woke at every tick only to find nothing to do cost the simulation a third of its time).
@@ -89,6 +93,10 @@ class RoundAgent(Agent):
         for content, aid in outbox:
             copies = self.network.copies() if self.network is not None else 1
             for _ in range(copies):
+                self.sent += 1
+                if self.drop is not None and self.drop.random() < self.loss:
+                    self.dropped += 1  # fault injection over TCP: lost on the way
+                    continue
                 await self.send_message(content, receiver_addr=self.addresses[aid])
 
     def now(self) -> tuple[int, Phase]:

@@ -14,16 +14,24 @@ side of the line:
   (one Euler step of the controller-state map). Each end integrates its own copy of the two
   prices from its own measurements: with perfect sensors and links the copies are equal;
   otherwise only the sum of the two half prices matters for the generators' comparisons.
+
+A controller that stops (crash): every round each end sends its partner at the other end of
+the line a :class:`~popdispatch.agents.messages.Heartbeat`. An end whose partner has been
+silent for more than ``stale_rounds`` rounds takes the line over: it also sends the other
+side its half (the negation of its own: it measures the same flow), until the partner's
+heartbeats resume. The generators on the silent end's side keep the last price they heard
+meanwhile (and report the silence themselves, :mod:`popdispatch.agents.generator`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from popdispatch.agents.base import RoundAgent
-from popdispatch.agents.messages import Measurement, Signals
+from popdispatch.agents.messages import Heartbeat, Measurement, Signals
 from popdispatch.agents.schedule import Phase
 from popdispatch.game.controllers import overflow_signal
+from popdispatch.modes.exact import line_price
 
 
 @dataclass
@@ -32,7 +40,10 @@ class LineEnd:
 
     ``line``: index among the limited lines; ``orientation``: +1 at the parent end (a positive
     flow leaves this node), -1 at the child end; ``limit_mw``: U; ``receivers``: generator
-    agent ids on this end's side; ``z_up``, ``z_down``: exact-mode prices, EUR/MW.
+    agent ids on this end's side; ``z_up``, ``z_down``: exact-mode prices, EUR/MW;
+    ``partner``: the controller at the other end, ``other_receivers`` the generators on its
+    side; ``partner_round``: round of its latest heartbeat; ``took_over``: this end sends the
+    other side's half too (the partner is silent).
     """
 
     line: int
@@ -43,6 +54,10 @@ class LineEnd:
     flow_round: int = -1
     z_up: float = 0.0
     z_down: float = 0.0
+    partner: str | None = None
+    other_receivers: list[str] = field(default_factory=list)
+    partner_round: int = -1
+    took_over: bool = False
 
 
 class ControllerAgent(RoundAgent):
@@ -56,8 +71,10 @@ class ControllerAgent(RoundAgent):
     PHASES = (Phase.SIGNAL,)
 
     def __init__(self, ends: list[LineEnd], exact: bool, C: float, price_rate: float,
-                 step_s: float, network=None):  # fmt: skip
+                 step_s: float, network=None, stale_rounds: int = 10):  # fmt: skip
         super().__init__(network)
+        self.stale_rounds = int(stale_rounds)
+        self.events: list[dict] = []
         self.ends = ends
         self.exact = exact
         self.C = C
@@ -72,29 +89,54 @@ class ControllerAgent(RoundAgent):
             for end in self.by_line.get(content.line, ()):
                 if content.round > end.flow_round:
                     end.flow_mw, end.flow_round = content.flow_mw, content.round
+        elif isinstance(content, Heartbeat):
+            for end in self.by_line.get(content.line, ()):
+                end.partner_round = max(end.partner_round, content.round)
 
     def act(self, rnd: int, phase: Phase) -> None:
         if phase != Phase.SIGNAL:
             return
         values: dict[str, dict[str, float]] = {}
         for end in self.ends:
+            if end.partner is not None:
+                self.send(Heartbeat(rnd, end.line), end.partner)
+                self._watch(end, rnd)
             if end.flow_mw is None:
                 continue  # nothing measured yet: nothing to say
             value = self._price(end) if self.exact else self._overflow(end)
             for aid in end.receivers:
                 values.setdefault(aid, {})[str(end.line)] = value
+            if end.took_over:  # the silent partner's half: the same law from its side
+                other = -value if self.exact else self._overflow(end, -1)
+                for aid in end.other_receivers:
+                    values.setdefault(aid, {})[str(end.line)] = other
         for aid, by_line in values.items():
             self.send(Signals(rnd, by_line), aid)
 
-    def _overflow(self, end: LineEnd) -> float:
-        """Paper eq. 8 as seen from this node."""
-        return overflow_signal(end.orientation * end.flow_mw, end.limit_mw, self.C)
+    def _watch(self, end: LineEnd, rnd: int) -> None:
+        """Take the line over when the partner has been silent for more than
+        ``stale_rounds`` rounds; hand it back when it speaks again."""
+        silent = rnd - max(end.partner_round, 0) > self.stale_rounds
+        if silent and not end.took_over:
+            end.took_over = True
+            self.events.append({"round": rnd, "event": "controller_silent",
+                                "agent": end.partner, "line": end.line,
+                                "taken_over_by": self.aid})  # fmt: skip
+        elif not silent and end.took_over:
+            end.took_over = False
+            self.events.append({"round": rnd, "event": "controller_back",
+                                "agent": end.partner, "line": end.line})  # fmt: skip
+
+    def _overflow(self, end: LineEnd, side: int = 1) -> float:
+        """Paper eq. 8 as seen from this node (``side`` -1: from the other end)."""
+        return overflow_signal(side * end.orientation * end.flow_mw, end.limit_mw, self.C)
 
     def _price(self, end: LineEnd) -> float:
-        """Exact mode: this end's half of the net price, then one Euler step of the prices."""
+        """Exact mode: this end's half of the net price (modes/exact.py ``line_price``), then
+        one Euler step of the prices."""
         excess_up = end.flow_mw - end.limit_mw
         excess_down = -end.flow_mw - end.limit_mw
-        nu = max(0.0, end.z_up + self.C * excess_up) - max(0.0, end.z_down + self.C * excess_down)
+        nu = line_price(end.z_up, end.z_down, excess_up, excess_down, self.C)
         h, rate = self.step_s, self.price_rate
         end.z_up = max(end.z_up + h * (rate * excess_up), 0.0)
         end.z_down = max(end.z_down + h * (rate * excess_down), 0.0)

@@ -41,11 +41,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from popdispatch.agents.base import RoundAgent
-from popdispatch.agents.messages import Accept, Ack, Decision, Offer, Output, Signals, Status
+from popdispatch.agents.messages import (
+    Accept,
+    Ack,
+    Decision,
+    Offer,
+    Output,
+    Relayed,
+    Signals,
+    Status,
+)
 from popdispatch.agents.plant import Inverters
 from popdispatch.agents.schedule import Phase
 from popdispatch.dynamics.fields import field_weights
-from popdispatch.dynamics.pairwise import graph_flows
+from popdispatch.dynamics.pairwise import RELAY_MASS, graph_flows
 from popdispatch.game.fitness import fitness_into
 from popdispatch.game.parameters import share_bounds
 
@@ -115,6 +124,16 @@ class GeneratorAgent(RoundAgent):
         self.reserved: dict[str, float] = {}  # receiver: txid: MW accepted, undecided
         self.answered: set[str] = set()  # receiver: offers accepted or refused
         self.applied: set[str] = set()  # receiver: decisions applied
+        self.relay = False  # relay through blocked generators (a graph that is not complete)
+        self.status_round = -1  # the round of the own latest status
+        self.heard: dict[tuple[str, str], tuple[Status, tuple]] = {}  # (origin, via): route
+        self.forwarded: set[str] = set()  # origins whose status this relay passed on
+        self.routes: dict[str, tuple] = {}  # relayed txid: hops to the counterparty
+        self.relayed_messages = 0  # messages this generator passed on as a relay
+        self.stale_rounds = 10  # rounds of silence after which a line or neighbour is stale
+        self.unwatched: set[str] = set()  # lines whose price is older than stale_rounds
+        self.events: list[dict] = []  # what this generator noticed (stale prices)
+        self.tripped = False
 
     @property
     def p(self) -> float:
@@ -144,6 +163,9 @@ class GeneratorAgent(RoundAgent):
             old = self.statuses.get(sender)
             if old is None or content.round >= old.round:
                 self.statuses[sender] = content
+            self._flood(sender, content, ())
+        elif isinstance(content, Relayed):
+            self._relayed(content, sender)
         elif isinstance(content, Offer):
             if content.txid not in self.answered:
                 self.offers_in.append((sender, content))
@@ -154,6 +176,153 @@ class GeneratorAgent(RoundAgent):
             self._apply(content, sender)
         elif isinstance(content, Ack):
             self.undelivered.pop(content.txid, None)
+
+    # -- the relay (docs/agents.md "the relay"; dynamics/pairwise.py relay_flows) -----------
+
+    @property
+    def blocked(self) -> bool:
+        """Whether this generator cannot take part in a comparison this round (at a limit:
+        ``w = 0`` or ``v = 0``): it relays."""
+        return self.own is not None and not (self.own[1] > 0.0 and self.own[2] > RELAY_MASS)
+
+    def _flood(self, origin: str, status: Status, route: tuple) -> None:
+        """A blocked generator passes every status of this round on to its other
+        neighbours, once per origin, the route growing by itself."""
+        if not self.relay or origin == self.aid:
+            return
+        if route:
+            self.heard[(origin, route[-1])] = (status, route)
+        if not self.blocked or status.round != self.status_round or origin in self.forwarded:
+            return
+        self.forwarded.add(origin)
+        onward = (*route, self.aid)
+        for aid in self.neighbours:
+            if aid != origin and aid not in route:
+                self._forward(Relayed(origin, status, onward), aid)
+
+    def _relayed(self, message: Relayed, sender: str) -> None:
+        """A flooded status, or a routed transaction message: pass it on along its path, or,
+        if addressed here, remember the way back and take its content."""
+        if isinstance(message.content, Status) and not message.path:
+            self._flood(message.origin, message.content, tuple(message.route))
+            return
+        route = (*message.route, sender) if sender != message.origin else tuple(message.route)
+        if message.path:
+            nxt, rest = message.path[0], tuple(message.path[1:])
+            self._forward(Relayed(message.origin, message.content, route, rest), nxt)
+            return
+        txid = getattr(message.content, "txid", None)
+        if txid is not None:
+            self.routes.setdefault(txid, (*reversed(route), message.origin))
+        self.receive(message.content, message.origin)
+
+    def _forward(self, message: Relayed, aid: str) -> None:
+        """Pass a message on at once (a relay does not wait for its next tick)."""
+        self.relayed_messages += 1
+        self.schedule_instant_task(self.send_message(message, receiver_addr=self.addresses[aid]))
+
+    def _send_tx(self, content, aid: str, txid: str) -> None:
+        """Send a transaction message to ``aid``, through the relays if it was relayed."""
+        hops = self.routes.get(txid)
+        if hops is None or len(hops) == 1:
+            self.send(content, aid)
+        else:
+            self.send(Relayed(self.aid, content, (), tuple(hops[1:])), hops[0])
+
+    def _groups(self) -> list[tuple[str, list[tuple[str, Status]], tuple | None]]:
+        """The relay groups this generator belongs to this round, from the flooded statuses:
+        ``(best receiver, members, hops to it)`` each (members: ``(id, status)``, itself
+        included; hops None when it is itself the best receiver)."""
+        rnd = self.status_round
+        f0, w0, v0, _ = self.own
+        me = Status(rnd, f0, w0, v0, self.index)
+        status = {self.aid: me}
+        direct = {a: s for a, s in self.statuses.items() if s.round == rnd}
+        status.update(direct)
+        heard = [(o, st, r) for (o, _), (st, r) in self.heard.items() if st.round == rnd]
+        for o, st, _ in heard:
+            status[o] = st
+        parent: dict[str, str] = {}
+
+        def find(a: str) -> str:
+            parent.setdefault(a, a)
+            while parent[a] != a:
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            return a
+
+        def union(a: str, b: str) -> None:
+            parent[find(a)] = find(b)
+
+        def is_blocked(st: Status) -> bool:
+            return not (st.w > 0.0 and st.v > RELAY_MASS)
+
+        comps: set[str] = set()
+        members: dict[str, dict[str, Status]] = {}
+        for o, st, route in heard:
+            for a, b in zip(route, route[1:], strict=False):
+                union(a, b)
+            if is_blocked(st):
+                union(o, route[0])
+            if self.blocked:
+                union(self.aid, route[-1])
+        for a, st in direct.items():
+            if is_blocked(st) and self.blocked:
+                union(self.aid, a)
+        for a, st in direct.items():
+            if is_blocked(st):
+                comps.add(find(a))
+                members.setdefault(find(a), {})[a] = st
+        for o, st, route in heard:
+            c = find(route[0])
+            comps.add(c)
+            members.setdefault(c, {})[o] = st
+        if self.blocked:
+            own = find(self.aid)
+            comps.add(own)
+            members.setdefault(own, {}).update(direct)
+        groups = []
+        for c in comps:
+            group = members.get(c, {})
+            group[self.aid] = me
+            receivers = [(st.f, -st.index, a) for a, st in group.items() if st.w > 0.0]
+            if not receivers:
+                continue
+            best = max(receivers)[2]
+            hops = None
+            if best != self.aid:
+                hops = (best,) if best in direct else self._hops_to(best, c, find, heard)
+            groups.append((best, sorted(group.items()), hops))
+        return groups
+
+    def _hops_to(self, target: str, comp: str, find, heard) -> tuple | None:
+        """The shortest way (relays, then ``target``) by which ``target``'s status came
+        through the group ``comp``."""
+        routes = [r for o, _, r in heard if o == target and find(r[0]) == comp]
+        if not routes:
+            return None
+        return (*reversed(min(routes, key=len)), target)
+
+    def _relay_flows(self) -> tuple[float, list[tuple[str, float, tuple]]]:
+        """This round's relayed inflow (as the best receiver of a group) and outflows (to
+        each group's best receiver: ``(receiver, rate, hops)``), shares/s, at the pairwise
+        rate ``w_b v_a [f_b - f_a]_+`` of dynamics/pairwise.py ``relay_flows``."""
+        if not self.relay or self.own is None:
+            return 0.0, []
+        f0, w0, v0, _ = self.own
+        inflow, out = 0.0, []
+        for best, group, hops in self._groups():
+            if best == self.aid:
+                for aid, st in group:
+                    gap = f0 - st.f
+                    if aid != self.aid and st.v > 0.0 and gap > 0.0:
+                        inflow += gap * w0 * st.v
+                continue
+            st = dict(group)[best]
+            gap = st.f - f0
+            if v0 > 0.0 and gap > 0.0 and hops is not None:
+                out.append((best, gap * st.w * v0, hops))
+        return inflow, out
 
     def _apply(self, decision: Decision, sender: str) -> None:
         """A sender's decision: recorded once by id (applied at its effective round, or now
@@ -168,7 +337,7 @@ class GeneratorAgent(RoundAgent):
                     self._report()
                 else:
                     self.pending_in[decision.txid] = (decision.amount_mw, decision.effective_round)
-        self.send(Ack(decision.txid), sender)
+        self._send_tx(Ack(decision.txid), sender, decision.txid)
 
     # -- the round ---------------------------------------------------------------------------
 
@@ -182,8 +351,42 @@ class GeneratorAgent(RoundAgent):
         elif phase == Phase.COMMIT:
             self._commit(rnd)
 
+    def _watch_signals(self, rnd: int) -> None:
+        """Report each line whose latest price is more than ``stale_rounds`` rounds old (its
+        controller is silent; the last price is kept), and when it is fresh again."""
+        for line, (heard, _) in self.signals.items():
+            stale = rnd - heard > self.stale_rounds
+            if stale and line not in self.unwatched:
+                self.unwatched.add(line)
+                self.events.append({"round": rnd, "event": "stale_price", "agent": self.aid,
+                                    "line": int(line), "last_round": heard})  # fmt: skip
+            elif not stale and line in self.unwatched:
+                self.unwatched.discard(line)
+                self.events.append({"round": rnd, "event": "fresh_price", "agent": self.aid,
+                                    "line": int(line)})  # fmt: skip
+
+    def forget(self, aid: str) -> None:
+        """A neighbour that tripped (the protection's report): drop its status, the offers
+        to it and from it, and the decisions it will never acknowledge (the source bus
+        carries what they moved, :func:`popdispatch.agents.system.trip`)."""
+        self.neighbours = [n for n in self.neighbours if n != aid]
+        self.statuses.pop(aid, None)
+
+        def other(txid: str) -> str:
+            sender, _, receiver = txid.split("/")[:3]
+            return receiver if sender == self.aid else sender
+
+        for book in (self.open_offers, self.undelivered, self.reserved, self.accepted,
+                     self.committed, self.pending_out, self.pending_in):  # fmt: skip
+            for txid in [t for t in book if other(t) == aid]:
+                del book[txid]
+        self.offers_in = [(s, o) for s, o in self.offers_in if s != aid]
+
     def _status(self, rnd: int) -> None:
         """Fitness and weights at the own set point; status to the neighbours."""
+        self._watch_signals(rnd)
+        for aid in [a for a, st in self.statuses.items() if rnd - st.round > self.stale_rounds]:
+            del self.statuses[aid]  # a neighbour silent that long takes no part
         r = self.rule
         one = np.ones(1)
         p = np.array([self.p])  # the inverter's output: what the lines carry
@@ -201,7 +404,10 @@ class GeneratorAgent(RoundAgent):
         x = np.array([self.planned]) / r.demand_mw
         field_weights(r.field, x, lo, hi, active, w, v, room)
         self.own = (float(f[0]), float(w[0]), float(v[0]), float(room[0]))
-        status = Status(rnd, *self.own[:3])
+        self.status_round = rnd
+        self.heard = {}
+        self.forwarded = set()
+        status = Status(rnd, *self.own[:3], self.index)
         for aid in self.neighbours:
             self.send(status, aid)
 
@@ -221,6 +427,9 @@ class GeneratorAgent(RoundAgent):
         indices = np.array(list(range(1, n)) + [0] * (n - 1), dtype=np.int64)
         inflow, outflow = np.zeros(n), np.zeros(n)
         graph_flows(f, w, v, indptr, indices, inflow, outflow)
+        relay_in, relay_out = self._relay_flows()
+        inflow[0] += relay_in
+        outflow[0] += sum(rate for _, rate, _ in relay_out)
         h = self.rule.step_s
         # the flux limiter of integrate/steppers.py (euler_steps), own side only
         lim_v = v0 * (v0 / (h * outflow[0])) if h * outflow[0] > v0 else v0
@@ -232,16 +441,23 @@ class GeneratorAgent(RoundAgent):
         for t, aid in enumerate(names, start=1):
             gap = f[t] - f0
             if gap > 0.0 and w[t] > 0.0 and lim_v > 0.0:
-                amounts[aid] = h * (gap * w[t] * lim_v) * demand
+                amounts[(aid, "")] = h * (gap * w[t] * lim_v) * demand
+        hops_of = {}
+        for k, (aid, rate, hops) in enumerate(relay_out):
+            if lim_v > 0.0:  # rate = gap w_b v0: the limited one scales v0 to lim_v
+                amounts[(aid, f"/r{k}")] = h * (rate * (lim_v / v0)) * demand
+                hops_of[(aid, f"/r{k}")] = hops
         # what is still offered from earlier rounds is not movable again
         movable = v0 * demand - sum(amount for _, _, amount in self.open_offers.values())
         total = sum(amounts.values())
         scale = max(movable, 0.0) / total if total > max(movable, 0.0) else 1.0
-        for aid, amount in amounts.items():
+        for (aid, tag), amount in amounts.items():
             if amount * scale > 0.0:
-                txid = f"{self.aid}/{rnd}/{aid}"
+                txid = f"{self.aid}/{rnd}/{aid}{tag}"
                 self.open_offers[txid] = (aid, rnd, amount * scale)
-                self.send(Offer(rnd, txid, amount * scale), aid)
+                if tag:
+                    self.routes[txid] = hops_of[(aid, tag)]
+                self._send_tx(Offer(rnd, txid, amount * scale), aid, txid)
 
     def _accept(self, rnd: int) -> None:
         """Accept the open offers that arrived, all in the same proportion, within the room
@@ -267,7 +483,7 @@ class GeneratorAgent(RoundAgent):
             room -= amount
             if amount > 0.0:
                 self.reserved[offer.txid] = amount
-                self.send(Accept(offer.txid, amount), sender)
+                self._send_tx(Accept(offer.txid, amount), sender, offer.txid)
 
     def _commit(self, rnd: int) -> None:
         """Commit the accepted offers, abort the expired ones; (re)send every decision not yet
@@ -287,7 +503,7 @@ class GeneratorAgent(RoundAgent):
         self._due(rnd)
         for aid, decision in self.undelivered.values():
             for _ in range(self.copies):
-                self.send(decision, aid)
+                self._send_tx(decision, aid, decision.txid)
 
     def _due(self, rnd: int) -> None:
         """Change the inverter by every commit whose effective round has come."""

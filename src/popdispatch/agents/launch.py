@@ -37,7 +37,9 @@ class LaunchConfig:
 
     ``limits``: path limits ``[a, b, kW]``; ``ports``: agent id -> TCP port; ``t0``: epoch
     seconds of round 0's first tick; ``tick_s``: seconds per tick; ``rounds``: rounds to run;
-    ``step_s``: the round's Euler step (s)."""
+    ``step_s``: the round's Euler step (s); ``loss``: probability that a message is dropped
+    by its sender (fault injection over TCP, each process with its own seeded draws);
+    ``seed``: of those draws."""
 
     minute: int
     limits: list
@@ -49,6 +51,8 @@ class LaunchConfig:
     tick_s: float
     rounds: int
     step_s: float
+    loss: float = 0.0
+    seed: int = 0
 
 
 def _codec():
@@ -65,15 +69,17 @@ def _codec():
 def _system(config: LaunchConfig):
     """The problem and the agents, built the same way in every process."""
     from popdispatch.agents.network import Faults
-    from popdispatch.agents.system import build_agents
+    from popdispatch.agents.system import AgentSettings, build_agents
     from popdispatch.online import RunSettings
     from popdispatch.runs import FeederSource, load_run
 
     limits = [tuple(limit) for limit in config.limits]
     problem, _ = load_run(FeederSource(), None, config.minute, limits)
     settings = RunSettings(dynamics=config.dynamics, mode=config.mode, graph=config.graph)
+    faults = Faults(loss=config.loss, seed=config.seed)
+    copies = AgentSettings().copies_for(faults)
     system = build_agents(problem, config.minute, settings, config.step_s, Faults(),
-                          engine_limiter=False)  # fmt: skip
+                          copies=copies, engine_limiter=False)  # fmt: skip
     return problem, system
 
 
@@ -91,6 +97,10 @@ async def _serve(aid: str, config: LaunchConfig) -> None:
     agent = agent_ids(system)[aid]
     agent.network = None
     agent.t0, agent.tick_s, agent.wall_clock = config.t0, config.tick_s, True
+    if config.loss:
+        import random
+
+        agent.loss, agent.drop = config.loss, random.Random(f"{config.seed}/{aid}")
     if aid in system.graph.nodes:
         agent.plant_id = "plant"
     container = create_tcp_container((HOST, config.ports[aid]), codec=_codec())
@@ -104,8 +114,10 @@ async def _serve(aid: str, config: LaunchConfig) -> None:
     if agent.missed_ticks:
         print(f"agent {aid} missed {agent.missed_ticks} ticks (started late or fell behind; "
               "a longer --startup-s or --tick-ms helps)", file=sys.stderr)  # fmt: skip
+    counts = {"sent": agent.sent, "dropped": agent.dropped}
     if aid == "plant":
-        print(json.dumps({"setpoints_mw": [list(map(float, p)) for p in agent.history]}))
+        counts["setpoints_mw"] = [list(map(float, p)) for p in agent.history]
+    print(json.dumps(counts))
 
 
 @dataclass(frozen=True)
@@ -117,17 +129,21 @@ class LaunchResult:
     trajectory_kw: np.ndarray
     wall_seconds: float
     processes: int
+    messages: int = 0
+    lost: int = 0
 
 
 def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
            graph: str = "complete", rounds: int = 200, tick_s: float = 0.05,
-           step_s: float | None = None, base_port: int = 0,
-           startup_s: float = 30.0) -> LaunchResult:  # fmt: skip
+           step_s: float | None = None, base_port: int = 0, startup_s: float = 30.0,
+           loss: float = 0.0, seed: int = 0) -> LaunchResult:  # fmt: skip
     """Run the agents of one minute as separate processes over TCP (module docstring).
 
     ``base_port``: first TCP port (0: free ports the OS hands out); ``startup_s``: seconds
     the processes get to load their data before round 0; ``step_s``: the round's Euler step
-    (None: :meth:`popdispatch.agents.system.AgentSettings.step_for`).
+    (None: :meth:`popdispatch.agents.system.AgentSettings.step_for`); ``loss``: probability
+    that each message is dropped by its sender (``seed``: of the draws; decisions then go out
+    in 3 copies, as in the simulation).
     """
     from popdispatch.runs import FeederSource, load_run
 
@@ -146,12 +162,16 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
     ports = _ports(len(ids), base_port)
     config = LaunchConfig(minute, [list(x) for x in limits], mode, dynamics, graph,
                           dict(zip(ids, ports, strict=True)), time.time() + startup_s, tick_s,
-                          rounds, step_s)  # fmt: skip
+                          rounds, step_s, float(loss), int(seed))  # fmt: skip
     start = time.perf_counter()
-    outputs = _run_children(ids, config)
-    history = json.loads(outputs["plant"])["setpoints_mw"]
+    outputs = {aid: json.loads(out.strip().splitlines()[-1])
+               for aid, out in _run_children(ids, config).items()}  # fmt: skip
+    history = outputs["plant"]["setpoints_mw"]
     wall = time.perf_counter() - start
-    return LaunchResult(list(problem.generators), np.array(history) * 1000.0, wall, len(ids))
+    sent = sum(o["sent"] for o in outputs.values())
+    lost = sum(o["dropped"] for o in outputs.values())
+    return LaunchResult(list(problem.generators), np.array(history) * 1000.0, wall, len(ids),
+                        sent, lost)  # fmt: skip
 
 
 def _ports(n: int, base: int) -> list[int]:

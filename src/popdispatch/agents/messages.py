@@ -44,6 +44,7 @@ class Status:
     f: float
     w: float
     v: float
+    index: int = -1  # the generator's position (ties between best receivers of a relay group)
 
 
 @json_serializable
@@ -96,4 +97,43 @@ class Output:
     p_mw: float
 
 
-ALL_MESSAGES = (Measurement, Signals, Status, Offer, Accept, Decision, Ack, Output)
+@json_serializable
+@dataclass(frozen=True)
+class Heartbeat:
+    """Node controller -> the controller at the other end of limited line ``line``: alive
+    at ``round`` (a silent partner's lines are taken over, docs/agents.md)."""
+
+    round: int
+    line: int
+
+
+@json_serializable
+@dataclass(frozen=True)
+class Relayed:
+    """A message passed on by relays (generators that cannot take part in a comparison,
+    dynamics/pairwise.py ``relay_flows``): ``content`` from ``origin``.
+
+    ``route``: the relays it went through so far, in order (a flooded status: each blocked
+    generator passes every status it hears on to its other neighbours, once per origin and
+    round); ``path``: the relays still to go before its addressee (a routed offer, accept,
+    decision or acknowledgement of a relayed transaction; empty for a flood).
+    """
+
+    origin: str
+    content: object
+    route: tuple = ()
+    path: tuple = ()
+
+
+ALL_MESSAGES = (
+    Measurement,
+    Signals,
+    Status,
+    Offer,
+    Accept,
+    Decision,
+    Ack,
+    Output,
+    Relayed,
+    Heartbeat,
+)

@@ -22,6 +22,44 @@ from mango import CommunicationSimulation, CommunicationSimulationResult, Packag
 from popdispatch.agents.schedule import HOP_TICKS, TICKS_PER_ROUND
 from popdispatch.errors import OptionError
 
+#: The agent faults a run can be given (:class:`FaultEvent`).
+FAULT_KINDS = ("trip", "crash", "controller-crash")
+
+
+@dataclass(frozen=True)
+class FaultEvent:
+    """A fault of one agent at the start of round ``round``: ``trip`` (a DG's output to 0 at
+    once, for good), ``crash`` (a DG's agent stops; its inverter holds the last set point) or
+    ``controller-crash`` (a node controller stops); ``rounds``: rounds until it restarts
+    (None: never; a trip never restarts)."""
+
+    kind: str
+    agent: str
+    round: int
+    rounds: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in FAULT_KINDS:
+            raise OptionError(f"unknown fault {self.kind!r} (known: {', '.join(FAULT_KINDS)})",
+                              "--" + str(self.kind))  # fmt: skip
+        if self.round < 0 or (self.rounds is not None and self.rounds < 1):
+            raise OptionError(f"{self.kind} of {self.agent}: round >= 0 and rounds >= 1 "
+                              f"required, got {self.round} and {self.rounds}",
+                              "--" + self.kind)  # fmt: skip
+
+    @classmethod
+    def parse(cls, kind: str, text: str) -> FaultEvent:
+        """``AGENT@ROUND`` or ``AGENT@ROUND+ROUNDS`` (restart after ROUNDS rounds)."""
+        agent, at, when = text.partition("@")
+        start, plus, length = when.partition("+")
+        try:
+            if not (agent and at and start.isdigit() and (not plus or length.isdigit())):
+                raise ValueError
+            return cls(kind, agent, int(start), int(length) if plus else None)
+        except ValueError:
+            raise OptionError(f"{kind} {text!r}: expected AGENT@ROUND or AGENT@ROUND+ROUNDS",
+                              "--" + kind) from None  # fmt: skip
+
 
 @dataclass(frozen=True)
 class Faults:
@@ -35,6 +73,7 @@ class Faults:
     duplicate : probability that a message is delivered twice (each copy delayed on its own).
     noise_kw : standard deviation of the flow measurement noise, kW (plant sensors).
     seed : seed of every random draw of the run.
+    events : agent faults (:class:`FaultEvent`: trips, crashes) at given rounds.
     """
 
     loss: float = 0.0
@@ -42,6 +81,7 @@ class Faults:
     duplicate: float = 0.0
     noise_kw: float = 0.0
     seed: int = 0
+    events: tuple = ()
 
     def __post_init__(self) -> None:
         for name, option in (("loss", "--loss"), ("duplicate", "--duplicate")):

@@ -20,9 +20,10 @@ import numpy as np
 
 from popdispatch.agents.controller import ControllerAgent, LineEnd
 from popdispatch.agents.generator import GeneratorAgent, GeneratorRule
-from popdispatch.agents.network import Faults, LossyNetwork
+from popdispatch.agents.network import FaultEvent, Faults, LossyNetwork
 from popdispatch.agents.plant import Inverters, PlantAgent
 from popdispatch.agents.schedule import TICKS_PER_ROUND
+from popdispatch.agents.source import SOURCE_ID, SourceAgent
 from popdispatch.constants import KW_PER_MW
 from popdispatch.dynamics import communication_graph, get_dynamics
 from popdispatch.errors import OptionError
@@ -76,6 +77,13 @@ class AgentSettings:
     paced: bool = True
     decision_copies: int | None = None
     engine_limiter: bool | None = None
+    stale_rounds: int = 10
+
+    def stale_for(self, faults: Faults) -> int:
+        """Rounds of silence after which a price or a neighbour's status counts as stale
+        (``stale_rounds``, plus ``delay_max`` in unpaced rounds, where messages may be that
+        late): at 30 % loss ten rounds in a row are lost with probability 6e-6."""
+        return self.stale_rounds + (0 if self.paced else int(faults.delay_max))
 
     def engine_limiter_for(self, faults: Faults) -> bool:
         """Whether receivers use the engine's limiter factor (None: no; set it to follow the
@@ -150,21 +158,69 @@ class AgentSystem:
     network: LossyNetwork
     graph: nx.Graph
     demand_mw: float
+    source: SourceAgent | None = None
+    events: list = field(default_factory=list)
 
     @property
     def agents(self) -> list:
-        return [self.plant, *self.controllers.values(), *self.generators]
+        extra = [self.source] if self.source is not None else []
+        return [self.plant, *self.controllers.values(), *self.generators, *extra]
+
+    @property
+    def parties(self) -> list[GeneratorAgent]:
+        """Everyone who commits power: the generators and the source bus."""
+        return [*self.generators, *([self.source] if self.source is not None else [])]
+
+    def apply(self, event: FaultEvent, rnd: int) -> None:
+        """Start or end ``event`` at round ``rnd`` (see :class:`FaultEvent`)."""
+        if event.kind == "trip":
+            if rnd == event.round:
+                self.trip(event.agent, rnd)
+            return
+        agent = (self.controllers.get(event.agent) if event.kind == "controller-crash"
+                 else self._generator_or_none(event.agent))  # fmt: skip
+        end = None if event.rounds is None else event.round + event.rounds
+        if rnd == event.round:
+            agent.crashed = True
+            self.events.append({"round": rnd, "event": event.kind, "agent": event.agent})
+        elif rnd == end:
+            agent.crashed = False
+            self.events.append({"round": rnd, "event": "restart", "agent": event.agent})
+
+    def _generator_or_none(self, name: str):
+        return next((g for g in self.generators if g.aid == name), None)
+
+    def trip(self, name: str, rnd: int) -> None:
+        """DG ``name`` trips: its output goes to 0 at once and its agent stops for good; the
+        protection reports it, so the others forget it (its transactions, its status) and the
+        source bus takes over at once what the committed state now lacks (the tripped output
+        and the transactions the trip cut), as its committed position
+        (:mod:`popdispatch.agents.source`)."""
+        gen = self._generator_or_none(name)
+        gen.crashed = gen.tripped = True
+        self.inverters.p[gen.index] = 0.0
+        for book in (gen.pending_in, gen.pending_out, gen.committed, gen.undelivered,
+                     gen.open_offers, gen.reserved, gen.accepted):  # fmt: skip
+            book.clear()
+        for other in self.parties:
+            if other is not gen:
+                other.forget(name)
+        taken = -self.committed_imbalance_mw()
+        self.source.position_mw += taken
+        self.events.append({"round": rnd, "event": "trip", "agent": name,
+                            "source_takes_kw": taken * KW_PER_MW})  # fmt: skip
 
     def committed_imbalance_mw(self) -> float:
         """Supply minus demand of the committed state: every set point, plus each committed
         transaction whose receiver has not applied it yet (in flight). Zero up to rounding
         if every transaction is applied exactly once at each end."""
-        applied = set().union(*(g.applied for g in self.generators))
+        parties = self.parties
+        applied = set().union(*(g.applied for g in parties))
         in_flight = sum(
-            amount for g in self.generators for txid, amount in g.committed.items()
+            amount for g in parties for txid, amount in g.committed.items()
             if txid not in applied
         )  # fmt: skip
-        planned = sum(g.planned for g in self.generators)
+        planned = sum(g.planned for g in parties)
         return float(planned + in_flight - self.demand_mw)
 
     def physical_imbalance_mw(self) -> float:
@@ -186,7 +242,11 @@ class AgentRun:
     flight); ``final_imbalance_w``: of the inverters after the drain; ``open_transactions``:
     undecided or unacknowledged transactions left after the drain; ``prices``: exact mode,
     each controller's ``(line, z_up, z_down)`` EUR/MW; ``step_s``: the round's Euler step;
-    ``phase_ticks``: ticks per phase (paced rounds); ``stall_reason``: why a run at rest is
+    ``phase_ticks``: ticks per phase (paced rounds); ``events``: the faults and what the
+    agents noticed (trips, crashes and restarts, stale prices, controllers taken over), each
+    ``{"round", "event", "agent", ...}``; ``source_kw``: the source bus's committed position
+    left after the drain (power a trip moved to it that the generators could not take
+    back); ``stall_reason``: why a run at rest is
     not at the DC-OPF (exact mode's KKT check, :func:`popdispatch.online.kkt_violations`, on
     the set points and the controllers' prices), None otherwise.
     """
@@ -209,6 +269,8 @@ class AgentRun:
     step_s: float
     phase_ticks: int = 1
     prices: dict = field(default_factory=dict)
+    events: list = field(default_factory=list)
+    source_kw: float = 0.0
 
     stall_reason: str | None = None
 
@@ -257,7 +319,8 @@ def generator_graph(problem: DispatchProblem, settings: RunSettings) -> nx.Graph
 
 def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
                  step_s: float, faults: Faults, timeout: int = 1, lag: int = 0,
-                 copies: int = 1, engine_limiter: bool = True) -> AgentSystem:  # fmt: skip
+                 copies: int = 1, engine_limiter: bool = True,
+                 stale_rounds: int = 10) -> AgentSystem:  # fmt: skip
     """The agents of one minute (not yet registered anywhere); ``timeout``: rounds an offer
     stays open; ``lag``: rounds from a commit to the inverters' change."""
     if not problem.online[minute - 1].all():
@@ -286,14 +349,48 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
                 rule, i, inverters, neighbours, timeout, lag, copies, engine_limiter, network
             )  # fmt: skip
         )
+    relay = not _complete(graph)
+    for gen in generators:
+        gen.relay = relay
+        gen.stale_rounds = stale_rounds
     controllers, line_ends = _controllers(problem, mode.bounded, fp, step_s, network)
+    for controller in controllers.values():  # the generators report a silence first
+        controller.stale_rounds = 2 * stale_rounds
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
                        network)  # fmt: skip
-    return AgentSystem(plant, controllers, generators, inverters, network, graph, demand)
+    source = SourceAgent(names, timeout, copies, network)
+    _check_events(faults.events, names, controllers)
+    return AgentSystem(plant, controllers, generators, inverters, network, graph, demand,
+                       source)  # fmt: skip
+
+
+def _check_events(events, generators: list[str], controllers: dict) -> None:
+    """Every fault names an agent of its kind (one-line error naming it)."""
+    for event in events:
+        known = list(controllers) if event.kind == "controller-crash" else generators
+        if event.agent not in known:
+            what = "node controller" if event.kind == "controller-crash" else "generator"
+            raise OptionError(f"{event.kind}: no {what} {event.agent!r} (known: "
+                              f"{', '.join(map(str, known))})", "--" + event.kind)  # fmt: skip
+
+
+def _complete(graph: nx.Graph) -> bool:
+    n = graph.number_of_nodes()
+    return graph.number_of_edges() == n * (n - 1) // 2
+
+
+def relay_phase_ticks(n_generators: int, delay_max: int) -> int:
+    """Ticks per phase that let a relayed message cross the longest chain of relays: at
+    most ``n - 1`` hops, each half a tick plus up to ``delay_max`` rounds of
+    :data:`TICKS_PER_ROUND` ticks (relays pass messages on as they arrive)."""
+    hops = max(n_generators - 1, 1)
+    return int(hops * (0.5 + TICKS_PER_ROUND * int(delay_max))) + 1
 
 
 def controller_id(bus) -> str:
-    """Agent id of the node controller at original bus ``bus``."""
+    """Agent id of the node controller at original bus ``bus`` (``C505``)."""
+    if isinstance(bus, float) and bus.is_integer():
+        bus = int(bus)
     return f"C{bus}"
 
 
@@ -310,6 +407,11 @@ def _controllers(problem, exact: bool, fp, step_s: float, network):
             LineEnd(k, int(row.orientation), float(row.limit_kw) / KW_PER_MW, list(row.receivers))
         )
         line_ends[k].append(aid)
+    for aid, own in ends.items():  # each end knows its partner and the other side
+        for end in own:
+            partner = next(a for a in line_ends[end.line] if a != aid)
+            end.partner = partner
+            end.other_receivers = next(e.receivers for e in ends[partner] if e.line == end.line)
     controllers = {
         aid: ControllerAgent(own, exact, float(fp.C), float(fp.price_rate), step_s, network)
         for aid, own in ends.items()
@@ -338,8 +440,24 @@ def run_agents(
     run = _run(problem, minute, settings, faults, agent_settings, step_s, on_round)
     if run.rest_round is None or not get_mode(settings.mode).claims_dc_opf:
         return run
-    return replace(run, stall_reason=_kkt_reason(problem, minute, settings, agent_settings,
+    tripped = [e.agent for e in faults.events if e.kind == "trip"]
+    if abs(run.source_kw) > agent_settings.tol_kw:
+        reason = (f"the source bus carries {run.source_kw:.4g} kW that the generators left "
+                  f"after the trip of {', '.join(tripped)} cannot take")  # fmt: skip
+        return replace(run, stall_reason=reason)
+    checked = without(problem, minute, tripped)
+    return replace(run, stall_reason=_kkt_reason(checked, minute, settings, agent_settings,
                                                  step_s, run))  # fmt: skip
+
+
+def without(problem: DispatchProblem, minute: int, names: list[str]) -> DispatchProblem:
+    """``problem`` with the generators ``names`` offline in ``minute`` (tripped: the DC-OPF a
+    run with trips must reach)."""
+    if not names:
+        return problem
+    online = problem.online.copy()
+    online[minute - 1, problem.generators.get_indexer(names)] = False
+    return replace(problem, online=online)
 
 
 def _kkt_reason(problem, minute, settings, opts: AgentSettings, step_s: float, run) -> str | None:
@@ -368,9 +486,13 @@ def _run(problem, minute, settings, faults, agent_settings, step_s, on_round) ->
     system = build_agents(problem, minute, settings, step_s, faults,
                           agent_settings.timeout_for(faults), agent_settings.lag_for(faults),
                           agent_settings.copies_for(faults),
-                          agent_settings.engine_limiter_for(faults))  # fmt: skip
+                          agent_settings.engine_limiter_for(faults),
+                          agent_settings.stale_for(faults))  # fmt: skip
+    ticks = agent_settings.phase_ticks_for(faults)
+    if system.generators[0].relay:
+        ticks = max(ticks, relay_phase_ticks(len(system.generators), faults.delay_max))
     for agent in system.agents:
-        agent.phase_ticks = agent_settings.phase_ticks_for(faults)
+        agent.phase_ticks = ticks
     window = agent_settings.rest_window(faults)
     return asyncio.run(_simulate(system, agent_settings, window, on_round))
 
@@ -384,6 +506,7 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         world.register(agent, suggested_aid=aid)
     for gen, name in zip(system.generators, system.graph.nodes, strict=True):
         world.register(gen, suggested_aid=name)
+    world.register(system.source, suggested_aid=SOURCE_ID)
     topology = graph_topology(system.graph.copy())
     for name, node in zip(system.graph.nodes, per_node(topology), strict=True):
         node.add(world.agents[name])
@@ -394,30 +517,38 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
     tol = opts.tol_kw / KW_PER_MW
     rest_round = None
     max_imbalance = max_transient = 0.0
+    last_event = max((_last_round(e) for e in system.network.faults.events), default=-1)
     async with world:
         rnd, quiet = 0, False
         while True:
             max_imbalance = max(max_imbalance, abs(system.committed_imbalance_mw()))
             max_transient = max(max_transient, abs(system.physical_imbalance_mw()))
+            for event in system.network.faults.events:
+                system.apply(event, rnd)
+            max_imbalance = max(max_imbalance, abs(system.committed_imbalance_mw()))
             if on_round is not None:
                 on_round(system, rnd)
-            settled = all(c.residual_mw() <= tol for c in system.controllers.values())
-            if not quiet and settled and _at_rest(system.plant.history, window, tol):
+            settled = all(
+                c.residual_mw() <= tol for c in system.controllers.values() if not c.crashed
+            )
+            due = rnd > last_event + window  # no rest declared before the last fault
+            if not quiet and due and settled and _at_rest(system.plant.history, window, tol):
                 rest_round = len(system.plant.history) - 1
             if not quiet and (rest_round is not None or rnd >= opts.max_rounds):
                 quiet = True  # the drain: no new offers, open transactions decided
-                for gen in system.generators:
+                for gen in system.parties:
                     gen.quiet = True
-            busy = any(g.busy for g in system.generators)
+            busy = any(g.busy for g in system.parties if not g.crashed)
             if (quiet and not busy) or rnd >= opts.max_rounds + opts.drain_rounds:
                 break
             await world.step_until(system.plant.round_ticks)
             _raise_agent_errors(system)
             rnd += 1
     wall = time.perf_counter() - start
-    prices = {
+    prices = {  # a crashed controller's copies froze when it stopped: the survivor's count
         aid: [(end.line, end.z_up, end.z_down) for end in c.ends]
         for aid, c in system.controllers.items()
+        if not c.crashed
     }
     residual = max((c.residual_mw() for c in system.controllers.values()), default=0.0)
     trajectory = np.array(system.plant.history) * KW_PER_MW
@@ -434,7 +565,7 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         max_transient_w=max_transient * W_PER_MW,
         final_imbalance_w=system.physical_imbalance_mw() * W_PER_MW,
         open_transactions=sum(
-            len(g.open_offers) + len(g.undelivered) + len(g.reserved) for g in system.generators
+            len(g.open_offers) + len(g.undelivered) + len(g.reserved) for g in system.parties
         ),
         residual_kw=residual * KW_PER_MW,
         wall_seconds=wall,
@@ -442,7 +573,20 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         step_s=system.generators[0].rule.step_s,
         phase_ticks=system.plant.phase_ticks,
         prices=prices,
+        events=sorted(_events(system), key=lambda e: e["round"]),
+        source_kw=system.source.position_mw * KW_PER_MW,
     )
+
+
+def _last_round(event: FaultEvent) -> int:
+    """The round a fault event last changes something (its start or its restart)."""
+    return event.round + (event.rounds or 0)
+
+
+def _events(system: AgentSystem) -> list[dict]:
+    """The run's fault events and what the agents noticed."""
+    noticed = [e for a in [*system.generators, *system.controllers.values()] for e in a.events]
+    return [*system.events, *noticed]
 
 
 def _raise_agent_errors(system: AgentSystem) -> None:

@@ -49,6 +49,15 @@ from popdispatch.report.progress import Progress
 @option("--noise-kw", type=click.FloatRange(0.0), default=0.0, show_default=True,
         help="Standard deviation of each line-flow measurement, kW.")  # fmt: skip
 @option("--seed", type=int, default=0, show_default=True, help="Seed of every random draw.")
+@option("--trip", "trips", multiple=True, metavar="GEN@ROUND",
+        help="DG GEN trips at ROUND: output 0 at once, for good (repeatable).")  # fmt: skip
+@option("--crash", "crashes", multiple=True, metavar="GEN@ROUND[+ROUNDS]",
+        help="DG GEN's agent stops at ROUND (restarts after ROUNDS); its inverter holds "
+        "its set point (repeatable).")  # fmt: skip
+@option("--controller-crash", "controller_crashes", multiple=True,
+        metavar="CONTROLLER@ROUND[+ROUNDS]",
+        help="Node controller (C<bus>, e.g. C505) stops at ROUND (restarts after ROUNDS) "
+        "(repeatable).")  # fmt: skip
 @option("--step-s", type=click.FloatRange(0.0, min_open=True), default=None,
         help="Euler step of one round, s (default: exact 0.005, paper 1e-4).")  # fmt: skip
 @option("--max-rounds", type=click.IntRange(1), default=4000, show_default=True,
@@ -62,8 +71,8 @@ from popdispatch.report.progress import Progress
 @quiet_option
 @click.pass_context
 def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, duplicate, noise_kw,
-           seed, step_s, max_rounds, pace, profiles, source, as_json, quiet,
-           constants=None) -> int:  # fmt: skip
+           seed, trips, crashes, controller_crashes, step_s, max_rounds, pace, profiles, source,
+           as_json, quiet, constants=None) -> int:  # fmt: skip
     """One minute dispatched by agents: one per generator, one per node controller and the
     plant, exchanging messages in mango's simulated world with seeded loss, delay and
     duplication; power moves only in pairwise transactions (offer, accept, commit), compared
@@ -75,7 +84,8 @@ def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, dupl
         raise click.MissingParameter(param_hint="'--minute'", param_type="option")
     progress = Progress(quiet)
     settings = settings_from(dynamics, mode, x0, graph, None, constants)
-    faults = _faults(loss, delay_max, duplicate, noise_kw, seed)
+    events = {"trip": trips, "crash": crashes, "controller-crash": controller_crashes}
+    faults = _faults(loss, delay_max, duplicate, noise_kw, seed, events)
     problem = _problem(source, profiles, minute, limits, progress)
     with progress.step(f"minute {minute}: {dynamics} dynamics by agents"):
         options = AgentOptions(step_s, max_rounds, pace)
@@ -86,17 +96,23 @@ def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, dupl
     return 0
 
 
-def _faults(loss, delay_max, duplicate, noise_kw, seed):
-    """The run's :class:`~popdispatch.agents.network.Faults` (one-line error without mango)."""
+def _faults(loss, delay_max, duplicate, noise_kw, seed, events=None):
+    """The run's :class:`~popdispatch.agents.network.Faults` (one-line error without mango);
+    ``events``: ``{kind: ("AGENT@ROUND[+ROUNDS]", ...)}``."""
     try:
         from popdispatch.agents import require_mango
 
         require_mango()
     except ImportError as exc:
         raise Failure(str(exc)) from None
-    from popdispatch.agents.network import Faults
+    from popdispatch.agents.network import FaultEvent, Faults
 
-    return Faults(loss, delay_max, duplicate, noise_kw, seed)
+    parsed = tuple(
+        FaultEvent.parse(kind, text) for kind, texts in (events or {}).items() for text in texts
+    )
+    if any(e.kind == "trip" and e.rounds is not None for e in parsed):
+        raise click.BadParameter("a trip is for good: GEN@ROUND", param_hint="'--trip'")
+    return Faults(loss, delay_max, duplicate, noise_kw, seed, parsed)
 
 
 def _problem(source, profiles, minute, limits, progress):
@@ -127,7 +143,7 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
     """The snapshot summary of the agents' run against the DC-OPF, plus the messages' keys."""
     import numpy as np
 
-    from popdispatch.agents.system import AgentSettings, run_agents
+    from popdispatch.agents.system import AgentSettings, run_agents, without
     from popdispatch.online import SnapshotResult, limited_flows_mw, overflow_kw
     from popdispatch.opf import solve_opf
     from popdispatch.report.summaries import snapshot_summary
@@ -156,8 +172,10 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         stall_reason=run.stall_reason,
         rest_at=run.rest_round,
     )
-    summary = snapshot_summary(problem, SnapshotComparison(result, solve_opf(problem, minute)),
-                               limits)  # fmt: skip
+    # the yardstick: the DC-OPF without the tripped DGs
+    remaining = without(problem, minute, [e.agent for e in faults.events if e.kind == "trip"])
+    comparison = SnapshotComparison(result, solve_opf(remaining, minute))
+    summary = snapshot_summary(remaining, comparison, limits)
     summary.update(
         iterations=run.rounds,
         rounds=run.rounds,
@@ -177,6 +195,12 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         max_transient_w=run.max_transient_w,
         final_imbalance_w=run.final_imbalance_w,
         open_transactions=run.open_transactions,
+        faults=[
+            {"kind": e.kind, "agent": e.agent, "round": e.round, "rounds": e.rounds}
+            for e in faults.events
+        ],
+        events=run.events,
+        source_kw=run.source_kw,
     )
     return summary
 
@@ -211,7 +235,17 @@ def agents_text(s: dict) -> str:
         f"max {s['max_transient_w']:.3g} W, final {s['final_imbalance_w']:.3g} W, open "
         f"transactions {s['open_transactions']}",
     ]
+    lines += [_event_text(e) for e in s["events"]]
+    if abs(s["source_kw"]) > 0.0005:
+        lines.append(f"source bus still carries {s['source_kw']:.3f} kW after the trips")
     return "\n".join(lines)
+
+
+def _event_text(e: dict) -> str:
+    """One fault event as a line."""
+    extra = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+                      for k, v in e.items() if k not in ("round", "event", "agent"))  # fmt: skip
+    return f"round {e['round']}: {e['event']} {e['agent']}" + (f" ({extra})" if extra else "")
 
 
 @agents.command(short_help="The agents as separate processes over TCP on localhost.")
@@ -226,9 +260,18 @@ def agents_text(s: dict) -> str:
         help="Real time per tick, ms (6 ticks a round).")  # fmt: skip
 @option("--startup-s", type=click.FloatRange(1.0), default=40.0, show_default=True,
         help="Seconds the processes get to load their data before round 0.")  # fmt: skip
+@option(
+    "--loss",
+    type=click.FloatRange(0.0, 1.0, max_open=True),
+    default=0.0,
+    show_default=True,
+    help="Probability that a message is dropped by its sender (0-1).",
+)
+@option("--seed", type=int, default=0, show_default=True, help="Seed of the drops.")
 @json_option
 @quiet_option
-def launch(minute, limits, mode, rounds, tick_ms, startup_s, as_json, quiet) -> int:
+def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, as_json,
+           quiet) -> int:  # fmt: skip
     """One OS process per agent (plant, node controllers, generators) on localhost, talking
     over TCP (mango), on the built-in ieee-elv case; compared with the DC-OPF. Ctrl-C stops
     every process (exit 130)."""
@@ -243,7 +286,8 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, as_json, quiet) -> 
     problem, _ = load_run(FeederSource(), None, minute, limits, progress)
     with progress.step(f"minute {minute}: {rounds} rounds by agent processes over TCP"):
         result = run_launch(minute, [list(x) for x in limits], mode=mode, rounds=rounds,
-                            tick_s=tick_ms / 1000.0, startup_s=startup_s)  # fmt: skip
+                            tick_s=tick_ms / 1000.0, startup_s=startup_s, loss=loss,
+                            seed=seed)  # fmt: skip
     opf = solve_opf(problem, minute)
     final = result.trajectory_kw[-1]
     error = float(np.abs(final - opf.p_kw).max()) if opf.status == "optimal" else None
@@ -258,6 +302,10 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, as_json, quiet) -> 
         ],
         "max_abs_error_kw": error,
         "wall_seconds": result.wall_seconds,
+        "loss": loss,
+        "seed": seed,
+        "messages": result.messages,
+        "lost": result.lost,
     }
     text = "\n".join(
         [f"minute {minute}, {mode} mode: {summary['rounds']} rounds by agent processes over TCP"]
@@ -266,6 +314,7 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, as_json, quiet) -> 
             for g in summary["generators"]
         ]
         + ["max |error| vs DC-OPF: " + ("null" if error is None else f"{error:.4f} kW")]
+        + [f"messages {result.messages} ({result.lost} dropped, loss {loss:g})"]
     )
     emit(stamp(summary), as_json, text)
     return 0

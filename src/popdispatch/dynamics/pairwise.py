@@ -80,11 +80,141 @@ def graph_flows(f, w, v, indptr, indices, inflow, outflow):
                 outflow[j] += rate
 
 
+#: Movable mass (shares) at or below which a strategy counts as at its lower limit for the
+#: relay. A sender's mass decays to its limit exponentially and never reaches it exactly, and
+#: until it does it would neither relay nor pass the mass on; the run then comes to rest
+#: (set points moving less than the tolerance) before the relay opens: a generator worse than
+#: its neighbours holding its last 7e-11 of a share held a random tree 4.6 kW from the
+#: DC-OPF. 1e-7 is ten times below the engine's relative tolerance (1e-6 of the demand), at
+#: which the KKT check counts a generator as at its limit anyway.
+RELAY_MASS = 1e-7
+
+
+@nb.njit(cache=True, inline="always")
+def blocked(w, v, k):
+    """Whether strategy ``k`` cannot take part in a comparison both ways (``w_k = 0``: at its
+    upper limit, offline; or ``v_k <= RELAY_MASS``: at its lower limit, extinct): it relays."""
+    return not (w[k] > 0.0 and v[k] > RELAY_MASS)
+
+
+@nb.njit(cache=True, inline="always")
+def relay_root(label, k):
+    """Root of ``k``'s relay group in the union-find forest ``label`` (parents ``>= 0``, roots
+    negative: see :func:`relay_flows`), halving the path on the way."""
+    while label[k] >= 0:
+        parent = label[k]
+        grand = label[parent]
+        if grand >= 0:
+            label[k] = grand
+            k = grand
+        else:
+            k = parent
+    return k
+
+
+@nb.njit(cache=True, inline="always")
+def relay_groups(f, w, v, indptr, indices, label):
+    """Relay groups and their best receivers into ``label`` (int, length n); False if no
+    strategy is blocked.
+
+    A relay group is a connected set ``S`` of blocked strategies (:func:`blocked`) together
+    with its neighbours ``N(S)``: any two members are joined by a path whose inner strategies
+    are all in ``S``. ``label`` holds a union-find forest over the blocked strategies: a
+    parent index, ``-1`` for a strategy that is not blocked, ``-2 - b`` at a root, ``b`` the
+    group's best receiver (largest ``f`` with ``w > 0``, lowest index on ties; ``n``: none).
+    """
+    n = f.shape[0]
+    any_blocked = False
+    for k in range(n):
+        if blocked(w, v, k):
+            label[k] = -2 - n
+            any_blocked = True
+        else:
+            label[k] = -1
+    if not any_blocked:
+        return False
+    for a in range(n):
+        if label[a] == -1:
+            continue
+        for e in range(indptr[a], indptr[a + 1]):
+            b = indices[e]
+            if b > a and label[b] != -1:
+                ra = relay_root(label, a)
+                rb = relay_root(label, b)
+                if ra != rb:
+                    label[rb] = ra
+    for k in range(n):
+        if label[k] == -1:
+            continue
+        r = relay_root(label, k)
+        for e in range(indptr[k], indptr[k + 1] + 1):
+            c = k if e == indptr[k + 1] else indices[e]
+            if w[c] <= 0.0:
+                continue
+            best = -2 - label[r]
+            if best == n or f[c] > f[best] or (f[c] == f[best] and c < best):
+                label[r] = -2 - c
+    return True
+
+
+@nb.njit(cache=True, inline="always")
+def relay_send(f, w, v, label, a, r, inflow, outflow):
+    """``a``'s relayed flow to the best receiver of the group rooted at ``r``."""
+    i = -2 - label[r]
+    if i < f.shape[0] and i != a:
+        gap = f[i] - f[a]
+        if gap > 0.0:
+            rate = gap * w[i] * v[a]
+            inflow[i] += rate
+            outflow[a] += rate
+
+
+@nb.njit(cache=True, inline="always")
+def relay_flows(f, w, v, indptr, indices, label, inflow, outflow):
+    """Add the relayed flows of distributed Smith on a graph to ``inflow``/``outflow``
+    (``label``: int scratch of length n); nothing when no strategy is blocked.
+
+    On a communication graph a strategy that cannot take part in a comparison (at a limit:
+    :func:`blocked`) cuts its neighbours apart: a generator at ``Pmax`` receives nothing and
+    passes nothing on, so two interior generators on either side of it never trade and
+    distributed Smith rests away from the dispatch (docs/agents.md). The relay: every sender
+    ``a`` (``v_a > 0``) of a relay group (:func:`relay_groups`) also sends to the group's best
+    receiver ``b`` at the pairwise rate ``w_b v_a [f_b - f_a]_+``, once per group it belongs
+    to; the blocked strategies between them pass the mass on and keep their own. Each term
+    moves mass from a worse to a better strategy, like the direct ones, so the flux limiter
+    and the rest-point argument of the pairwise flows apply unchanged: at rest no strategy
+    that can send is worse than one that can receive anywhere in the graph, the
+    box-constrained equilibrium of the complete graph (docs/agents.md, "the relay").
+    """
+    if not relay_groups(f, w, v, indptr, indices, label):
+        return
+    for a in range(f.shape[0]):
+        if v[a] <= 0.0:
+            continue
+        own = relay_root(label, a) if label[a] != -1 else -1
+        if own >= 0:
+            relay_send(f, w, v, label, a, own, inflow, outflow)
+        for e in range(indptr[a], indptr[a + 1]):
+            b = indices[e]
+            if label[b] == -1:
+                continue
+            r = relay_root(label, b)
+            seen = r == own
+            for e2 in range(indptr[a], e):  # a group reached through an earlier neighbour
+                b2 = indices[e2]
+                if not seen and label[b2] != -1 and relay_root(label, b2) == r:
+                    seen = True
+            if not seen:
+                relay_send(f, w, v, label, a, r, inflow, outflow)
+
+
 @nb.njit(cache=True, inline="always")
 def pairwise_flows(f, w, v, complete, indptr, indices, order, inflow, outflow):
     """Dispatch to :func:`complete_graph_flows` (``order`` already sorted) or
-    :func:`graph_flows`."""
+    :func:`graph_flows` plus the relay (:func:`relay_flows`, ``order`` as its scratch: the
+    order by fitness is only read on the complete graph)."""
     if complete:
         complete_graph_flows(f, w, v, order, inflow, outflow)
     else:
         graph_flows(f, w, v, indptr, indices, inflow, outflow)
+        relay_flows(f, w, v, indptr, indices, order, inflow, outflow)
