@@ -21,8 +21,17 @@ from popdispatch.dynamics.fields import Field
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
 from popdispatch.game.parameters import MinuteInputs
 from popdispatch.game.problem import DispatchProblem
-from popdispatch.integrate import STABLE_STEP, Status
+from popdispatch.integrate import ROUND_OFF, STABLE_STEP, Status
 from popdispatch.modes import ModeCode, get_mode
+
+
+def at_rest(x, last_x, z, last_z) -> bool:
+    """The fixed-point test: every share within ``ROUND_OFF`` of where it was, every
+    controller state within ``ROUND_OFF`` of its size."""
+    return bool(
+        np.all(np.abs(x - last_x) <= ROUND_OFF)
+        and np.all(np.abs(z - last_z) <= ROUND_OFF * np.abs(z))
+    )
 
 
 def overflow_signals(flow: np.ndarray, limit: np.ndarray, C: float) -> np.ndarray:
@@ -189,16 +198,22 @@ class ReferenceMinute:
         h_try = it.dt
         calm = 0  # iterations in a row with the residual within tol
         for k in range(1, horizon + 1):
+            last_x, last_z = x, z
             x, z, _, residual, h_try = self.advance(x, z, h_try)
             samples.append(x * self.demand)
             if len(z) and z.max() > self.z_cap:
                 return np.array(samples), x, z, Status.INFEASIBLE, -1
             calm = calm + 1 if residual <= tol else 0
             if k >= need and calm >= it.window and self._windows_agree(samples, tol):
-                if self.evaluate(x, z)[2] > tol:  # the end state's own residual
-                    calm = 0
-                    continue
-                return np.array(samples), x, z, Status.CONVERGED, k - it.window
+                converged_at = k - it.window
+            elif it.fixed_point and residual <= tol and at_rest(x, last_x, z, last_z):
+                converged_at = k - 1  # the fixed-point stop
+            else:
+                continue
+            if self.evaluate(x, z)[2] > tol:  # the end state's own residual
+                calm = 0
+                continue
+            return np.array(samples), x, z, Status.CONVERGED, converged_at
         return np.array(samples), x, z, Status.NOT_CONVERGED, -1
 
     def _windows_agree(self, samples, tol) -> bool:

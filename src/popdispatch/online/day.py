@@ -60,7 +60,9 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
     for row in range(day.demand.shape[0]):
         active = day.online[row]
         demand = day.demand[row]
-        warm_start(day.warm_start, day.bounded, x, old_demand, demand, pmin, pmax, active, weight)
+        # the demand step in merit order (docs/exact-mode.md, "Warm start between minutes")
+        warm_start(day.warm_start, day.bounded, x, old_demand, demand, pmin, pmax, active, weight,
+                   params.b, params.c)  # fmt: skip
         share_bounds(pmin, pmax, active, demand, lo, hi)
         minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active)
         outcome = integrate(x, z, term, params, minute, ws, stepper, rule, h_try, no_history)
