@@ -19,7 +19,7 @@ import importlib
 #: The kernels every engine run compiles (``module:function``); their callees are compiled and
 #: cached with them.
 ENTRY_POINTS = (
-    "popdispatch.integrate.solve:integrate",
+    "popdispatch.integrate.steppers:evaluate_stage",
     "popdispatch.online.day:integrate_day",
     "popdispatch.game.flows:limited_ancestors",
 )

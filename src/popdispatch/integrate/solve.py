@@ -7,9 +7,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from popdispatch.integrate.steppers import advance
+from popdispatch.integrate.steppers import advance, evaluate_stage
 from popdispatch.integrate.stopping import Status, check, tolerance
-from popdispatch.integrate.term import evaluate
 
 
 class Outcome(NamedTuple):
@@ -46,18 +45,19 @@ def at_rest(x, last_x, z, last_z):
     return True
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def final_residual(x, z, term, params, minute, ws):
     """The mode's residual (MW) at the state ``(x, z)`` itself, evaluated into the first
     stage of the workspace ``ws`` (which the next step evaluates afresh anyway)."""
     one = ws.first
     ws.counters.evaluations[0] += 1
-    _, residual = evaluate(x, z, one.p, one.f, one.w, one.v, one.room, one.inflow, one.outflow,
-                           one.z_rate, one.order, term, params, minute, ws.game)  # fmt: skip
+    _, residual = evaluate_stage(x, z, one.p, one.f, one.w, one.v, one.room, one.inflow,
+                                 one.outflow, one.z_rate, one.order, term, params, minute,
+                                 ws.game)  # fmt: skip
     return residual
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def integrate(x, z, term, params, minute, ws, stepper, rule, h_try, history):
     """Run the dynamics from shares ``x`` (and controller states ``z``, both updated in place)
     at fixed ``minute`` inputs until converged, infeasible or the horizon; an :class:`Outcome`.

@@ -115,6 +115,21 @@ def workspace(n: int, n_lines: int, n_states: int, window: int) -> Workspace:
     )  # fmt: skip
 
 
+@nb.njit(cache=True)
+def evaluate_stage(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, params, minute,
+                   work):  # fmt: skip
+    """:func:`~popdispatch.integrate.term.evaluate` as one compiled function, called (not
+    inlined) by every stage of the steppers and by the stopping rule's end-state check.
+
+    Inlined, the game and field (every mode's payoff, every field's weights, both pairwise
+    sums) were copied into each of four call sites, and LLVM optimised every copy again in
+    each function that links them: 60-90 s of compilation on the first run. Called, they are
+    compiled once; the call costs a few reference counts per evaluation.
+    """
+    return evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, params, minute,
+                    work)  # fmt: skip
+
+
 @nb.njit(cache=True, inline="always")
 def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v, room, inflow,
                 outflow, z_rate, order, lim, work, evaluations, x_out, z_out):  # fmt: skip
@@ -138,8 +153,8 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
     for step in range(steps):
         if step > 0 or evaluate_first:
             evaluations[0] += 1
-            congestion, residual = evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate,
-                                            order, term, params, minute, work)  # fmt: skip
+            congestion, residual = evaluate_stage(x, z, p, f, w, v, room, inflow, outflow, z_rate,
+                                                  order, term, params, minute, work)  # fmt: skip
             congested = max(congested, congestion)
         limited_any = False
         for i in range(x.shape[0]):
@@ -175,7 +190,7 @@ def error_norm(x_high, x_low, z_high, z_low, rtol, atol, price_atol):
     return err
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def advance_euler(x, z, term, params, minute, ws, stepper):
     """One iteration of ``substeps`` limited Euler steps; ``(congested, residual)``."""
     one = ws.first
@@ -263,7 +278,7 @@ def stiffness(h, x, z, v1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol, pr
     return np.sqrt(turned / moved) / h
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
     """One iteration of adaptive Heun steps; ``(congested, largest residual, next h_try)``."""
     rtol, atol, price_atol, dt = stepper.rtol, stepper.atol, stepper.price_atol, stepper.dt
@@ -292,8 +307,8 @@ def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
         residual = max(residual, step_residual)
         fresh = True
         counters.evaluations[0] += 1
-        evaluate(x1, z1, p2, f2, w2, v2, room2, in2, out2, zr2, order2, term, params, minute,
-                 work)  # fmt: skip
+        evaluate_stage(x1, z1, p2, f2, w2, v2, room2, in2, out2, zr2, order2, term, params,
+                       minute, work)  # fmt: skip
         heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2, v2, in2,
                          out2, zr2, order2, lim1, lim2, complete, indptr, indices, x2,
                          z2)  # fmt: skip
