@@ -17,6 +17,7 @@ from popdispatch.game.controllers import broadcast_signals, overflow_signal
 from popdispatch.game.flows import broadcast, limited_line_flows
 from popdispatch.game.problem import build_problem
 from popdispatch.integrate import Integrator, Status
+from popdispatch.modes.exact import ExactConstants
 from popdispatch.online import Engine, RunSettings, initial_shares
 from popdispatch.reference import ReferenceMinute, pair_flows
 from popdispatch.scenarios import CONGESTION_PATH, PEAK_MINUTE, elv_problem
@@ -174,7 +175,9 @@ def test_flux_limiter_keeps_every_step_inside_the_limits(congested, method):
     set points within their limits, total equal to the demand."""
     loose = Integrator(method=method, dt=1.0, substeps=1, rtol=1e6, atol=1e6, max_iterations=50)
     problem = congested
-    engine = Engine(problem, RunSettings(mode="exact", integrator=loose))
+    # prices slow enough that 1 s steps do not carry them past their cap (infeasible) at once
+    slow = ExactConstants(price_rate=0.01)
+    engine = Engine(problem, RunSettings(mode="exact", integrator=loose, exact=slow))
     x0 = initial_shares(problem, "uniform", PEAK_MINUTE)
     trajectory = engine.run_minute(x0, PEAK_MINUTE).trajectory
     assert len(trajectory) > 5

@@ -121,7 +121,9 @@ class ReferenceMinute:
         f, w, v, room, inflow, outflow, z_rate = point
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             alpha = np.where(h * outflow > v, v / (h * outflow), 1.0)
-            beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
+            # the receivers from the flows of the limited senders
+            into = pair_flows(f, w, alpha * v, self.graph)[0] if (alpha < 1.0).any() else inflow
+            beta = np.where(h * into > room, room / (h * into), 1.0)
         if (alpha < 1.0).any() or (beta < 1.0).any():
             inflow, outflow = pair_flows(f, beta * w, alpha * v, self.graph)
         return x + h * (inflow - outflow), np.maximum(z + h * z_rate, 0.0)
@@ -132,6 +134,11 @@ class ReferenceMinute:
         out, into = half * (out1 + out2), half * (in1 + in2)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             alpha = np.where(out > v1, v1 / out, 1.0)
+            if (alpha < 1.0).any():  # the receivers from the flows of the limited senders
+                into = half * (
+                    pair_flows(f1, w1, alpha * v1, self.graph)[0]
+                    + pair_flows(f2, w2, alpha * v2, self.graph)[0]
+                )
             beta = np.where(into > room1, room1 / into, 1.0)
         if (alpha < 1.0).any() or (beta < 1.0).any():
             in1, out1 = pair_flows(f1, beta * w1, alpha * v1, self.graph)

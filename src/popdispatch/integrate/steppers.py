@@ -156,15 +156,24 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
             congestion, residual = evaluate_stage(x, z, p, f, w, v, room, inflow, outflow, z_rate,
                                                   order, term, params, minute, work)  # fmt: skip
             congested = max(congested, congestion)
-        limited_any = False
+        # senders first; the receivers' factors from the flows of the limited senders, so a
+        # pair limited at both ends is scaled once (from the unlimited flows it was scaled
+        # twice and moved less than either limit allows)
+        senders = False
         for i in range(x.shape[0]):
-            lim_w[i] = w[i]
             lim_v[i] = v[i]
             if h * outflow[i] > v[i]:
                 lim_v[i] = v[i] * (v[i] / (h * outflow[i]))
-                limited_any = True
-            if h * inflow[i] > room[i]:
-                lim_w[i] = w[i] * (room[i] / (h * inflow[i]))
+                senders = True
+        into = inflow
+        if senders:
+            pairwise_flows(f, w, lim_v, complete, indptr, indices, order, lim_in, lim_out)
+            into = lim_in
+        limited_any = senders
+        for i in range(x.shape[0]):
+            lim_w[i] = w[i]
+            if h * into[i] > room[i]:
+                lim_w[i] = w[i] * (room[i] / (h * into[i]))
                 limited_any = True
         if limited_any:
             pairwise_flows(f, lim_w, lim_v, complete, indptr, indices, order, lim_in, lim_out)
@@ -218,19 +227,27 @@ def heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2,
     sw1, sv1, sin1, sout1 = lim1.w, lim1.v, lim1.inflow, lim1.outflow
     sw2, sv2, sin2, sout2 = lim2.w, lim2.v, lim2.inflow, lim2.outflow
     half = 0.5 * h
-    limited = False
+    # senders first, then the receivers from the flows of the limited senders (see
+    # euler_steps)
+    senders = False
     for i in range(x.shape[0]):
         alpha = 1.0
-        beta = 1.0
         out = half * (out1[i] + out2[i])
-        into = half * (in1[i] + in2[i])
         if out > v1[i]:
             alpha = v1[i] / out
-            limited = True
+            senders = True
+        sv1[i], sv2[i] = alpha * v1[i], alpha * v2[i]
+    if senders:
+        pairwise_flows(f1, w1, sv1, complete, indptr, indices, order1, sin1, sout1)
+        pairwise_flows(f2, w2, sv2, complete, indptr, indices, order2, sin2, sout2)
+    limited = senders
+    for i in range(x.shape[0]):
+        beta = 1.0
+        into = half * (sin1[i] + sin2[i]) if senders else half * (in1[i] + in2[i])
         if into > room1[i]:
             beta = room1[i] / into
             limited = True
-        sw1[i], sv1[i], sw2[i], sv2[i] = beta * w1[i], alpha * v1[i], beta * w2[i], alpha * v2[i]
+        sw1[i], sw2[i] = beta * w1[i], beta * w2[i]
     if limited:
         pairwise_flows(f1, sw1, sv1, complete, indptr, indices, order1, sin1, sout1)
         pairwise_flows(f2, sw2, sv2, complete, indptr, indices, order2, sin2, sout2)
