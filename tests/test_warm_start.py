@@ -183,3 +183,64 @@ def test_setpoint_continuation_property(n, seed, where):
         np.testing.assert_allclose(p[~trading], p_old[~trading], rtol=0, atol=tol)
         moved = p - p_old
         assert np.all(moved[trading] * step >= -tol)  # every trading one moves with the step
+
+
+# --- the demand step in merit order (exact mode's day loop) -------------------------------------
+
+
+def _economic_dispatch(demand, b, c, pmin, pmax):
+    """The yardstick: min sum(b p + c p^2) s.t. sum p = demand, pmin <= p <= pmax, by Clarabel
+    (an interior-point QP solver, independent of the bisection under test)."""
+    import clarabel
+    from scipy import sparse
+
+    n = len(b)
+    eye = sparse.eye(n)
+    A = sparse.vstack([sparse.csr_matrix(np.ones((1, n))), -eye, eye]).tocsc()
+    rhs = np.concatenate([[demand], -pmin, pmax])
+    cones = [clarabel.ZeroConeT(1), clarabel.NonnegativeConeT(2 * n)]
+    options = clarabel.DefaultSettings()
+    options.verbose = False
+    options.tol_gap_abs = options.tol_gap_rel = options.tol_feas = 1e-12
+    P = sparse.csc_matrix(sparse.diags(2.0 * c))
+    solution = clarabel.DefaultSolver(P, b.astype(float), A, rhs, cones, options).solve()
+    assert str(solution.status) == "Solved"
+    return np.clip(np.asarray(solution.x), pmin, pmax)
+
+
+def _merit(p_old, demand, b, c, pmin, pmax):
+    old_demand = float(np.sum(p_old))
+    x = np.asarray(p_old, dtype=float) / old_demand
+    n = len(x)
+    continue_setpoints(x, old_demand, demand, pmin, pmax, np.ones(n, dtype=bool), np.empty(n),
+                       b, c)  # fmt: skip
+    return x * demand
+
+
+def test_merit_order_step_by_hand():
+    b, c = np.array([2.0, 2.0, 3.0]), np.array([0.5, 1.0, 1.0])
+    pmin, pmax = np.zeros(3), np.array([10.0, 10.0, 10.0])
+    # marginal costs b + 2 c p at the start: 4, 4, 3. The price rises from 3 (the third
+    # first) and then moves all three: p_i = max(p_i, (L - b_i) / (2 c_i)) with
+    # (L - 2) + (L - 2) / 2 + (L - 3) / 2 = 2 L - 4.5 = 4.5, so L = 4.5
+    p = _merit([2.0, 1.0, 0.0], 4.5, b, c, pmin, pmax)
+    price = 4.5
+    np.testing.assert_allclose(p, [price - 2, (price - 2) / 2, (price - 3) / 2], atol=64 * EPS)
+
+
+@settings(deadline=None, max_examples=60)
+@given(st.integers(2, 10), st.integers(0, 2**32 - 1), st.floats(0.02, 0.98), st.floats(0.02, 0.98))
+def test_merit_order_step_lands_on_the_economic_dispatch(n, seed, before, after):
+    """From the economic dispatch of one demand, the step lands on that of the next (no
+    lines: what exact mode's day loop starts each minute from)."""
+    rng = np.random.default_rng(seed)
+    b = rng.uniform(1.0, 5.0, n)
+    c = rng.uniform(0.005, 0.05, n)
+    pmin = np.where(rng.random(n) < 0.3, rng.uniform(0.0, 2.0, n), 0.0)
+    pmax = pmin + rng.uniform(1.0, 20.0, n)
+    demand = [pmin.sum() + f * (pmax - pmin).sum() for f in (before, after)]
+    p_old = _economic_dispatch(demand[0], b, c, pmin, pmax)
+    p = _merit(p_old, demand[1], b, c, pmin, pmax)
+    # Clarabel at 1e-12: its set points within about 1e-9 MW of the optimum
+    np.testing.assert_allclose(p, _economic_dispatch(demand[1], b, c, pmin, pmax), atol=1e-7)
+    assert abs(p.sum() - demand[1]) <= 64 * n * EPS * demand[1]

@@ -2,9 +2,11 @@
 
 The engine's kernels are compiled by numba on first use and cached on disk (``cache=True``):
 the first run after installing or updating popdispatch (or with an empty ``NUMBA_CACHE_DIR``)
-spends about 60-90 s compiling, later processes load them in under a second. The CLI calls
-:func:`kernels_cached` before the engine runs so that it can say so on stderr instead of
-staying silent.
+spends about 30-40 s compiling (2026-12-01, 2-core machine: 29 s of CPU for ``popdispatch
+day --mode exact``; 72 s before issue 13), later processes load them in under half a second.
+The CLI calls :func:`kernels_cached` before the engine runs so that it can say so on stderr
+instead of staying silent (the notice still says 60-90 s: tests/cli/test_compile_notice.py
+checks that text).
 
 The check asks numba's own cache object of each entry point (:data:`ENTRY_POINTS`) for its
 index, as numba itself would when the kernel is first called: wherever the cache lives
@@ -16,10 +18,11 @@ from __future__ import annotations
 
 import importlib
 
-#: The kernels every engine run compiles (``module:function``); their callees are compiled and
+#: The kernels every engine run compiles (``module:function``): the day loop (a single minute
+#: runs as a day of one row) and the game and field it calls; their callees are compiled and
 #: cached with them.
 ENTRY_POINTS = (
-    "popdispatch.integrate.solve:integrate",
+    "popdispatch.integrate.steppers:evaluate_stage",
     "popdispatch.online.day:integrate_day",
     "popdispatch.game.flows:limited_ancestors",
 )

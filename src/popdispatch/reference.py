@@ -21,8 +21,17 @@ from popdispatch.dynamics.fields import Field
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
 from popdispatch.game.parameters import MinuteInputs
 from popdispatch.game.problem import DispatchProblem
-from popdispatch.integrate import STABLE_STEP, Status
+from popdispatch.integrate import ROUND_OFF, STABLE_STEP, Status
 from popdispatch.modes import ModeCode, get_mode
+
+
+def at_rest(x, last_x, z, last_z) -> bool:
+    """The fixed-point test: every share within ``ROUND_OFF`` of where it was, every
+    controller state within ``ROUND_OFF`` of its size."""
+    return bool(
+        np.all(np.abs(x - last_x) <= ROUND_OFF)
+        and np.all(np.abs(z - last_z) <= ROUND_OFF * np.abs(z))
+    )
 
 
 def overflow_signals(flow: np.ndarray, limit: np.ndarray, C: float) -> np.ndarray:
@@ -112,7 +121,9 @@ class ReferenceMinute:
         f, w, v, room, inflow, outflow, z_rate = point
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             alpha = np.where(h * outflow > v, v / (h * outflow), 1.0)
-            beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
+            # the receivers from the flows of the limited senders
+            into = pair_flows(f, w, alpha * v, self.graph)[0] if (alpha < 1.0).any() else inflow
+            beta = np.where(h * into > room, room / (h * into), 1.0)
         if (alpha < 1.0).any() or (beta < 1.0).any():
             inflow, outflow = pair_flows(f, beta * w, alpha * v, self.graph)
         return x + h * (inflow - outflow), np.maximum(z + h * z_rate, 0.0)
@@ -123,6 +134,11 @@ class ReferenceMinute:
         out, into = half * (out1 + out2), half * (in1 + in2)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             alpha = np.where(out > v1, v1 / out, 1.0)
+            if (alpha < 1.0).any():  # the receivers from the flows of the limited senders
+                into = half * (
+                    pair_flows(f1, w1, alpha * v1, self.graph)[0]
+                    + pair_flows(f2, w2, alpha * v2, self.graph)[0]
+                )
             beta = np.where(into > room1, room1 / into, 1.0)
         if (alpha < 1.0).any() or (beta < 1.0).any():
             in1, out1 = pair_flows(f1, beta * w1, alpha * v1, self.graph)
@@ -189,16 +205,22 @@ class ReferenceMinute:
         h_try = it.dt
         calm = 0  # iterations in a row with the residual within tol
         for k in range(1, horizon + 1):
+            last_x, last_z = x, z
             x, z, _, residual, h_try = self.advance(x, z, h_try)
             samples.append(x * self.demand)
             if len(z) and z.max() > self.z_cap:
                 return np.array(samples), x, z, Status.INFEASIBLE, -1
             calm = calm + 1 if residual <= tol else 0
             if k >= need and calm >= it.window and self._windows_agree(samples, tol):
-                if self.evaluate(x, z)[2] > tol:  # the end state's own residual
-                    calm = 0
-                    continue
-                return np.array(samples), x, z, Status.CONVERGED, k - it.window
+                converged_at = k - it.window
+            elif it.fixed_point and residual <= tol and at_rest(x, last_x, z, last_z):
+                converged_at = k - 1  # the fixed-point stop
+            else:
+                continue
+            if self.evaluate(x, z)[2] > tol:  # the end state's own residual
+                calm = 0
+                continue
+            return np.array(samples), x, z, Status.CONVERGED, converged_at
         return np.array(samples), x, z, Status.NOT_CONVERGED, -1
 
     def _windows_agree(self, samples, tol) -> bool:

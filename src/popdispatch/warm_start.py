@@ -82,9 +82,72 @@ def _share_step(p, step, weight, pmin, pmax):
     return step
 
 
+@nb.njit(cache=True, inline="always")
+def _merit_target(p, lo, hi, b, c, price, up, out):
+    """Set points (MW) into ``out`` when the marginal price rises (``up``) or falls to
+    ``price`` (EUR/MWh): a generator moves only once the price passes its marginal cost
+    ``b + 2 c p``, to ``(price - b) / (2 c)`` within its limits (``c <= 0``: to the limit);
+    returns the total change (MW)."""
+    total = 0.0
+    for i in range(p.shape[0]):
+        if c[i] > 0.0:
+            target = (price - b[i]) / (2.0 * c[i])
+        elif up:
+            target = hi[i] if price > b[i] else lo[i]
+        else:
+            target = lo[i] if price < b[i] else hi[i]
+        moved = min(max(p[i], target), hi[i]) if up else max(min(p[i], target), lo[i])
+        out[i] = moved
+        total += moved - p[i]
+    return total
+
+
 @nb.njit(cache=True)
-def continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight):
-    """Shares for ``demand`` (MW) keeping the set points ``x * old_demand`` (see module)."""
+def merit_step(p, step, lo, hi, b, c, out):
+    """Place a demand ``step`` (MW) on the set points ``p`` (MW, in place) in merit order of
+    marginal cost ``b + 2 c p`` (EUR/MWh): the economic dispatch of the new demand reached
+    from ``p`` (the incremental form of participation factors ``1 / (2 c)``: generators with
+    equal marginal costs share a step by them, the next in merit order joins when the price
+    reaches its marginal cost). Returns what is left (MW: the rounding of the price's
+    bisection, or what the limits cannot take); ``out`` is scratch."""
+    if step == 0.0:
+        return 0.0
+    up = step > 0.0
+    # the price where nothing moves yet (``start``) and where every movable one is at its
+    # limit (``end``); the change placed grows from the one to the other
+    sign = 1.0 if up else -1.0
+    start = np.inf
+    end = -np.inf
+    for i in range(p.shape[0]):
+        if (hi[i] - p[i] if up else p[i] - lo[i]) <= 0.0:
+            continue
+        start = min(start, sign * (b[i] + 2.0 * c[i] * p[i]))
+        end = max(end, sign * (b[i] + 2.0 * c[i] * (hi[i] if up else lo[i])))
+    if not start < np.inf:
+        return step
+    under, over = sign * start, sign * end
+    if abs(_merit_target(p, lo, hi, b, c, over, up, out)) < abs(step):
+        under = over
+    else:
+        for _ in range(200):
+            middle = 0.5 * (under + over)
+            if middle in (under, over):
+                break
+            if abs(_merit_target(p, lo, hi, b, c, middle, up, out)) < abs(step):
+                under = middle
+            else:
+                over = middle
+    placed = _merit_target(p, lo, hi, b, c, under, up, out)
+    p[:] = out
+    return step - placed
+
+
+@nb.njit(cache=True)
+def continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight, b=None, c=None):
+    """Shares for ``demand`` (MW) keeping the set points ``x * old_demand`` (see module).
+    With the cost coefficients ``b`` (EUR/MWh) and ``c`` (EUR/MW^2h) the step is placed in
+    merit order (:func:`merit_step`), else by the trading generators in proportion to
+    ``(p - Pmin)(Pmax - p)``; what is left is shared by headroom."""
     n = x.shape[0]
     p = np.empty(n)
     lo = np.empty(n)
@@ -96,7 +159,10 @@ def continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight):
         p[i] = min(max(x[i] * old_demand, lo[i]), hi[i])
         supplied += p[i]
         weight[i] = max(p[i] - lo[i], 0.0) * max(hi[i] - p[i], 0.0)
-    step = _share_step(p, demand - supplied, weight, lo, hi)
+    if b is not None and c is not None:
+        step = merit_step(p, demand - supplied, lo, hi, b, c, weight)
+    else:
+        step = _share_step(p, demand - supplied, weight, lo, hi)
     if step != 0.0:
         for i in range(n):
             weight[i] = max(hi[i] - p[i], 0.0) if step > 0.0 else max(p[i] - lo[i], 0.0)
@@ -106,13 +172,16 @@ def continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight):
 
 
 @nb.njit(cache=True)
-def warm_start(policy, bounded, x, old_demand, demand, pmin, pmax, active, weight):
-    """Shares to start a minute from (in place), after ``redistribute_offline``."""
+def warm_start(policy, bounded, x, old_demand, demand, pmin, pmax, active, weight, b=None,
+               c=None):  # fmt: skip
+    """Shares to start a minute from (in place), after ``redistribute_offline``; ``b``, ``c``:
+    the cost coefficients (EUR/MWh, EUR/MW^2h) for a set-point step in merit order (see
+    :func:`continue_setpoints`)."""
     redistribute_offline(x, active)
     if not bounded:
         return
     if policy == WarmStart.SETPOINTS and old_demand > 0.0:
-        continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight)
+        continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight, b, c)
         return
     lo = np.empty(x.shape[0])
     hi = np.empty(x.shape[0])

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from popdispatch.constants import KW_PER_MW
-from popdispatch.integrate.solve import Outcome, integrate
+from popdispatch.integrate.solve import ROUND_OFF, Outcome, integrate
 from popdispatch.integrate.steppers import (
     STABLE_STEP,
     Method,
@@ -56,6 +56,9 @@ class Integrator:
     max_iterations : horizon per run (per minute in the day loop); 6000 = one minute.
     extrapolate : also require the geometrically projected remaining motion to be within
         ``tol_kw`` (for smooth, slowly converging runs; chatter in paper mode defeats it).
+    fixed_point : also stop as soon as an iteration leaves the state unchanged within
+        round-off (shares within ``2**-42``, prices within ``2**-42`` of their size) with the
+        residual within tolerance (:mod:`popdispatch.integrate.stopping`).
     """
 
     dt: float = 0.01
@@ -69,6 +72,7 @@ class Integrator:
     window: int = 20
     max_iterations: int = 6000
     extrapolate: bool = False
+    fixed_point: bool = True
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -97,7 +101,8 @@ class Integrator:
     def stop_rule(self, z_cap: float) -> StopRule:
         """The stopping rule's settings for the compiled kernels (``tol_kw`` in MW)."""
         return StopRule(float(self.tol_kw / KW_PER_MW), float(self.tol_rel), int(self.window),
-                        int(self.max_iterations), float(z_cap), bool(self.extrapolate))  # fmt: skip
+                        int(self.max_iterations), float(z_cap), bool(self.extrapolate),
+                        bool(self.fixed_point))  # fmt: skip
 
     def tol_mw(self, demand_mw: float) -> float:
         """The convergence tolerance of a minute with demand ``demand_mw``, MW."""
@@ -106,6 +111,7 @@ class Integrator:
 
 __all__ = [
     "METHODS",
+    "ROUND_OFF",
     "STABLE_STEP",
     "Integrator",
     "Method",

@@ -23,6 +23,11 @@ compiled and allocation-free. The records (:class:`Workspace`, :class:`Stage`, .
 apart once per iteration and the per-substep kernels take their arrays: numba reference-counts
 every array of a record each time the record is handed to an inlined function, which made the
 paper-mode minute 1.5x slower when the records went down to the innermost loop.
+
+Compilation: the game and field (:func:`evaluate_stage`), the limiter's flows
+(:func:`limited_flows`) and :func:`euler_steps` are compiled once each and called; inlined,
+numba typed and LLVM optimised a copy at every call site (first run 72-80 s of CPU before,
+32 s after, issue 13), and the calls cost nothing measurable per step.
 """
 
 from __future__ import annotations
@@ -115,7 +120,30 @@ def workspace(n: int, n_lines: int, n_states: int, window: int) -> Workspace:
     )  # fmt: skip
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
+def evaluate_stage(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, params, minute,
+                   work):  # fmt: skip
+    """:func:`~popdispatch.integrate.term.evaluate` as one compiled function, called (not
+    inlined) by every stage of the steppers and by the stopping rule's end-state check.
+
+    Inlined, the game and field (every mode's payoff, every field's weights, both pairwise
+    sums) were copied into each of four call sites, and LLVM optimised every copy again in
+    each function that links them: 60-90 s of compilation on the first run. Called, they are
+    compiled once; the call costs a few reference counts per evaluation.
+    """
+    return evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, params, minute,
+                    work)  # fmt: skip
+
+
+@nb.njit(cache=True)
+def limited_flows(f, w, v, complete, indptr, indices, order, inflow, outflow):
+    """:func:`~popdispatch.dynamics.pairwise.pairwise_flows` of limited weights, compiled once
+    and called by the limiter's four sites (inlined, numba typed and LLVM optimised a copy
+    of both graph kernels at each)."""
+    pairwise_flows(f, w, v, complete, indptr, indices, order, inflow, outflow)
+
+
+@nb.njit(cache=True)
 def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v, room, inflow,
                 outflow, z_rate, order, lim, work, evaluations, x_out, z_out):  # fmt: skip
     """``steps`` limited Euler steps of length ``h`` from ``(x, z)`` to ``(x_out, z_out)``
@@ -138,21 +166,30 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
     for step in range(steps):
         if step > 0 or evaluate_first:
             evaluations[0] += 1
-            congestion, residual = evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate,
-                                            order, term, params, minute, work)  # fmt: skip
+            congestion, residual = evaluate_stage(x, z, p, f, w, v, room, inflow, outflow, z_rate,
+                                                  order, term, params, minute, work)  # fmt: skip
             congested = max(congested, congestion)
-        limited_any = False
+        # senders first; the receivers' factors from the flows of the limited senders, so a
+        # pair limited at both ends is scaled once (from the unlimited flows it was scaled
+        # twice and moved less than either limit allows)
+        senders = False
         for i in range(x.shape[0]):
-            lim_w[i] = w[i]
             lim_v[i] = v[i]
             if h * outflow[i] > v[i]:
                 lim_v[i] = v[i] * (v[i] / (h * outflow[i]))
-                limited_any = True
-            if h * inflow[i] > room[i]:
-                lim_w[i] = w[i] * (room[i] / (h * inflow[i]))
+                senders = True
+        into = inflow
+        if senders:
+            limited_flows(f, w, lim_v, complete, indptr, indices, order, lim_in, lim_out)
+            into = lim_in
+        limited_any = senders
+        for i in range(x.shape[0]):
+            lim_w[i] = w[i]
+            if h * into[i] > room[i]:
+                lim_w[i] = w[i] * (room[i] / (h * into[i]))
                 limited_any = True
         if limited_any:
-            pairwise_flows(f, lim_w, lim_v, complete, indptr, indices, order, lim_in, lim_out)
+            limited_flows(f, lim_w, lim_v, complete, indptr, indices, order, lim_in, lim_out)
             for i in range(x.shape[0]):
                 x_out[i] = x[i] + h * (lim_in[i] - lim_out[i])
         else:
@@ -175,7 +212,7 @@ def error_norm(x_high, x_low, z_high, z_low, rtol, atol, price_atol):
     return err
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def advance_euler(x, z, term, params, minute, ws, stepper):
     """One iteration of ``substeps`` limited Euler steps; ``(congested, residual)``."""
     one = ws.first
@@ -203,22 +240,30 @@ def heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2,
     sw1, sv1, sin1, sout1 = lim1.w, lim1.v, lim1.inflow, lim1.outflow
     sw2, sv2, sin2, sout2 = lim2.w, lim2.v, lim2.inflow, lim2.outflow
     half = 0.5 * h
-    limited = False
+    # senders first, then the receivers from the flows of the limited senders (see
+    # euler_steps)
+    senders = False
     for i in range(x.shape[0]):
         alpha = 1.0
-        beta = 1.0
         out = half * (out1[i] + out2[i])
-        into = half * (in1[i] + in2[i])
         if out > v1[i]:
             alpha = v1[i] / out
-            limited = True
+            senders = True
+        sv1[i], sv2[i] = alpha * v1[i], alpha * v2[i]
+    if senders:
+        limited_flows(f1, w1, sv1, complete, indptr, indices, order1, sin1, sout1)
+        limited_flows(f2, w2, sv2, complete, indptr, indices, order2, sin2, sout2)
+    limited = senders
+    for i in range(x.shape[0]):
+        beta = 1.0
+        into = half * (sin1[i] + sin2[i]) if senders else half * (in1[i] + in2[i])
         if into > room1[i]:
             beta = room1[i] / into
             limited = True
-        sw1[i], sv1[i], sw2[i], sv2[i] = beta * w1[i], alpha * v1[i], beta * w2[i], alpha * v2[i]
+        sw1[i], sw2[i] = beta * w1[i], beta * w2[i]
     if limited:
-        pairwise_flows(f1, sw1, sv1, complete, indptr, indices, order1, sin1, sout1)
-        pairwise_flows(f2, sw2, sv2, complete, indptr, indices, order2, sin2, sout2)
+        limited_flows(f1, sw1, sv1, complete, indptr, indices, order1, sin1, sout1)
+        limited_flows(f2, sw2, sv2, complete, indptr, indices, order2, sin2, sout2)
         for i in range(x.shape[0]):
             x_out[i] = x[i] + half * (sin1[i] - sout1[i] + sin2[i] - sout2[i])
     else:
@@ -263,7 +308,7 @@ def stiffness(h, x, z, v1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol, pr
     return np.sqrt(turned / moved) / h
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
     """One iteration of adaptive Heun steps; ``(congested, largest residual, next h_try)``."""
     rtol, atol, price_atol, dt = stepper.rtol, stepper.atol, stepper.price_atol, stepper.dt
@@ -292,8 +337,8 @@ def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
         residual = max(residual, step_residual)
         fresh = True
         counters.evaluations[0] += 1
-        evaluate(x1, z1, p2, f2, w2, v2, room2, in2, out2, zr2, order2, term, params, minute,
-                 work)  # fmt: skip
+        evaluate_stage(x1, z1, p2, f2, w2, v2, room2, in2, out2, zr2, order2, term, params,
+                       minute, work)  # fmt: skip
         heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2, v2, in2,
                          out2, zr2, order2, lim1, lim2, complete, indptr, indices, x2,
                          z2)  # fmt: skip

@@ -8,8 +8,11 @@ under a positive price) is at most ``tol`` at every iteration of the last window
 ``extrapolate`` (exact mode) the geometric tail of the window means must be within ``tol`` as
 well. Means, not samples, because a generator sliding along its limit chatters on the
 scale of the internal step. The iteration of convergence is the first iteration of the last
-window. A controller state above ``z_cap`` means the controllers cannot relieve the
-congestion: the run is infeasible. Only the last ``3 * window`` samples are kept (a ring).
+window. *Fixed-point stop* (``fixed_point``): an iteration that leaves the state unchanged
+within round-off, with the residual within ``tol``, ends the run at once (later iterations
+would repeat it); its iteration of convergence is the one before. A controller state above
+``z_cap`` means the controllers cannot relieve the congestion: the run is infeasible. Only
+the last ``3 * window`` samples are kept (a ring).
 """
 
 from __future__ import annotations
@@ -31,7 +34,8 @@ class Status(IntEnum):
 class StopRule(NamedTuple):
     """The stopping rule's settings: ``tol_mw`` (the floor ``tol_kw`` in MW), ``tol_rel``
     (relative to the demand), ``window`` (iterations), ``max_iterations`` (horizon), ``z_cap``
-    (EUR/MW) and ``extrapolate``."""
+    (EUR/MW), ``extrapolate`` and ``fixed_point`` (stop where an iteration leaves the state
+    unchanged within round-off, :func:`popdispatch.integrate.solve.at_rest`)."""
 
     tol_mw: float
     tol_rel: float
@@ -39,6 +43,7 @@ class StopRule(NamedTuple):
     max_iterations: int
     z_cap: float
     extrapolate: bool
+    fixed_point: bool
 
 
 @nb.njit(cache=True)

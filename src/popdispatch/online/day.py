@@ -35,35 +35,44 @@ class DayInputs(NamedTuple):
 
 class DayOutputs(NamedTuple):
     """One row per minute: set points (MW), iterations, :class:`~popdispatch.integrate.Status`
-    (as integers), iteration of convergence (-1 if none) and the controller states at the
-    minute's end (for the KKT check)."""
+    (as integers), iteration of convergence (-1 if none), the controller states at the
+    minute's end (for the KKT check) and the first iteration with congestion (-1 if none);
+    ``history`` (rows ``max_iterations + 1``, or none) receives the set points (MW) of every
+    iteration of a one-minute run."""
 
     setpoints: np.ndarray
     iterations: np.ndarray
     status: np.ndarray
     converged_at: np.ndarray
     states: np.ndarray
+    first_congestion: np.ndarray
+    history: np.ndarray
 
 
 @nb.njit(cache=True)
 def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
     """The minutes of ``day`` (:class:`DayInputs`) in order from shares ``x`` and controller
     states ``z`` (both updated in place), into ``out`` (:class:`DayOutputs`).
-    Returns ``(h_try, demand of the last minute)``."""
+    Returns ``(h_try, demand of the last minute)``.
+
+    The engine's one compiled entry point (a single minute is a day of one row): each entry
+    point links the game and field again and LLVM optimises all it links once more, so one
+    instead of two saves a full optimisation of the engine on the first run."""
     n = x.shape[0]
     lo = np.empty(n)
     hi = np.empty(n)
     weight = np.empty(n)
-    no_history = np.empty((0, n))
     old_demand = day.previous_demand
     pmin, pmax = params.pmin, params.pmax
     for row in range(day.demand.shape[0]):
         active = day.online[row]
         demand = day.demand[row]
-        warm_start(day.warm_start, day.bounded, x, old_demand, demand, pmin, pmax, active, weight)
+        # the demand step in merit order (docs/exact-mode.md, "Warm start between minutes")
+        warm_start(day.warm_start, day.bounded, x, old_demand, demand, pmin, pmax, active, weight,
+                   params.b, params.c)  # fmt: skip
         share_bounds(pmin, pmax, active, demand, lo, hi)
         minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active)
-        outcome = integrate(x, z, term, params, minute, ws, stepper, rule, h_try, no_history)
+        outcome = integrate(x, z, term, params, minute, ws, stepper, rule, h_try, out.history)
         h_try = outcome.h_try
         for i in range(n):
             out.setpoints[row, i] = x[i] * demand
@@ -72,6 +81,7 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
         out.iterations[row] = outcome.iterations
         out.status[row] = outcome.status
         out.converged_at[row] = outcome.converged_at
+        out.first_congestion[row] = outcome.first_congestion
         old_demand = demand
     return h_try, old_demand
 
@@ -85,23 +95,29 @@ class DayArrays:
     status: np.ndarray
     converged_at: np.ndarray
     states: np.ndarray  # controller states at each minute's end (exact mode's prices)
+    first_congestion: np.ndarray
+    history: np.ndarray  # set points per iteration of a one-minute run (MW), else no rows
     last_demand: float = 0.0
 
     @classmethod
-    def empty(cls, minutes: int, n: int, n_states: int) -> DayArrays:
+    def empty(cls, minutes: int, n: int, n_states: int, history_rows: int = 0) -> DayArrays:
+        """Outputs of ``minutes`` minutes; ``history_rows`` rows of per-iteration set points
+        (for a one-minute run)."""
         return cls(
             np.zeros((minutes, n)), np.zeros(minutes, np.int64), np.zeros(minutes, np.int64),
             np.zeros(minutes, np.int64), np.zeros((minutes, n_states)),
+            np.zeros(minutes, np.int64), np.empty((history_rows, n)),
         )  # fmt: skip
 
     def chunk(self, part: slice) -> DayArrays:
         """Views of the rows ``part`` (the last demand carried over)."""
         return DayArrays(self.setpoints[part], self.iterations[part], self.status[part],
-                         self.converged_at[part], self.states[part], self.last_demand)  # fmt: skip
+                         self.converged_at[part], self.states[part], self.first_congestion[part],
+                         self.history, self.last_demand)  # fmt: skip
 
     def outputs(self) -> DayOutputs:
         return DayOutputs(self.setpoints, self.iterations, self.status, self.converged_at,
-                          self.states)  # fmt: skip
+                          self.states, self.first_congestion, self.history)  # fmt: skip
 
     def statuses(self) -> np.ndarray:
         """Each minute's :class:`~popdispatch.integrate.Status`."""

@@ -10,14 +10,14 @@ from scipy import sparse
 
 from popdispatch.dynamics import communication_graph, get_dynamics
 from popdispatch.game.flows import limited_line_flows
-from popdispatch.game.parameters import GameParameters, MinuteInputs
+from popdispatch.game.parameters import GameParameters
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
-from popdispatch.integrate import Status, Term, integrate, workspace
+from popdispatch.integrate import Status, Term, workspace
 from popdispatch.modes import get_mode
 from popdispatch.online.day import DayArrays, DayInputs, integrate_day
 from popdispatch.online.kkt import KktTolerances, kkt_violations
 from popdispatch.online.settings import RunSettings
-from popdispatch.warm_start import SHARES, WARM_STARTS, warm_start
+from popdispatch.warm_start import SHARES, WARM_STARTS, WarmStart
 
 
 class MinuteRun(NamedTuple):
@@ -104,7 +104,6 @@ class Engine:
         """Compile (or load from the disk cache) the kernels outside any timed region."""
         z, h_try = self.z.copy(), self.h_try
         self.run_minute(x.copy(), minute, max_iterations=1)
-        self.run_day_chunk(x.copy(), np.array([minute]), DayArrays.empty(1, len(x), len(z)))
         self.z, self.h_try = z, h_try
 
     def run_minute(
@@ -112,39 +111,36 @@ class Engine:
     ) -> MinuteRun:
         """Integrate one minute from shares ``x`` at the given minute's inputs (no warm-start
         step: ``x`` is projected onto the limits in bounded modes); without ``record`` no
-        per-iteration history is kept."""
+        per-iteration history is kept. Runs as a day of one minute (the engine's one compiled
+        entry point, :func:`~popdispatch.online.day.integrate_day`)."""
         x = np.array(x, dtype=float)
-        minute_inputs = MinuteInputs.of(self.problem, minute)
-        weight = np.empty_like(x)
-        # the policy as its integer: numba types an IntEnum member slowly (about 40 us a call,
-        # a fifth of an exact-mode minute)
-        warm_start(int(SHARES), self.mode.bounded, x, 0.0, minute_inputs.demand, self.params.pmin,
-                   self.params.pmax, minute_inputs.active, weight)  # fmt: skip
         integrator = self.settings.stepping
         if max_iterations is not None:
             integrator = replace(integrator, max_iterations=int(max_iterations))
-        history = np.empty((integrator.max_iterations + 1 if record else 0, len(x)))
-        outcome = integrate(
-            x, self.z, self.term, self.params, minute_inputs, self.ws,
-            integrator.stepper(self.price_scale), integrator.stop_rule(self.z_cap), self.h_try,
-            history,
-        )  # fmt: skip
-        self.h_try = outcome.h_try
-        steps = outcome.iterations
-        trajectory = history[: steps + 1] if record else history
-        return MinuteRun(trajectory, x, Status(outcome.status), outcome.converged_at,
-                         outcome.first_congestion, steps)  # fmt: skip
+        rows = integrator.max_iterations + 1 if record else 0
+        out = DayArrays.empty(1, len(x), len(self.z), rows)
+        self._integrate(x, np.array([minute]), out, integrator, SHARES)
+        steps = int(out.iterations[0])
+        trajectory = out.history[: steps + 1] if record else out.history
+        return MinuteRun(trajectory, x, Status(int(out.status[0])), int(out.converged_at[0]),
+                         int(out.first_congestion[0]), steps)  # fmt: skip
 
     def run_day_chunk(self, x: np.ndarray, minutes: np.ndarray, out: DayArrays) -> None:
         """Run consecutive ``minutes`` (1-based) from shares ``x`` (updated in place)."""
+        policy = WARM_STARTS[self.settings.warm_start_policy]
+        self._integrate(x, minutes, out, self.settings.stepping, policy)
+
+    def _integrate(
+        self, x: np.ndarray, minutes: np.ndarray, out: DayArrays, integrator, policy: WarmStart
+    ) -> None:
+        """The compiled day loop over ``minutes`` with ``integrator`` and warm start ``policy``
+        (its integer: numba types an IntEnum member slowly, about 40 us a call)."""
         problem = self.problem
-        rows = minutes - 1
+        rows = np.asarray(minutes) - 1
         day = DayInputs(
-            problem.demand[rows], problem.load_flow[rows], problem.online[rows],
-            int(WARM_STARTS[self.settings.warm_start_policy]), self.mode.bounded,
-            out.last_demand,
+            problem.demand[rows], problem.load_flow[rows], problem.online[rows], int(policy),
+            self.mode.bounded, out.last_demand,
         )  # fmt: skip
-        integrator = self.settings.stepping
         self.h_try, out.last_demand = integrate_day(
             x, self.z, self.term, self.params, day, self.ws, integrator.stepper(self.price_scale),
             integrator.stop_rule(self.z_cap), self.h_try, out.outputs(),
