@@ -90,110 +90,37 @@ def line_price(z_up, z_down, excess_up, excess_down, C):
 
 
 @nb.njit(cache=True, inline="always")
-def _direction(z_up, z_down, excess_up, excess_down):
-    """Which direction of a line its price currently acts in: +1 (flow above ``+U``: priced
-    or overflowing), -1 (below ``-U``), 0 (neither, or both at once)."""
-    up = z_up > 0.0 or excess_up > 0.0
-    down = z_down > 0.0 or excess_down > 0.0
-    if up and not down:
-        return 1.0
-    if down and not up:
-        return -1.0
-    return 0.0
-
-
-#: Generators a region without any counts as, against the ones below its line (see _share).
-EMPTY_REGION = 1e-4
-
-
-@nb.njit(cache=True, inline="always")
-def _share(own, below):
-    """Inverse weight of a region of the active tree: generators below its line over those in
-    the region itself (1 for a line without active lines below it)."""
-    return (below + EMPTY_REGION) / (own + EMPTY_REGION)
-
-
-@nb.njit(cache=True, inline="always")
 def line_signals(p, z, params, minute, work, signal, z_rate):
     """The line prices: their signal per generator into ``signal`` (EUR/MW, overwritten) and
     the controllers' rates into ``z_rate``; returns ``(congestion, residual)``.
 
     For limited line ``k`` the controllers keep prices ``z[k]`` (flow above ``+U``) and
-    ``z[L + k]`` (flow below ``-U``). The broadcast price is :func:`line_price`; the net price
-    ``nu`` goes as ``+nu / 2`` to the generators below the line and ``-nu / 2`` to those above
-    (incentive to the receiving side, penalty to the sending side). Returns the largest
-    ``|nu|`` (EUR/MW) and the largest distance from complementary slackness (MW).
-
-    Rates (``z_rate``, EUR/MW per s): a line whose price is zero and whose flow is within its
-    limit integrates its excess at ``price_rate`` (and so stays at zero). The *active* lines
-    (priced or overflowing) integrate their excesses preconditioned by the tree of active
-    lines, ``nu' = price_rate * (g_k - g_a)``, with ``g_k = eps_k - sum eps_c`` over the
-    nearest active lines ``c`` below ``k`` and ``a`` the nearest active line above ``k``
-    (``eps``: flow minus the limit in the active direction, MW): dual ascent in the path sums
-    of prices that the generators see (docs/exact-mode.md, "Nested limits").
+    ``z[L + k]`` (flow below ``-U``), integrating the excess at ``price_rate`` (``z_rate``).
+    The broadcast price is :func:`line_price`; the net price ``nu`` goes as ``+nu / 2`` to the
+    generators below the line and ``-nu / 2`` to those above (incentive to the receiving side,
+    penalty to the sending side). Returns the largest ``|nu|`` (EUR/MW) and the largest
+    distance from complementary slackness (MW).
     """
-    flow, sign, g, above = work.flow, work.parent_side, work.child_side, work.path
+    flow, parent_side, child_side = work.flow, work.parent_side, work.child_side
     limit, C, price_rate = params.limit, params.C, params.price_rate
-    line_up, preorder, generator_line = params.line_up, params.line_preorder, params.generator_line
     n_lines = limit.shape[0]
-    limited_line_flows(minute.load_flow, p, generator_line, line_up, preorder, flow)
-    # generators below each line (z_rate[L + k]; z_rate[k]: those in its own region)
-    own, below = z_rate[:n_lines], z_rate[n_lines:]
-    below[:] = 0.0
-    for i in range(p.shape[0]):
-        k = generator_line[i]
-        if k >= 0 and minute.hi[i] > minute.lo[i]:
-            below[k] += 1.0
-    for r in range(n_lines - 1, -1, -1):
-        k = preorder[r]
-        if line_up[k] >= 0:
-            below[line_up[k]] += below[k]
-    # pre-order: each line's active direction, its excess there, its nearest active ancestor
-    for r in range(n_lines):
-        k = preorder[r]
-        s = _direction(z[k], z[n_lines + k], flow[k] - limit[k], -flow[k] - limit[k])
-        sign[k] = s
-        g[k] = flow[k] - s * limit[k] if s != 0.0 else 0.0
-        own[k] = below[k]
-        up = line_up[k]
-        above[k] = -1.0 if up < 0 else (float(up) if sign[up] != 0.0 else above[up])
-    # g = L^-1 eps: every active line's excess (and generators) leave its nearest active
-    # ancestor's own part
-    for k in range(n_lines):
-        a = int(above[k])
-        if sign[k] != 0.0 and a >= 0:
-            g[a] -= flow[k] - sign[k] * limit[k]
-            own[a] -= below[k]
+    limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
+                       params.line_preorder, flow)  # fmt: skip
     congestion = 0.0
     residual = 0.0
-    # post-order, so that a line reads its ancestor's values before they are overwritten
-    for r in range(n_lines - 1, -1, -1):
-        k = preorder[r]
-        s = sign[k]
-        step = 0.0
-        if s != 0.0:
-            # the active direction's excess, preconditioned: (M eps)_k, M = L^-T W^-1 L^-1
-            # (read before z_rate[k], z_rate[L + k], which hold the counts, are written)
-            a = int(above[k])
-            step = g[k] * _share(own[k], below[k])
-            if a >= 0:
-                step -= g[a] * _share(own[a], below[a])
+    for k in range(n_lines):
         excess_up = flow[k] - limit[k]
         excess_down = -flow[k] - limit[k]
         z_rate[k] = price_rate * excess_up
         z_rate[n_lines + k] = price_rate * excess_down
-        if s != 0.0:
-            if s > 0.0:
-                z_rate[k] = price_rate * step
-            else:
-                z_rate[n_lines + k] = -price_rate * step
         residual = max(residual, _dual_residual(excess_up, z[k]))
         residual = max(residual, _dual_residual(excess_down, z[n_lines + k]))
         nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C)
         congestion = max(congestion, abs(nu))
-        g[k] = 0.5 * nu  # the child side's value from here on
-        sign[k] = -0.5 * nu  # the parent side's
-    broadcast(sign, g, generator_line, line_up, preorder, above, signal)
+        child_side[k] = 0.5 * nu
+        parent_side[k] = -0.5 * nu
+    broadcast(parent_side, child_side, params.generator_line, params.line_up,
+              params.line_preorder, work.path, signal)  # fmt: skip
     return congestion, residual
 
 
