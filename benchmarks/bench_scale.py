@@ -1,7 +1,7 @@
 """Exact mode on every scale (issue 12): iterations, evaluations and distance to the DC-OPF.
 
 Usage: python benchmarks/bench_scale.py [--cases SUBSTRING,...] [--sizes 1000,10000,100000]
-    [--horizon 3000] [--markdown]
+    [--horizon 3000] [--rtol 1e-5]
 
 For every case of ``benchmarks/scale_cases.py`` (the built-in cases and MATPOWER radial cases
 without and with a binding limit, synthetic 1k/10k/100k feeders with every candidate line
@@ -35,10 +35,13 @@ from popdispatch.online import Engine, RunSettings, initial_shares  # noqa: E402
 from popdispatch.opf import solve_opf  # noqa: E402
 
 
-def run_case(problem, horizon: int) -> dict:
-    """One exact-mode snapshot of minute 1 from uniform shares, and its DC-OPF."""
+def run_case(problem, horizon: int, rtol: float | None = None) -> dict:
+    """One exact-mode snapshot of minute 1 from uniform shares, and its DC-OPF (``rtol``:
+    the Heun error control instead of the mode's default)."""
     settings = RunSettings(mode="exact")
     integrator = replace(settings.stepping, max_iterations=horizon)
+    if rtol is not None:
+        integrator = replace(integrator, rtol=rtol)
     settings = replace(settings, integrator=integrator)
     engine = Engine(problem, settings)
     x = initial_shares(problem, "uniform", 1)
@@ -72,6 +75,8 @@ def main() -> None:
     parser.add_argument("--cases", default="", help="comma-separated substrings of case names")
     parser.add_argument("--sizes", default="1000,10000,100000")
     parser.add_argument("--horizon", type=int, default=3000)
+    parser.add_argument("--rtol", type=float, default=None,
+                        help="Heun error control (default: exact mode's, 1e-4)")  # fmt: skip
     args = parser.parse_args()
     wanted = [w for w in args.cases.split(",") if w]
     sizes = tuple(int(s) for s in args.sizes.split(",") if s)
@@ -90,7 +95,7 @@ def main() -> None:
             print(f"| {name} | skipped: {matpower_missing(name)} |")
             continue
         problem = build()
-        row = run_case(problem, args.horizon)
+        row = run_case(problem, args.horizon, args.rtol)
         buses = problem.feeder.original.buses.shape[0]
         print(
             f"| {name} | {buses} | {limits} | {row['lines']} ({row['binding']}) | "
