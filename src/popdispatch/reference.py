@@ -14,10 +14,12 @@ shares dimensionless.
 
 from __future__ import annotations
 
+import networkx as nx
 import numpy as np
 
 from popdispatch.dynamics import communication_graph, get_dynamics
 from popdispatch.dynamics.fields import Field
+from popdispatch.dynamics.pairwise import RELAY_MASS
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
 from popdispatch.game.parameters import MinuteInputs
 from popdispatch.game.problem import DispatchProblem
@@ -82,9 +84,34 @@ def weights(field: Field, x, lo, hi, active):
 
 
 def pair_flows(f, w, v, graph):
-    """``(inflow, outflow)``: ``T[i, j] = g_ij w_i v_j [f_i - f_j]_+`` summed over j / over i."""
+    """``(inflow, outflow)``: ``T[i, j] = g_ij w_i v_j [f_i - f_j]_+`` plus the relay
+    (:func:`relay_matrix`), summed over j / over i."""
     T = graph * w[:, None] * v[None, :] * np.maximum(f[:, None] - f[None, :], 0.0)
+    T = T + relay_matrix(f, w, v, graph)
     return T.sum(axis=1), T.sum(axis=0)
+
+
+def relay_matrix(f, w, v, graph) -> np.ndarray:
+    """The relay of distributed Smith on a graph (dynamics/pairwise.py ``relay_flows``),
+    written from its definition with networkx: each connected set of blocked strategies
+    together with its neighbours is a group; every member of it sends to the group's best
+    receiver (largest fitness with ``w > 0``, lowest index on ties) at ``w_b v_a [f_b -
+    f_a]_+``. Nothing on the complete graph."""
+    n = len(f)
+    relay = np.zeros((n, n))
+    if (graph + np.eye(n) > 0).all():
+        return relay
+    blocked = ~((w > 0) & (v > RELAY_MASS))
+    g = nx.from_numpy_array(graph)
+    for members in nx.connected_components(g.subgraph(np.flatnonzero(blocked).tolist())):
+        group = set(members) | {b for k in members for b in g.neighbors(k)}
+        receivers = [c for c in sorted(group) if w[c] > 0]
+        if not receivers:
+            continue
+        best = max(receivers, key=lambda c: (f[c], -c))
+        for a in group - {best}:
+            relay[best, a] += w[best] * v[a] * max(f[best] - f[a], 0.0)
+    return relay
 
 
 class ReferenceMinute:

@@ -106,7 +106,7 @@ class GeneratorAgent(RoundAgent):
         self.copies = int(copies)
         self.engine_limiter = bool(engine_limiter)
         self.plant_id: str | None = None  # real time: whom to tell the inverter's output
-        self.receiver_scale = 1.0
+        self.room_share = np.inf  # room below Pmax at the round's status, share of demand
         self.pending_out: dict[str, tuple[float, int]] = {}  # committed: MW, effective round
         self.pending_in: dict[str, tuple[float, int]] = {}  # received: MW, effective round
         self.index = index
@@ -433,7 +433,7 @@ class GeneratorAgent(RoundAgent):
         h = self.rule.step_s
         # the flux limiter of integrate/steppers.py (euler_steps), own side only
         lim_v = v0 * (v0 / (h * outflow[0])) if h * outflow[0] > v0 else v0
-        self.receiver_scale = room0 / (h * inflow[0]) if h * inflow[0] > room0 else 1.0
+        self.room_share = room0  # the receiver's side of the limiter, in _accept
         if self.quiet:
             return
         demand = self.rule.demand_mw
@@ -474,8 +474,10 @@ class GeneratorAgent(RoundAgent):
         room = self.rule.pmax - self.planned - sum(self.reserved.values())
         if self.rule.barrier:  # paper mode: no upper limit in the revision rule
             room = np.inf
-        if self.engine_limiter:  # the steppers' factor, then never past the room left
-            scale = self.receiver_scale
+        if self.engine_limiter:  # the steppers' factor, then never past the room left:
+            # room over the limited senders' flows (h * inflow), which the offers carry (MW)
+            offered = total / self.rule.demand_mw
+            scale = self.room_share / offered if offered > self.room_share else 1.0
         else:
             scale = 1.0 if total <= max(room, 0.0) else max(room, 0.0) / total
         for sender, offer in valid:
