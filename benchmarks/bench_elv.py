@@ -158,13 +158,19 @@ def main() -> None:
         )
         for name, seconds in qp_days.items():
             print(f"{name}: {seconds:.4f} s")
-    for mode in reversed(modes):
-        settings = RunSettings(mode=mode)
+    # exact mode with its default warm start (the demand step in merit order: a central
+    # incremental dispatch) and with the one that needs no central knowledge (setpoints)
+    days = [(mode, None) for mode in reversed(modes)]
+    if "exact" in modes:
+        days.append(("exact", "setpoints"))
+    for mode, warm in days:
+        settings = RunSettings(mode=mode, warm_start=warm)
         repeat = args.repeat if mode == "exact" else 1
         day = median_seconds(lambda s=settings: run_day(day_problem, s).wall_seconds, repeat)
         result = run_day(day_problem, settings)
         print(
-            f"population-dynamics day, {mode} mode: {day:.4f} s (engine); {result.status}, "
+            f"population-dynamics day, {mode} mode, {settings.warm_start_policy} warm start: "
+            f"{day:.4f} s (engine); {result.status}, "
             f"{int(result.converged.sum())}/{len(result.converged)} minutes converged, "
             f"iterations per minute {distribution(result.iterations)} "
             f"(mean {result.iterations.mean():.2f})"

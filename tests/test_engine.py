@@ -99,8 +99,9 @@ def test_invariants_on_random_feeders(seed, n_buses, n_gens, dynamics):
     problem = build_problem(reduced, single_minute_profiles(1, load, "random"))
     integrator = Integrator(substeps=20, max_iterations=300)
     run = run_snapshot(
-        problem, 1, RunSettings(dynamics=dynamics, graph=graph_for(dynamics, "path"),
-                                integrator=integrator)
+        problem,
+        1,
+        RunSettings(dynamics=dynamics, graph=graph_for(dynamics, "path"), integrator=integrator),
     )
     assert np.all(run.trajectory_kw >= 0.0)
     np.testing.assert_allclose(run.trajectory_kw.sum(axis=1), load.sum(), rtol=1e-10)

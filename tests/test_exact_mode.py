@@ -58,30 +58,17 @@ def test_congestion_prices_match_the_opf_duals():
     assert np.abs(prices).max() > 0.9
 
 
-@pytest.mark.parametrize("graph", ["complete", "star"])
+@pytest.mark.parametrize("graph", ["complete", "star", "ring", "path"])
 def test_distributed_smith_reaches_the_opf(graph):
-    """Complete graph, and the star around G1 (the generator that trades with every other)."""
+    """Complete graph, the star around G1 (the generator that trades with every other), and
+    the ring and path in fleet order, where G1 and G739 are separated by generators at Pmax:
+    before the relay (dynamics/pairwise.py, docs/agents.md) distributed Smith rested 0.78 kW
+    from the DC-OPF there (reported stalled); now the saturated generators relay."""
     problem = elv_problem(limits=[(505, 666, 28.0)])
     settings_ = RunSettings(mode="exact", dynamics="distributed-smith", graph=graph)
     run = run_snapshot(problem, 566, settings_)
     assert run.status == "converged"
     assert np.abs(run.setpoints_kw - solve_opf(problem, 566).p_kw).max() <= 1e-3
-
-
-@pytest.mark.parametrize("graph", ["ring", "path"])
-def test_a_sparse_graph_rest_point_off_the_dc_opf_is_reported_stalled(graph):
-    """Documented limitation (docs/exact-mode.md): on the ring or path in fleet order, G1 and
-    G739 are separated by generators at Pmax, which cannot take mass to pass it on;
-    distributed Smith rests 0.78 kW from the DC-OPF although every generator is at rest with
-    its neighbours. Issue 10, item 9: that is reported ``stalled`` with the failed KKT
-    condition, never ``converged``."""
-    problem = elv_problem(limits=[(505, 666, 28.0)])
-    settings_ = RunSettings(mode="exact", dynamics="distributed-smith", graph=graph)
-    run = run_snapshot(problem, 566, settings_)
-    assert run.status == "stalled"
-    assert run.converged_at is None and run.rest_at is not None
-    assert "G1 at Pmax" in run.stall_reason and "G739 interior" in run.stall_reason
-    assert np.abs(run.setpoints_kw - solve_opf(problem, 566).p_kw).max() > 0.5
 
 
 @pytest.mark.parametrize("dynamics", ["replicator", "local-replicator"])

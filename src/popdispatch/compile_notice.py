@@ -5,8 +5,7 @@ the first run after installing or updating popdispatch (or with an empty ``NUMBA
 spends about 30-40 s compiling (2026-12-01, 2-core machine: 29 s of CPU for ``popdispatch
 day --mode exact``; 72 s before issue 13), later processes load them in under half a second.
 The CLI calls :func:`kernels_cached` before the engine runs so that it can say so on stderr
-instead of staying silent (the notice still says 60-90 s: tests/cli/test_compile_notice.py
-checks that text).
+instead of staying silent.
 
 The check asks numba's own cache object of each entry point (:data:`ENTRY_POINTS`) for its
 index, as numba itself would when the kernel is first called: wherever the cache lives
@@ -29,7 +28,7 @@ ENTRY_POINTS = (
 
 COMPILE_NOTICE = (
     "compiling the engine's kernels (first run after installing or updating popdispatch, or "
-    "an empty numba cache): about 60-90 s, once; later runs load them from numba's disk cache"
+    "an empty numba cache): about 30-60 s, once; later runs load them from numba's disk cache"
 )
 
 

@@ -3,10 +3,16 @@
 - ``shares`` (the paper's rule, paper mode's default): the shares continue, ``p = x * P_d`` with
   the new demand ``P_d``; with generator limits (exact mode) they are projected onto
   ``lo <= x <= hi``.
-- ``setpoints`` (exact mode's default): the set points continue and the demand step is taken by
-  the generators that are trading (strictly inside their limits), in proportion to
-  ``(p - Pmin) (Pmax - p)``, as participation factors would share it; a generator resting at a
-  limit stays there. Only if no generator is trading is the step shared by headroom.
+- ``setpoints``: the set points continue and the demand step is taken by the generators that
+  are trading (strictly inside their limits), in proportion to ``(p - Pmin) (Pmax - p)``, as
+  participation factors would share it; a generator resting at a limit stays there. Only if no
+  generator is trading is the step shared by headroom. Every generator needs only the step.
+- ``merit`` (exact mode's default): the set points continue and the demand step is placed in
+  merit order of marginal cost ``b + 2 c p`` (:func:`merit_step`): the incremental economic
+  dispatch of the step, line limits ignored, as a feeder head that knows every generator's
+  cost curve would broadcast it (AGC with economic participation factors). Not distributed in
+  the paper's sense: the dynamics then only correct for the lines (and confirm the rest);
+  ``setpoints`` is the warm start that uses no central knowledge (docs/exact-mode.md).
 
 Generators that went offline hand their mass to the online ones (in proportion to their shares).
 All functions are compiled: the day loop calls them every minute.
@@ -28,9 +34,10 @@ class WarmStart(IntEnum):
 
     SHARES = 0
     SETPOINTS = 1
+    MERIT = 2
 
 
-SHARES, SETPOINTS = WarmStart
+SHARES, SETPOINTS, MERIT = WarmStart
 WARM_STARTS = {policy.name.lower(): policy for policy in WarmStart}
 
 
@@ -180,8 +187,11 @@ def warm_start(policy, bounded, x, old_demand, demand, pmin, pmax, active, weigh
     redistribute_offline(x, active)
     if not bounded:
         return
-    if policy == WarmStart.SETPOINTS and old_demand > 0.0:
+    if policy == WarmStart.MERIT and old_demand > 0.0:
         continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight, b, c)
+        return
+    if policy == WarmStart.SETPOINTS and old_demand > 0.0:
+        continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight)
         return
     lo = np.empty(x.shape[0])
     hi = np.empty(x.shape[0])

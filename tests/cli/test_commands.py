@@ -6,6 +6,7 @@ dynamics is run once and its outputs are checked together.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import signal
@@ -392,6 +393,8 @@ def test_reproduce_writes_every_file(tmp_path):
     summary = json.loads(result.stdout)
     expected = {"base_day.csv", "congestion.csv", "extinction.csv", "summary.json", "report.md"}
     expected |= {f"figures/{f}.{ext}" for f in FIGURES for ext in ("png", "pdf")}
+    if importlib.util.find_spec("power_grid_model") is not None:  # the voltage scenario
+        expected |= {"voltage.csv"} | {f"figures/fig7_voltage_profile.{e}" for e in ("png", "pdf")}
     written = {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()}
     assert written == expected
     assert all((out / name).stat().st_size > 0 for name in expected)
@@ -448,15 +451,16 @@ def test_ctrl_c_leaves_no_partial_output(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_day_warm_start_choice_is_reported_and_both_reach_the_dc_opf():
+def test_day_warm_start_choice_is_reported_and_each_reaches_the_dc_opf():
     runs = {}
-    for choice in (None, "shares"):
+    for choice in (None, "shares", "setpoints"):
         extra = ["--warm-start", choice] if choice else []
         result = run("day", "--mode", "exact", "--minutes", "600-610", "--json", *extra)
         assert result.returncode == 0, result.stderr
         runs[choice] = json.loads(result.stdout)
-    assert runs[None]["warm_start"] == "setpoints"  # exact mode's default
+    assert runs[None]["warm_start"] == "merit"  # exact mode's default
     assert runs["shares"]["warm_start"] == "shares"
+    assert runs["setpoints"]["warm_start"] == "setpoints"
     for summary in runs.values():
         assert summary["status"] == "converged"
         assert summary["max_abs_error_kw"] < 1e-3

@@ -172,8 +172,9 @@ def snapshot(
     "--warm-start",
     type=EngineChoice("popdispatch.warm_start:WARM_STARTS"),
     help="How a minute starts from the last: shares (the paper's rule, p = x * new demand; "
-    "paper mode's default) or setpoints (set points kept, the demand step taken by the "
-    "generators inside their limits; exact mode's default).",
+    "paper mode's default), setpoints (set points kept, the demand step taken by the "
+    "generators inside their limits) or merit (set points kept, the step placed in merit "
+    "order of marginal cost: a central incremental dispatch; exact mode's default).",
 )
 @series_options
 @feeder_options

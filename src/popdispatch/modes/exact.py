@@ -148,7 +148,7 @@ MODE = Mode(
         "extrapolate": True,
         "price_atol": 2.5e-5,
     },  # fmt: skip
-    warm_start="setpoints",
+    warm_start="merit",
     claims_dc_opf=True,
     game_constants=lambda problem, settings: game_constants(problem, settings.exact),
     price_scale=lambda problem: scales(problem)[0],
