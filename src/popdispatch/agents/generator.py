@@ -15,13 +15,12 @@ Each round (:mod:`popdispatch.agents.schedule`) the generator
    ``h * D * w_i * v_j^lim * (f_i - f_j)`` MW;
 3. (tick 4) accepts the offers that arrived, all scaled by one factor and never past the
    room it has left (counting what it has reserved), reserving the amounts. The factor is
-   the steppers' receiver limiter ``room / (h * inflow)`` (``engine_limiter``, the default on
-   a perfect network, where the agents then follow the engine exactly) or
-   ``room / offered``. They differ where both ends of a pair are limited: the engine's
-   receiver factor is computed from the senders' *unlimited* masses, so such a pair is
-   scaled twice and moves ``~ 1 / gap``: the larger the fitness gap, the slower. After a
-   disturbance that winds the line prices up (a lost decision, a late price), the engine's
-   rule thus stalls while the prices keep integrating; ``room / offered`` does not;
+   the steppers' receiver limiter ``room / (h * inflow)`` with the inflow of the limited
+   senders, which is what their offers of the round carry (``engine_limiter``, the default
+   on a perfect network, where the agents then follow the engine exactly: room at the
+   round's status, offers of this round), or ``room / offered`` with the room left now and
+   every offer that arrived (lost, late or repeated messages). A receiver filled to its
+   room lands on ``Pmax`` exactly, as the engine's shares do (:meth:`GeneratorAgent._set`);
 4. (tick 5) commits the offers accepted in time (lowering its own set point by the amount:
    the transaction's decision point) and aborts the others, then sends every decision not
    yet acknowledged (again each round until the receiver acknowledges).
@@ -58,6 +57,11 @@ from popdispatch.dynamics.pairwise import RELAY_MASS, graph_flows
 from popdispatch.game.fitness import fitness_into
 from popdispatch.game.parameters import share_bounds
 
+#: Units in the last place of ``Pmax`` within which a set point counts as at ``Pmax``
+#: (:meth:`GeneratorAgent._set`): the rounding of a few accepted amounts added in MW (1 ulp
+#: measured); a generator approaching ``Pmax`` smoothly is 1e-9 MW or more away from it.
+LIMIT_ULPS = 16
+
 
 @dataclass(frozen=True)
 class GeneratorRule:
@@ -91,8 +95,9 @@ class GeneratorAgent(RoundAgent):
     copies of each decision sent per round (a decision lost on the way leaves the
     transaction half done, and the source bus takes up the difference, until a copy
     arrives); ``engine_limiter``: the receiver scales the offers by the steppers' own factor
-    ``room / (h * inflow)`` (inflow from its neighbours' unlimited masses, as the engine
-    does), else by ``room / offered`` (see step 3)."""
+    ``room / (h * inflow)`` (room at the round's status, inflow of the limited senders: this
+    round's offers, as the engine does), else by the room left over all offers received
+    (see step 3)."""
 
     PHASES = (Phase.STATUS, Phase.OFFER, Phase.ACCEPT, Phase.COMMIT)
 
@@ -150,6 +155,21 @@ class GeneratorAgent(RoundAgent):
         return self.p + later if later else self.p
 
     def _set(self, p_mw: float) -> None:
+        """Set the inverter to ``p_mw`` (MW); a set point within :data:`LIMIT_ULPS` units in
+        the last place of ``Pmax`` lands on ``Pmax`` (exact mode).
+
+        The receiver's side of the limiter fills a generator to its room exactly, but the
+        agent adds the accepted amounts in MW one by one and lands a few ulps off ``Pmax``
+        where the engine's shares land on it. Below it, the room (``~3e-17`` of a share) is
+        positive and the receiver weight ``1[x < hi]`` (dynamics/capacity.py) is 1, so next
+        round every worse neighbour counts it in its outflow and the senders' limiter
+        (steppers.py ``euler_steps``: senders first, from the unlimited flows) scales the
+        senders down for mass the generator cannot take: measured 4.3e-5 MW off the engine's
+        Euler step on the complete graph, 5.9e-4 MW on the ring.
+        """
+        r = self.rule
+        if not r.barrier and abs(p_mw - r.pmax) <= LIMIT_ULPS * np.spacing(r.pmax):
+            p_mw = r.pmax
         self.inverters.p[self.index] = p_mw
 
     # -- messages as they arrive -------------------------------------------------------------

@@ -63,8 +63,8 @@ class AgentSettings:
     decision_copies : copies of each commit or abort sent per round (see :meth:`copies_for`).
     engine_limiter : receivers scale offers by the engine's limiter factor (None: no, they
         accept ``room / offered``; see :mod:`popdispatch.agents.generator`). With it the
-        agents follow the engine's Euler trajectory exactly; without it they do not stall
-        where both ends of a pair are limited.
+        agents follow the engine's Euler trajectory exactly; without it a receiver scales
+        by the room it has left now over every offer that arrived (late or repeated ones).
     """
 
     step_s: float | None = None
