@@ -74,7 +74,7 @@ def game_constants(problem: DispatchProblem, constants: ExactConstants) -> Fitne
 
 
 @nb.njit(cache=True, inline="always")
-def _dual_residual(excess, price):
+def dual_residual(excess, price):
     """How far a line-direction is from complementary slackness, MW: any overflow, and any
     slack while its price is still positive."""
     return abs(excess) if price > 0.0 else max(excess, 0.0)
@@ -113,8 +113,8 @@ def line_signals(p, z, params, minute, work, signal, z_rate):
         excess_down = -flow[k] - limit[k]
         z_rate[k] = price_rate * excess_up
         z_rate[n_lines + k] = price_rate * excess_down
-        residual = max(residual, _dual_residual(excess_up, z[k]))
-        residual = max(residual, _dual_residual(excess_down, z[n_lines + k]))
+        residual = max(residual, dual_residual(excess_up, z[k]))
+        residual = max(residual, dual_residual(excess_down, z[n_lines + k]))
         nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C)
         congestion = max(congestion, abs(nu))
         child_side[k] = 0.5 * nu

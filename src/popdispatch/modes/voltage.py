@@ -24,25 +24,21 @@ Controller states: ``z = [line up (L), line down (L), bus low (V), bus high (V)]
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numba as nb
 
 from popdispatch.game.fitness import fitness_into
 from popdispatch.game.problem import DispatchProblem
-from popdispatch.modes.exact import game_constants, line_price, line_signals, scales
-from popdispatch.modes.mechanism import Mode, ModeCode
+from popdispatch.modes import exact
+from popdispatch.modes.exact import dual_residual, line_price, line_signals
+from popdispatch.modes.mechanism import ModeCode
 
 #: Voltage mode's Heun error control, relative (exact mode: 1e-4). Measured (docs/voltage.md):
 #: at 1e-4 the prices and set points hover at the error control's noise, 0.02 kW on the
 #: voltage scenario, above the stopping tolerance in 133 of 321 ELV minutes with a binding
 #: vmax; at 3e-6 every one converges (43 iterations on average) and the scenario in 34.
 RTOL = 3e-6
-
-
-@nb.njit(cache=True, inline="always")
-def _dual_residual(excess, price):
-    """Distance from complementary slackness of one row, MW (equivalents): any excess, and
-    any slack while its price is positive (the rule of exact mode's line controllers)."""
-    return abs(excess) if price > 0.0 else max(excess, 0.0)
 
 
 @nb.njit(cache=True, inline="always")
@@ -71,8 +67,8 @@ def voltage_signals(p, z, params, minute, signal, z_rate):
         z_lo, z_hi = z[state + j], z[state + n_rows + j]
         z_rate[state + j] = price_rate * excess_lo
         z_rate[state + n_rows + j] = price_rate * excess_hi
-        residual = max(residual, _dual_residual(excess_lo, z_lo))
-        residual = max(residual, _dual_residual(excess_hi, z_hi))
+        residual = max(residual, dual_residual(excess_lo, z_lo))
+        residual = max(residual, dual_residual(excess_hi, z_hi))
         net = line_price(z_lo, z_hi, excess_lo, excess_hi, C)  # mu_lo - mu_hi
         congestion = max(congestion, abs(net))
         if net != 0.0:
@@ -98,23 +94,11 @@ def controller_states(problem: DispatchProblem) -> int:
     return 2 * len(problem.limit) + 2 * problem.n_voltage
 
 
-MODE = Mode(
-    "voltage",
-    ModeCode.VOLTAGE,
-    controller_states,
-    bounded=True,
-    # exact mode's integrator with a tighter error control (RTOL)
-    integrator_options={
-        "method": "heun",
-        "rtol": RTOL,
-        "tol_kw": 1e-6,
-        "tol_rel": 1e-6,
-        "window": 5,
-        "extrapolate": True,
-        "price_atol": 2.5e-5,
-    },  # fmt: skip
-    warm_start="merit",
-    claims_dc_opf=True,
-    game_constants=lambda problem, settings: game_constants(problem, settings.exact),
-    price_scale=lambda problem: scales(problem)[0],
+#: exact mode's record with its own name, payoff kernel, dimension and a tighter error control
+MODE = replace(
+    exact.MODE,
+    name="voltage",
+    code=ModeCode.VOLTAGE,
+    controller_states=controller_states,
+    integrator_options={**exact.MODE.integrator_options, "rtol": RTOL},
 )
