@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
 
 import numpy as np
 
@@ -63,11 +62,6 @@ def apply_events(
 
 
 def _outage(problem: DispatchProblem, name: str, off: int, on: int | None) -> DispatchProblem:
-    """``name`` offline from step ``off`` until step ``on`` (excluded; ``None``: to the end).
-    As :meth:`DispatchProblem.with_outage` without its day-of-minutes bound, so that an event
-    may fall anywhere in a longer series."""
-    online = problem.online.copy()
-    online[
-        off - 1 : (on - 1 if on is not None else len(online)), problem.generators.get_loc(name)
-    ] = False
-    return replace(problem, online=online)
+    """``name`` offline from step ``off`` until step ``on`` (excluded; ``None``: to the end);
+    capacity is checked by the caller over the steps that run (:func:`check_online`)."""
+    return problem.with_outage(name, off, on, check=False)

@@ -123,15 +123,19 @@ class DispatchProblem:
     def with_outage(
         self, generator: str, off_minute: int, on_minute: int | None = None, check: bool = True
     ):
-        """The same problem with ``generator`` offline from ``off_minute`` until ``on_minute``.
+        """The same problem with ``generator`` offline from step ``off_minute`` until step
+        ``on_minute`` (excluded; ``None``: to the end), 1-based steps of the problem's series
+        (minutes of the ELV day, quarter hours of a SimBench year, ...).
 
-        ``check``: raise :class:`InfeasibleError` if the demand of some minute of the day then
-        exceeds the online capacity (:func:`check_capacity`); without it the problem is kept
-        as it is (a day with such minutes runs them; their DC-OPF is infeasible).
+        ``check``: raise :class:`InfeasibleError` if the demand of some step then exceeds the
+        online capacity (:func:`check_capacity`); without it the problem is kept as it is (a
+        day with such steps runs them; their DC-OPF is infeasible).
         """
         if generator not in self.generators:
             raise ValueError(f"unknown generator {generator!r}")
-        check_minute(off_minute)
+        check_minute(off_minute, len(self.demand))
+        if on_minute is not None:
+            check_minute(on_minute, len(self.demand) + 1)
         online = self.online.copy()
         stop = on_minute - 1 if on_minute is not None else len(online)
         online[off_minute - 1 : stop, self.generators.get_loc(generator)] = False
