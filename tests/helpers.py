@@ -11,6 +11,10 @@ import pytest
 
 from popdispatch.feeder.generators import make_fleet
 from popdispatch.feeder.model import Feeder
+from popdispatch.feeder.profiles import single_minute_profiles
+from popdispatch.feeder.reduction import reduce_feeder
+from popdispatch.game.problem import DispatchProblem, build_problem
+from popdispatch.scenarios import apply_path_limits
 
 #: Why a test that needs the official data is skipped, and what to set to run it.
 MISSING_OFFICIAL = (
@@ -72,3 +76,20 @@ def random_feeder(rng: np.random.Generator, n_buses: int, n_gens: int) -> Feeder
         for b in gen_buses
     ]
     return Feeder("random", buses, lines, loads, 1, make_fleet(rows))
+
+
+def random_limited_problem(
+    rng: np.random.Generator, n_buses: int, n_gens: int, n_limits: int
+) -> DispatchProblem:
+    """One minute on :func:`random_feeder` with ``n_limits`` random paths limited to 0.5-15 kW
+    and loads summing to 20-90 % of the fleet's capacity."""
+    feeder = random_feeder(rng, n_buses, n_gens)
+    limits = []
+    for _ in range(n_limits):
+        a, b = (int(v) for v in rng.choice(feeder.buses.index, 2, replace=False))
+        limits.append((a, b, float(rng.uniform(0.5, 15.0))))
+    feeder = apply_path_limits(feeder, limits)
+    capacity = feeder.generators.pmax_kw.sum()
+    load = pd.Series(rng.uniform(0.1, 1.0, len(feeder.loads)), index=feeder.loads.index)
+    load *= rng.uniform(0.2, 0.9) * capacity / load.sum()
+    return build_problem(reduce_feeder(feeder), single_minute_profiles(1, load, "random"))

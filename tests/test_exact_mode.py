@@ -22,9 +22,9 @@ from popdispatch.modes.exact import ExactConstants, scales
 from popdispatch.online import Engine, RunSettings, initial_shares, run_snapshot
 from popdispatch.opf import generation_cost, solve_opf
 from popdispatch.readers import read_profiles
-from popdispatch.scenarios import apply_path_limits, day_vs_opf, elv_problem
+from popdispatch.scenarios import day_vs_opf, elv_problem
 
-from helpers import official_folder, random_feeder
+from helpers import official_folder, random_limited_problem
 
 EXACT = RunSettings(mode="exact")
 
@@ -124,16 +124,7 @@ def test_whole_day_within_10_watts_of_dc_opf(official, limits):
 )
 def test_random_feeders_exact_equilibrium_is_the_qp_solution(seed, n_buses, n_gens, n_limits):
     rng = np.random.default_rng(seed)
-    feeder = random_feeder(rng, n_buses, min(n_gens, n_buses))
-    limits = []
-    for _ in range(n_limits):
-        a, b = (int(v) for v in rng.choice(feeder.buses.index, 2, replace=False))
-        limits.append((a, b, float(rng.uniform(0.5, 15.0))))
-    feeder = apply_path_limits(feeder, limits)
-    capacity = feeder.generators.pmax_kw.sum()
-    load = pd.Series(rng.uniform(0.1, 1.0, len(feeder.loads)), index=feeder.loads.index)
-    load *= rng.uniform(0.2, 0.9) * capacity / load.sum()
-    problem = build_problem(reduce_feeder(feeder), single_minute_profiles(1, load, "random"))
+    problem = random_limited_problem(rng, n_buses, min(n_gens, n_buses), n_limits)
     opf = solve_opf(problem, 1)
     # the mode's integrator (tolerance 1e-6 of demand), longer windows and a 10-minute horizon
     integrator = replace(EXACT.stepping, window=20, max_iterations=60000)

@@ -8,21 +8,17 @@ from dataclasses import replace
 
 import networkx as nx
 import numpy as np
-import pandas as pd
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy import sparse
 
 from popdispatch.dynamics.pairwise import RELAY_MASS, graph_flows, relay_flows
-from popdispatch.feeder.profiles import single_minute_profiles
-from popdispatch.feeder.reduction import reduce_feeder
-from popdispatch.game.problem import build_problem
 from popdispatch.online import RunSettings, run_snapshot
 from popdispatch.opf import solve_opf
-from popdispatch.scenarios import CONGESTION_PATH, PEAK_MINUTE, apply_path_limits, elv_problem
+from popdispatch.scenarios import CONGESTION_PATH, PEAK_MINUTE, elv_problem
 
-from helpers import random_feeder
+from helpers import random_limited_problem
 
 #: Set points within this of the DC-OPF (issue 15), kW.
 OPF_ATOL_KW = 1e-3
@@ -125,16 +121,7 @@ def test_a_saturated_chain_relays_between_its_ends():
 def random_problem(seed: int, n_gens: int, n_limits: int):
     """A random radial feeder (tests/helpers.py) with up to ``n_limits`` limited paths."""
     rng = np.random.default_rng(seed)
-    feeder = random_feeder(rng, int(rng.integers(max(4, n_gens), 25)), n_gens)
-    limits = []
-    for _ in range(n_limits):
-        a, b = (int(x) for x in rng.choice(feeder.buses.index, 2, replace=False))
-        limits.append((a, b, float(rng.uniform(0.5, 15.0))))
-    feeder = apply_path_limits(feeder, limits)
-    capacity = feeder.generators.pmax_kw.sum()
-    load = pd.Series(rng.uniform(0.1, 1.0, len(feeder.loads)), index=feeder.loads.index)
-    load *= rng.uniform(0.2, 0.9) * capacity / load.sum()
-    return build_problem(reduce_feeder(feeder), single_minute_profiles(1, load, "random"))
+    return random_limited_problem(rng, int(rng.integers(max(4, n_gens), 25)), n_gens, n_limits)
 
 
 def reduced_cost_margin(problem, opf) -> float:
