@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from popdispatch.constants import KW_PER_MW
-from popdispatch.integrate.solve import ROUND_OFF, Outcome, integrate
+from popdispatch.integrate.solve import Outcome, integrate
 from popdispatch.integrate.steppers import (
     STABLE_STEP,
     Method,
@@ -28,7 +28,7 @@ from popdispatch.integrate.steppers import (
     Workspace,
     workspace,
 )
-from popdispatch.integrate.stopping import Status, StopRule
+from popdispatch.integrate.stopping import ROUND_OFF, Status, StopRule
 from popdispatch.integrate.term import Stage, Term
 
 METHODS = {method.name.lower(): method for method in Method}

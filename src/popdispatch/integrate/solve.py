@@ -8,7 +8,7 @@ import numba as nb
 import numpy as np
 
 from popdispatch.integrate.steppers import advance, evaluate_stage
-from popdispatch.integrate.stopping import Status, check, tolerance
+from popdispatch.integrate.stopping import Status, at_rest, check, tolerance
 
 
 class Outcome(NamedTuple):
@@ -21,28 +21,6 @@ class Outcome(NamedTuple):
     converged_at: int
     first_congestion: int
     h_try: float
-
-
-#: What an iteration may move a state that it leaves "unchanged within round-off": 1024 units
-#: of round-off (``2**-42``, about 2.3e-13) of the demand for a set point, of its own size for
-#: a controller state (measured: the end states of the ELV day's minutes move by 1e-16 of the
-#: demand per iteration, 1e-10 of the convergence tolerance ``1e-6 P_d``).
-ROUND_OFF = 1024 * np.finfo(np.float64).eps
-
-
-@nb.njit(cache=True, inline="always")
-def at_rest(x, last_x, z, last_z):
-    """Did the last iteration leave ``(x, z)`` where it was (``last_x``, ``last_z``) within
-    round-off (:data:`ROUND_OFF`): every share within ``ROUND_OFF`` (so every set point
-    within ``ROUND_OFF * demand``) and every controller state within ``ROUND_OFF`` of its
-    size?"""
-    for i in range(x.shape[0]):
-        if abs(x[i] - last_x[i]) > ROUND_OFF:
-            return False
-    for k in range(z.shape[0]):  # noqa: SIM110 (numba compiles no generator expression)
-        if abs(z[k] - last_z[k]) > ROUND_OFF * abs(z[k]):
-            return False
-    return True
 
 
 @nb.njit(cache=True, inline="always")
@@ -100,18 +78,7 @@ def integrate(x, z, term, params, minute, ws, stepper, rule, h_try, history):
                 history[k, i] = ring[row, i]
         if first_congestion < 0 and congested > 0.0:
             first_congestion = k
-        status, calm = check(rule, ring, k, z, residual, calm, demand)
-        if (
-            status == Status.NOT_CONVERGED
-            and rule.fixed_point
-            and still
-            and residual <= tolerance(rule, demand)
-        ):
-            # fixed-point stop: the iteration left the state where it was within round-off
-            status = Status.CONVERGED
-            converged_at = k - 1
-        else:
-            converged_at = k - rule.window
+        status, calm, converged_at = check(rule, ring, k, z, residual, calm, demand, still)
         if status == Status.CONVERGED and final_residual(
             x, z, term, params, minute, ws
         ) > tolerance(rule, demand):
