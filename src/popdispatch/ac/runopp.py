@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from popdispatch.ac.network import load_q_per_kw, nominal_kv
+from popdispatch.ac.network import load_q_per_kw, nominal_kv, rated_current_a
 from popdispatch.constants import KW_PER_MW
 from popdispatch.errors import FeederError
 from popdispatch.feeder.model import Feeder
@@ -101,13 +101,12 @@ def _network(feeder, load_kw, vmin_pu, vmax_pu, source_pu, load_pf, vn_kv):
         # the source is an ideal voltage source (as in the AC check), not a free OPF variable
         low, high = (source_pu, source_pu) if bus == feeder.source_bus else (vmin_pu, vmax_pu)
         pp.create_bus(net, vn_kv=kv, index=int(bus), min_vm_pu=low, max_vm_pu=high)
-    ka_per_kw = 1.0 / (math.sqrt(3) * kv * KW_PER_MW)
     for name, ln in feeder.lines.iterrows():
         limited = math.isfinite(ln.limit_kw)
         pp.create_line_from_parameters(
             net, int(ln.from_bus), int(ln.to_bus), length_km=1.0, r_ohm_per_km=ln.r_ohm,
             x_ohm_per_km=ln.x_ohm, c_nf_per_km=0.0,
-            max_i_ka=ln.limit_kw * ka_per_kw if limited else UNLIMITED_KA,
+            max_i_ka=float(rated_current_a(ln.limit_kw, kv)) / 1e3 if limited else UNLIMITED_KA,
             max_loading_percent=100.0, name=str(name),
         )  # fmt: skip
     ratio, _ = load_q_per_kw(feeder, load_pf)

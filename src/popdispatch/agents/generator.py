@@ -63,6 +63,12 @@ from popdispatch.game.parameters import share_bounds
 LIMIT_ULPS = 16
 
 
+def relays(w: float, v: float) -> bool:
+    """A generator with receiver weight ``w`` and movable mass ``v`` (shares) cannot take part
+    in a comparison both ways and relays: dynamics/pairwise.py ``blocked``, for one status."""
+    return not (w > 0.0 and v > RELAY_MASS)
+
+
 @dataclass(frozen=True)
 class GeneratorRule:
     """What one generator knows of the game: its cost ``b`` (EUR/MWh), ``c`` (EUR/(MW^2 h)),
@@ -203,7 +209,7 @@ class GeneratorAgent(RoundAgent):
     def blocked(self) -> bool:
         """Whether this generator cannot take part in a comparison this round (at a limit:
         ``w = 0`` or ``v = 0``): it relays."""
-        return self.own is not None and not (self.own[1] > 0.0 and self.own[2] > RELAY_MASS)
+        return self.own is not None and relays(self.own[1], self.own[2])
 
     def _flood(self, origin: str, status: Status, route: tuple) -> None:
         """A blocked generator passes every status of this round on to its other
@@ -274,23 +280,20 @@ class GeneratorAgent(RoundAgent):
         def union(a: str, b: str) -> None:
             parent[find(a)] = find(b)
 
-        def is_blocked(st: Status) -> bool:
-            return not (st.w > 0.0 and st.v > RELAY_MASS)
-
         comps: set[str] = set()
         members: dict[str, dict[str, Status]] = {}
         for o, st, route in heard:
             for a, b in zip(route, route[1:], strict=False):
                 union(a, b)
-            if is_blocked(st):
+            if relays(st.w, st.v):
                 union(o, route[0])
             if self.blocked:
                 union(self.aid, route[-1])
         for a, st in direct.items():
-            if is_blocked(st) and self.blocked:
+            if relays(st.w, st.v) and self.blocked:
                 union(self.aid, a)
         for a, st in direct.items():
-            if is_blocked(st):
+            if relays(st.w, st.v):
                 comps.add(find(a))
                 members.setdefault(find(a), {})[a] = st
         for o, st, route in heard:
