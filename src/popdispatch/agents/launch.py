@@ -4,11 +4,20 @@
 CONFIG``), each building the same problem and agents (:func:`popdispatch.agents.system.
 build_agents`) and keeping its own, in a mango TCP container on ``127.0.0.1:<port>`` with
 mango's real-time clock. Every agent acts at absolute deadlines from a start time the launcher
-fixes (after the processes have had time to load their data), ``tick_s`` seconds a tick; the
+fixes once every process is ready, ``tick_s`` seconds a tick; the
 plant learns the generators' outputs from ``Output`` messages (it shares no memory with the
 inverters). Every process stops after the agreed number of rounds; the plant prints its
 recorded set points as JSON. The launcher starts the children in their own process group and
 on Ctrl-C (or any error) terminates the group and waits for every child: no orphans.
+
+Start-up is a barrier, not a guess: a real-time run is only as good as its slowest agent's
+first tick, and a process that is still importing or compiling when round 0 begins misses its
+ticks (a fresh install compiles the kernels for tens of seconds). So the launcher first runs
+the agents for a few rounds in mango's simulation (:func:`warm_up`, which compiles and caches
+every kernel they use), then starts the processes; each builds its agent, runs the same warm-up
+(loading those kernels into memory), and says it is ready (a file in the run's folder). When
+all are ready the launcher writes the start time ``t0`` (``START_MARGIN_S`` ahead, for the
+containers to open their sockets) and every process starts its container and waits for it.
 """
 
 from __future__ import annotations
@@ -30,13 +39,21 @@ import numpy as np
 
 HOST = "127.0.0.1"
 
+#: Seconds between the launcher's go and round 0 (every process opens its TCP container).
+START_MARGIN_S = 2.0
+
+#: Rounds of the simulated warm-up run (:func:`warm_up`).
+WARM_UP_ROUNDS = 3
+
 
 @dataclass(frozen=True)
 class LaunchConfig:
     """What every process of a launched run agrees on. Powers in kW where people give them.
 
-    ``limits``: path limits ``[a, b, kW]``; ``ports``: agent id -> TCP port; ``t0``: epoch
-    seconds of round 0's first tick; ``tick_s``: seconds per tick; ``rounds``: rounds to run;
+    ``limits``: path limits ``[a, b, kW]``; ``ports``: agent id -> TCP port; ``folder``: the
+    run's folder (ready files, the go file with ``t0``, epoch seconds of round 0's first
+    tick); ``startup_s``: longest wait for the go, s; ``tick_s``: seconds per tick;
+    ``rounds``: rounds to run;
     ``step_s``: the round's Euler step (s); ``loss``: probability that a message is dropped
     by its sender (fault injection over TCP, each process with its own seeded draws);
     ``seed``: of those draws."""
@@ -47,7 +64,8 @@ class LaunchConfig:
     dynamics: str
     graph: str
     ports: dict
-    t0: float
+    folder: str
+    startup_s: float
     tick_s: float
     rounds: int
     step_s: float
@@ -83,11 +101,34 @@ def _system(config: LaunchConfig):
     return problem, system
 
 
+def warm_up(config: LaunchConfig) -> None:
+    """Run the agents of ``config`` for :data:`WARM_UP_ROUNDS` rounds in mango's simulation:
+    every kernel they call is compiled (and cached on disk) or loaded before the clock runs."""
+    from popdispatch.agents.system import AgentSettings, _simulate
+
+    _, system = _system(config)
+    opts = AgentSettings(max_rounds=WARM_UP_ROUNDS, drain_rounds=0)
+    asyncio.run(_simulate(system, opts, opts.window, None))
+
+
 def agent_ids(system) -> dict:
     """Agent id -> agent of a built system (plant, controllers, generators by name)."""
     ids = {"plant": system.plant, **system.controllers}
     ids.update(zip(system.graph.nodes, system.generators, strict=True))
     return ids
+
+
+def _wait_for_go(config: LaunchConfig, aid: str) -> float:
+    """Say ``aid`` is ready, then wait for the launcher's start time (epoch s)."""
+    folder = Path(config.folder)
+    (folder / f"ready-{aid}").touch()
+    deadline = time.monotonic() + config.startup_s + 60.0
+    go = folder / "go"
+    while not go.exists():
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"agent {aid}: no start from the launcher")
+        time.sleep(0.02)
+    return float(go.read_text())
 
 
 async def _serve(aid: str, config: LaunchConfig) -> None:
@@ -96,7 +137,8 @@ async def _serve(aid: str, config: LaunchConfig) -> None:
     problem, system = _system(config)
     agent = agent_ids(system)[aid]
     agent.network = None
-    agent.t0, agent.tick_s, agent.wall_clock = config.t0, config.tick_s, True
+    t0 = _wait_for_go(config, aid)
+    agent.t0, agent.tick_s, agent.wall_clock = t0, config.tick_s, True
     if config.loss:
         import random
 
@@ -106,7 +148,7 @@ async def _serve(aid: str, config: LaunchConfig) -> None:
     container = create_tcp_container((HOST, config.ports[aid]), codec=_codec())
     container.register(agent, suggested_aid=aid)
     agent.addresses = {a: AgentAddress((HOST, port), a) for a, port in config.ports.items()}
-    end = config.t0 + (config.rounds + 1) * agent.round_ticks * config.tick_s
+    end = t0 + (config.rounds + 1) * agent.round_ticks * config.tick_s
     async with activate(container):
         await asyncio.sleep(max(0.0, end - time.time()))
     if agent.error is not None:
@@ -114,7 +156,7 @@ async def _serve(aid: str, config: LaunchConfig) -> None:
     if agent.missed_ticks:
         print(f"agent {aid} missed {agent.missed_ticks} ticks (started late or fell behind; "
               "a longer --startup-s or --tick-ms helps)", file=sys.stderr)  # fmt: skip
-    counts = {"sent": agent.sent, "dropped": agent.dropped}
+    counts = {"sent": agent.sent, "dropped": agent.dropped, "missed_ticks": agent.missed_ticks}
     if aid == "plant":
         counts["setpoints_mw"] = [list(map(float, p)) for p in agent.history]
     print(json.dumps(counts))
@@ -123,7 +165,9 @@ async def _serve(aid: str, config: LaunchConfig) -> None:
 @dataclass(frozen=True)
 class LaunchResult:
     """Set points (kW) the plant saw at the start of every round, the run's wall time (s,
-    start-up included) and the number of agent processes."""
+    start-up included), the number of agent processes, messages sent and dropped, and the
+    ticks the agents missed (deadlines already past when they got to them: a loaded machine;
+    0 in a sound run)."""
 
     generators: list
     trajectory_kw: np.ndarray
@@ -131,16 +175,18 @@ class LaunchResult:
     processes: int
     messages: int = 0
     lost: int = 0
+    missed_ticks: int = 0
 
 
 def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
            graph: str = "complete", rounds: int = 200, tick_s: float = 0.05,
-           step_s: float | None = None, base_port: int = 0, startup_s: float = 30.0,
+           step_s: float | None = None, base_port: int = 0, startup_s: float = 180.0,
            loss: float = 0.0, seed: int = 0) -> LaunchResult:  # fmt: skip
     """Run the agents of one minute as separate processes over TCP (module docstring).
 
-    ``base_port``: first TCP port (0: free ports the OS hands out); ``startup_s``: seconds
-    the processes get to load their data before round 0; ``step_s``: the round's Euler step
+    ``base_port``: first TCP port (0: free ports the OS hands out); ``startup_s``: longest
+    wait, s, for every process to be ready (round 0 starts as soon as all are); ``step_s``:
+    the round's Euler step
     (None: :meth:`popdispatch.agents.system.AgentSettings.step_for`); ``loss``: probability
     that each message is dropped by its sender (``seed``: of the draws; decisions then go out
     in 3 copies, as in the simulation).
@@ -160,18 +206,20 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
         step_s = AgentSettings().step_for(mode, Faults(), gain)
     ids = list(agent_ids(build_agents(problem, minute, settings, step_s, Faults())))
     ports = _ports(len(ids), base_port)
-    config = LaunchConfig(minute, [list(x) for x in limits], mode, dynamics, graph,
-                          dict(zip(ids, ports, strict=True)), time.time() + startup_s, tick_s,
-                          rounds, step_s, float(loss), int(seed))  # fmt: skip
     start = time.perf_counter()
-    outputs = {aid: json.loads(out.strip().splitlines()[-1])
-               for aid, out in _run_children(ids, config).items()}  # fmt: skip
+    with tempfile.TemporaryDirectory(prefix="popdispatch-launch-") as folder:
+        config = LaunchConfig(minute, [list(x) for x in limits], mode, dynamics, graph,
+                              dict(zip(ids, ports, strict=True)), folder, float(startup_s),
+                              tick_s, rounds, step_s, float(loss), int(seed))  # fmt: skip
+        warm_up(config)
+        outputs = {aid: json.loads(out.strip().splitlines()[-1])
+                   for aid, out in _run_children(ids, config).items()}  # fmt: skip
     history = outputs["plant"]["setpoints_mw"]
     wall = time.perf_counter() - start
-    sent = sum(o["sent"] for o in outputs.values())
-    lost = sum(o["dropped"] for o in outputs.values())
+    counts = {key: sum(o[key] for o in outputs.values())
+              for key in ("sent", "dropped", "missed_ticks")}  # fmt: skip
     return LaunchResult(list(problem.generators), np.array(history) * 1000.0, wall, len(ids),
-                        sent, lost)  # fmt: skip
+                        counts["sent"], counts["dropped"], counts["missed_ticks"])  # fmt: skip
 
 
 def _ports(n: int, base: int) -> list[int]:
@@ -191,31 +239,57 @@ def _ports(n: int, base: int) -> list[int]:
 
 
 def _run_children(ids: list[str], config: LaunchConfig) -> dict[str, str]:
-    """Start one process per agent in a new process group; wait for all; on Ctrl-C or an
-    error terminate the group and wait, so no child outlives the launcher."""
-    with tempfile.TemporaryDirectory(prefix="popdispatch-launch-") as folder:
-        path = Path(folder) / "config.json"
-        path.write_text(json.dumps(asdict(config)))
-        children, group = {}, None
-        try:
-            for aid in ids:
-                child = subprocess.Popen(
-                    [sys.executable, "-m", "popdispatch.agents.launch", "--id", aid, str(path)],
-                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                    process_group=group or 0,
-                )  # fmt: skip
-                group = group or child.pid
-                children[aid] = child
-            outputs = {}
-            for aid, child in children.items():
-                out, err = child.communicate()
-                if child.returncode != 0:
-                    last = err.strip().splitlines()[-1] if err.strip() else "no message"
-                    raise RuntimeError(f"agent process {aid} exited {child.returncode}: {last}")
-                outputs[aid] = out
-            return outputs
-        finally:
-            _stop(children, group)
+    """Start one process per agent in a new process group; when all are ready, write the
+    start time; wait for all; on Ctrl-C or an error terminate the group and wait, so no child
+    outlives the launcher."""
+    folder = Path(config.folder)
+    path = folder / "config.json"
+    path.write_text(json.dumps(asdict(config)))
+    children, group = {}, None
+    try:
+        for aid in ids:
+            child = subprocess.Popen(
+                [sys.executable, "-m", "popdispatch.agents.launch", "--id", aid, str(path)],
+                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                process_group=group or 0,
+            )  # fmt: skip
+            group = group or child.pid
+            children[aid] = child
+        _wait_until_ready(children, config)
+        staged = folder / "go.tmp"
+        staged.write_text(repr(time.time() + START_MARGIN_S))
+        os.replace(staged, folder / "go")
+        outputs = {}
+        for aid, child in children.items():
+            out, err = child.communicate()
+            _check_exit(aid, child, err)
+            outputs[aid] = out
+        return outputs
+    finally:
+        _stop(children, group)
+
+
+def _wait_until_ready(children: dict, config: LaunchConfig) -> None:
+    """Wait until every child has written its ready file (at most ``config.startup_s``)."""
+    folder = Path(config.folder)
+    deadline = time.monotonic() + config.startup_s
+    waiting = set(children)
+    while waiting:
+        waiting = {aid for aid in waiting if not (folder / f"ready-{aid}").exists()}
+        for aid in waiting:
+            if children[aid].poll() is not None:
+                _check_exit(aid, children[aid], children[aid].communicate()[1])
+        if waiting and time.monotonic() > deadline:
+            raise RuntimeError(f"agent process {sorted(waiting)[0]} not ready after "
+                               f"{config.startup_s:g} s (--startup-s)")  # fmt: skip
+        time.sleep(0.05)
+
+
+def _check_exit(aid: str, child: subprocess.Popen, err: str) -> None:
+    """Raise with the last line of a child's standard error if it failed."""
+    if child.returncode != 0:
+        last = err.strip().splitlines()[-1] if err.strip() else "no message"
+        raise RuntimeError(f"agent process {aid} exited {child.returncode}: {last}")
 
 
 def _stop(children: dict, group: int | None) -> None:
@@ -245,6 +319,7 @@ def main(argv=None) -> int:
     # take seconds, and the launcher waits for every child)
     signal.signal(signal.SIGTERM, lambda *_: os._exit(143))
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the launcher decides; it sends SIGTERM
+    warm_up(config)
     asyncio.run(_serve(args.id, config))
     return 0
 

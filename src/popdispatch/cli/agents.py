@@ -258,8 +258,9 @@ def _event_text(e: dict) -> str:
         help="Rounds to run.")  # fmt: skip
 @option("--tick-ms", type=click.FloatRange(1.0), default=50.0, show_default=True,
         help="Real time per tick, ms (6 ticks a round).")  # fmt: skip
-@option("--startup-s", type=click.FloatRange(1.0), default=40.0, show_default=True,
-        help="Seconds the processes get to load their data before round 0.")  # fmt: skip
+@option("--startup-s", type=click.FloatRange(1.0), default=180.0, show_default=True,
+        help="Longest wait, s, for every process to load its data (round 0 starts when all are "
+             "ready).")  # fmt: skip
 @option(
     "--loss",
     type=click.FloatRange(0.0, 1.0, max_open=True),
@@ -306,6 +307,7 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, as_json
         "seed": seed,
         "messages": result.messages,
         "lost": result.lost,
+        "missed_ticks": result.missed_ticks,
     }
     text = "\n".join(
         [f"minute {minute}, {mode} mode: {summary['rounds']} rounds by agent processes over TCP"]
@@ -315,6 +317,11 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, as_json
         ]
         + ["max |error| vs DC-OPF: " + ("null" if error is None else f"{error:.4f} kW")]
         + [f"messages {result.messages} ({result.lost} dropped, loss {loss:g})"]
+        + [
+            f"missed ticks {result.missed_ticks} (agents that fell behind the clock: a loaded "
+            "machine; a longer --tick-ms helps)"
+        ]
+        * bool(result.missed_ticks)
     )
     emit(stamp(summary), as_json, text)
     return 0
