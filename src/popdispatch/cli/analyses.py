@@ -71,7 +71,11 @@ def analysis_options(func):
     @functools.wraps(func)
     def command(*args, ac, vn_kv, html, vmin, vmax, ac_correct, **kwargs):
         if ac_correct and click.get_current_context().info_name != "snapshot":
-            raise click.BadParameter("runs on snapshot only", param_hint="'--ac-correct'")
+            raise click.BadParameter(
+                "runs on snapshot only: a day's loss factors would change the generators' "
+                "costs step by step, which the day loop holds fixed (docs/voltage.md)",
+                param_hint="'--ac-correct'",
+            )
         if ac_correct and vmin is None and vmax is None:
             raise click.BadParameter("needs --vmin or --vmax", param_hint="'--ac-correct'")
         analyses = Analyses(ac or vn_kv is not None or ac_correct, vn_kv, html, vmin, vmax,
