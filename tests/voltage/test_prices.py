@@ -16,7 +16,7 @@ import pytest
 
 from popdispatch.online import RunSettings
 from popdispatch.online.engine import Engine
-from popdispatch.report.summaries import day_table, snapshot_summary
+from popdispatch.report.summaries import day_summary, day_table, snapshot_summary
 from popdispatch.runs import run_day_vs_opf, run_snapshot_vs_opf
 from popdispatch.scenarios import CONGESTION_PATH, PEAK_MINUTE, elv_problem
 
@@ -89,6 +89,12 @@ def test_day_csv_carries_the_engine_prices(congested):
         assert table[column].iloc[r] == pytest.approx(duals[r, k], abs=tol)
         checked += 1
     assert checked >= len(minutes) - 1, run.converged
+    summary = day_summary(problem, result)
+    gap = summary["max_abs_price_gap_eur_per_mwh"]
+    assert gap <= max(price_tolerance(problem, EXACT, int(m)) for m in minutes)
+    assert gap == pytest.approx(
+        max(np.abs(run.line_price_eur_per_mwh[r] - duals[r]).max()
+            for r in range(len(minutes)) if run.converged[r]), rel=1e-12)  # fmt: skip
 
 
 def test_voltage_prices_are_the_lindistflow_opf_duals():

@@ -331,6 +331,10 @@ def day_summary(
     own over every simulated minute (deprecated twins: see the module docstring).
     ``price_runaway_minutes``: where exact mode's own infeasibility signal fired (line prices
     past their cap); the DC-OPF's verdict is the one that counts.
+    ``max_abs_price_gap_eur_per_mwh``: the largest difference between the run's own line and
+    voltage prices and the DC-OPF's duals over the converged minutes with a DC-OPF (EUR/MWh;
+    null in paper mode or without such minutes; per minute in ``day.csv``, see
+    :func:`price_columns`).
     ``minutes_outside_limits`` (and ``..._by_generator``) count minutes with a set point more
     than :data:`LIMIT_TOLERANCE_KW` outside its limits, ``max_outside_limits_kw`` the worst.
     """
@@ -362,10 +366,26 @@ def day_summary(
         "price_runaway_minutes": _runaway_minutes(run),
         "stalled_minutes": sorted(int(m) for m in getattr(run, "stall_reasons", {})),
         "converged_minutes": int(run.converged.sum()),
+        "max_abs_price_gap_eur_per_mwh": max_price_gap(result),
         **_day_comparison(problem, result, timeline.hours[run.minutes - 1]),
         "max_overflow_kw": float(run.overflow_kw.max()) if run.overflow_kw.size else 0.0,
         "wall_seconds": run.wall_seconds,
     }
+
+
+def max_price_gap(result: DayComparison) -> float | None:
+    """Largest ``|engine price - OPF dual|`` (EUR/MWh) over the converged minutes with a
+    DC-OPF, limited lines and monitored buses together; None in paper mode or without such
+    minutes (or without priced rows)."""
+    run = result.run
+    line = getattr(run, "line_price_eur_per_mwh", None)
+    if line is None:
+        return None
+    rows = np.flatnonzero(np.asarray(run.converged, bool) & np.asarray(result.feasible, bool))
+    engine = np.concatenate([line, run.voltage_price_eur_per_mwh], axis=1)[rows]
+    opf = np.array([np.concatenate([result.opf[r].line_price, result.opf[r].voltage_price])
+                    for r in rows]).reshape(engine.shape)  # fmt: skip
+    return float(np.max(np.abs(engine - opf))) if engine.size else None
 
 
 def _runaway_minutes(run) -> list[int]:
