@@ -10,7 +10,9 @@ polynomial in MW, EUR/h: ``a + b P + c P^2`` exactly as in the paper (eq. 2).
   unlimited) and ``mpc.gencost`` (model 2); ``rundcopf('file.m')`` solves the same DC-OPF.
 - pandapower (JSON): a net with ``bus`` (index = original bus), ``line`` (limits through
   ``max_i_ka`` at 100 % loading), ``load``, controllable ``gen`` with ``poly_cost``; the
-  generator at the source bus is the slack; ``pandapower.rundcopp(net)`` solves it.
+  generator at the source bus is the slack; ``pandapower.rundcopp(net)`` solves it. Built by
+  the package's one pandapower builder (:mod:`popdispatch.ac.pandapower_net`), as the AC OPF
+  anchor's net is.
 """
 
 from __future__ import annotations
@@ -27,7 +29,6 @@ from popdispatch.report.output import atomic_write, atomic_write_text
 
 BASE_MVA = 1.0
 BASE_KV = 0.416
-UNLIMITED_KA = 1000.0  # pandapower needs a finite max_i_ka; 1000 kA is ~720 MVA here
 FORMATS = ("matpower", "pandapower")
 
 
@@ -171,66 +172,18 @@ def matlab_name(path: Path) -> str:
 
 
 def pandapower_net(problem: DispatchProblem, minute: int, load_kw: np.ndarray):
-    """A pandapower net of the reduced feeder at ``minute`` (see module docstring)."""
-    import pandapower as pp
+    """A pandapower net of the reduced feeder at ``minute`` (see module docstring), built by
+    :func:`popdispatch.ac.pandapower_net.pandapower_network` (``gen`` form)."""
+    from popdispatch.ac.pandapower_net import pandapower_network
 
     t = case_tables(problem, minute, load_kw)
-    net = pp.create_empty_network(
-        name=f"{problem.feeder.original.name} minute {minute}", sn_mva=BASE_MVA
-    )
-    for bus in t["buses"].bus:
-        pp.create_bus(net, vn_kv=BASE_KV, name=str(bus), index=int(bus))
-    ka_per_mw = 1.0 / (math.sqrt(3) * BASE_KV)
-    for number, ln in t["lines"].iterrows():
-        length = max(float(ln.length_km), 1e-6)
-        limited = math.isfinite(ln.limit_kw)
-        pp.create_line_from_parameters(
-            net,
-            int(ln.from_bus),
-            int(ln.to_bus),
-            length_km=length,
-            r_ohm_per_km=ln.r_ohm / length,
-            x_ohm_per_km=max(ln.x_ohm, 1e-9) / length,
-            c_nf_per_km=0.0,
-            max_i_ka=ln.limit_kw / KW_PER_MW * ka_per_mw if limited else UNLIMITED_KA,
-            max_loading_percent=100.0,
-            name=f"line {number}",
-        )
-    for name, load in t["loads"].iterrows():
-        pp.create_load(net, int(load.bus), p_mw=load.p_kw / KW_PER_MW, name=str(name))
-    _add_generators(net, t)
+    lines = t["lines"].rename(index=lambda number: f"line {number}")
+    loads = t["loads"].assign(q_kvar=0.0)
+    net, _ = pandapower_network(
+        t["buses"].bus, lines, loads, t["generators"], t["source"], BASE_KV,
+        dispatchable="gen", name=f"{problem.feeder.original.name} minute {minute}",
+    )  # fmt: skip
     return net
-
-
-def _add_generators(net, t: dict) -> None:
-    import pandapower as pp
-
-    has_source = False
-    for name, g in t["generators"].iterrows():
-        at_source = int(g.bus) == t["source"]
-        has_source |= at_source
-        index = pp.create_gen(
-            net,
-            int(g.bus),
-            p_mw=0.0,
-            vm_pu=1.0,
-            name=str(name),
-            controllable=True,
-            min_p_mw=g.pmin_kw / KW_PER_MW,
-            max_p_mw=g.pmax_kw / KW_PER_MW,
-            slack=at_source,
-            in_service=bool(g.online),
-        )
-        pp.create_poly_cost(
-            net,
-            index,
-            "gen",
-            cp1_eur_per_mw=float(g.b),
-            cp2_eur_per_mw2=float(g.c),
-            cp0_eur=float(g.a),
-        )
-    if not has_source:  # a reference bus that supplies nothing
-        pp.create_ext_grid(net, t["source"], min_p_mw=0.0, max_p_mw=0.0, controllable=True)
 
 
 # -- writing ------------------------------------------------------------------------------------

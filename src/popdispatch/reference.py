@@ -48,10 +48,33 @@ def fitness(problem: DispatchProblem, p, signal, fp: FitnessParameters, gain: fl
                              float(fp.m), signal, float(gain), bool(barrier))  # fmt: skip
 
 
+def voltage_rows(problem: DispatchProblem, p, minute: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(excess, dexcess_dp)`` of the voltage rows from the unscaled LinDistFlow model
+    (docs/voltage.md): ``v^2 = v0^2 + S p`` (p.u.^2; ``S = d(v^2)/dp``, p.u.^2 per MW), the
+    rows ``vmin^2 - v^2 <= 0`` and ``v^2 - vmax^2 <= 0``, each divided by its bus's scale
+    ``s_j`` (p.u.^2 per MW) into MW equivalents: ``(2 V,)`` and ``(2 V, generators)``, low
+    rows then high rows. (The engine instead reads pre-scaled loads-only excesses from
+    ``load_flow`` and the scaled ``voltage_sens``.)"""
+    if not problem.n_voltage:
+        return np.zeros(0), np.zeros((0, problem.n_generators))
+    scale = problem.voltage_scale
+    S = problem.voltage_sens * scale[:, None]  # unscaled d(v^2)/dp
+    v_sq = problem.voltage_base[minute - 1] + S @ p
+    excess = np.concatenate([(problem.vmin_pu**2 - v_sq) / scale,
+                             (v_sq - problem.vmax_pu**2) / scale])  # fmt: skip
+    return excess, np.concatenate([-S / scale[:, None], S / scale[:, None]])
+
+
 def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: FitnessParameters):
-    """``(fitness, z_rate, congestion, residual)`` of a mode at set points ``p`` (MW)."""
+    """``(fitness, z_rate, congestion, residual)`` of a mode at set points ``p`` (MW).
+
+    Exact and voltage modes: every row ``r`` (a limited line's direction, a monitored bus's
+    bound) has an excess ``e_r`` (MW or MW equivalents) and a price ``mu_r = max(0, z_r + C
+    e_r)`` that integrates at ``price_rate e_r``; generator ``i``'s signal is ``-sum_r mu_r
+    de_r/dp_i`` weighed as the paper splits a line's (half to each side, eq. 8's sides) and in
+    full for a bus (the Lagrangian's gradient of the voltage rows)."""
     down = problem.down
-    flow = problem.load_flow[minute - 1] - down @ p
+    flow = problem.line_load_flow[minute - 1] - down @ p
     if mode == ModeCode.PAPER:
         parent = overflow_signals(flow, problem.limit, fp.C)
         child = np.where(parent != 0.0, overflow_signals(-flow, problem.limit, fp.C), 0.0)
@@ -59,12 +82,22 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
         congestion = np.abs(signal).max() if len(signal) else 0.0
         return fitness(problem, p, signal, fp, 1.0, True), np.zeros_like(z), congestion, 0.0
     excess = np.concatenate([flow - problem.limit, -flow - problem.limit])
+    if mode == ModeCode.VOLTAGE:
+        v_excess, v_gradient = voltage_rows(problem, p, minute)
+        excess = np.concatenate([excess, v_excess])
     z_rate = fp.price_rate * excess
     slack = np.where(z > 0.0, np.abs(excess), np.maximum(excess, 0.0))
     mu = np.maximum(0.0, z + fp.C * excess)
-    nu = mu[: len(flow)] - mu[len(flow) :]
+    lines = len(flow)
+    nu = mu[:lines] - mu[lines : 2 * lines]
     signal = down.T @ (0.5 * nu) - (1.0 - down).T @ (0.5 * nu)
-    congestion = np.abs(nu).max() if len(nu) else 0.0
+    prices = np.abs(nu)
+    if mode == ModeCode.VOLTAGE:
+        signal = signal - mu[2 * lines :] @ v_gradient
+        n_v = problem.n_voltage
+        prices = np.concatenate([prices, np.abs(mu[2 * lines : 2 * lines + n_v]
+                                                - mu[2 * lines + n_v :])])  # fmt: skip
+    congestion = prices.max() if len(prices) else 0.0
     residual = slack.max() if len(slack) else 0.0
     return fitness(problem, p, signal, fp, fp.gain, False), z_rate, congestion, residual
 

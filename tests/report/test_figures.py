@@ -268,3 +268,33 @@ def test_day_figure_fits_a_short_span_and_keeps_plain_kw_ticks():
     low, high = g114.get_ylim()
     assert high - low >= 1.0 - 1e-9
     assert g114.yaxis.get_offset_text().get_text() == ""  # no "+1e1" above the panel
+
+
+def test_day_figure_uses_the_series_step_length():
+    """A day of 15-minute steps (SimBench) spans 24 h, not 96 minutes; an outage of steps
+    41-48 is shaded over 10:00-12:00 (the timeline's own times: the yardstick)."""
+    from popdispatch.feeder.profiles import Timeline
+
+    times = pd.date_range("2016-01-01", periods=96, freq="15min")
+    timeline = Timeline.from_times(times)
+    online = np.ones((96, 6), bool)
+    online[40:48, 2] = False
+    fig = figures.base_day_figure(_day(online, "simbench"), list(range(6)), timeline=timeline)
+    _render(fig)
+    line = fig.axes[0].get_lines()[0]
+    assert line.get_xdata()[0] == pytest.approx(0.25) and line.get_xdata()[-1] == pytest.approx(24)
+    assert fig.axes[0].get_xlim() == pytest.approx((0, 24))
+    assert "15-minute steps" in fig.axes[-1].get_xlabel()
+    (span,) = [p for p in fig.axes[2].patches if isinstance(p, Polygon | Rectangle)]
+    xs = (
+        span.get_xy()[:, 0]
+        if isinstance(span, Polygon)
+        else [span.get_x(), span.get_x() + span.get_width()]
+    )
+    assert min(xs) == pytest.approx(10.0) and max(xs) == pytest.approx(12.0)
+    # a week of such steps: hours since the first day's midnight
+    week = Timeline.from_times(pd.date_range("2016-01-04", periods=672, freq="15min"))
+    fig = figures.base_day_figure(_day(np.ones((672, 6), bool), "x"), list(range(6)),
+                                  timeline=week)  # fmt: skip
+    assert fig.axes[0].get_lines()[0].get_xdata()[-1] == pytest.approx(168)
+    assert fig.axes[-1].get_xlabel().startswith("time since 2016-01-04 00:00, h")

@@ -209,11 +209,16 @@ def test_limits_need_exact_mode_and_voltage_mode_needs_limits():
         RunSettings(mode="voltage")
 
 
-@pytest.mark.parametrize("limits", [("--vmin", "0.95", "--vmax", "0.9"), ("--vmin", "2")])
-def test_cli_refuses_bad_limits_before_any_work(limits):
+@pytest.mark.parametrize(
+    ("mode", "limits"),
+    [("exact", ("--vmin", "0.95", "--vmax", "0.9")), ("exact", ("--vmin", "2")),
+     ("paper", ("--vmin", "0.95"))],
+)  # fmt: skip
+def test_cli_refuses_bad_limits_before_any_work(mode, limits):
+    """RunSettings' check (the only one), before the feeder is read."""
     result = subprocess.run(
         [sys.executable, "-m", "popdispatch.cli", "snapshot", "--case", "case33bw", "--minute",
-         "1", "--mode", "exact", *limits],
+         "1", "--mode", mode, *limits],
         capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert result.returncode == 2, result.stderr

@@ -18,6 +18,9 @@ voltage mode (one minute), the loop updates from an AC power flow at the last di
 It stops when no monitored bus's offset changes by more than ``tol_pu`` (p.u.) between two
 rounds. Each round is an ordinary run of the voltage mode against its LinDistFlow OPF (the KKT
 check applies to the corrected problem); the result reports the AC check of the last dispatch.
+
+One minute only: a day would need per-step costs in the compiled day loop (the penalty
+factors change ``b`` and ``c`` every step; docs/voltage.md, "Limits").
 """
 
 from __future__ import annotations

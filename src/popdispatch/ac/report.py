@@ -37,11 +37,15 @@ def voltage_columns(problem: DispatchProblem, minutes: Sequence[int], p_kw: np.n
     )
 
 
-def binding_rows(problem: DispatchProblem, opf) -> list[dict]:
+def binding_rows(problem: DispatchProblem, opf, engine: np.ndarray | None = None) -> list[dict]:
     """The monitored buses whose bound binds in one minute's LinDistFlow OPF: ``bus``,
-    ``bound`` (``vmin``/``vmax``), ``v_pu`` and ``price_eur_per_mwh`` (the net price the
-    bus's controller broadcasts, EUR/MW per MW equivalent) and ``dual_eur_per_h_pu2`` (the
-    dual of the unscaled row ``v^2 >= vmin^2``, EUR/h per p.u.^2)."""
+    ``bound`` (``vmin``/``vmax``), ``v_pu`` (the OPF's), ``opf_price_eur_per_mwh`` (the OPF's
+    dual of the bus's scaled row: the net price ``mu_lo - mu_hi`` a controller at rest would
+    broadcast, EUR/MWh per MW equivalent), ``engine_price_eur_per_mwh`` (the price the run's
+    own controller broadcast at that minute's end, from ``engine``, per monitored bus; null
+    without) and ``dual_eur_per_h_pu2`` (the OPF's dual of the unscaled row ``v^2 >=
+    vmin^2``, EUR/h per p.u.^2). ``price_eur_per_mwh``: deprecated twin of
+    ``opf_price_eur_per_mwh``, kept one release."""
     if opf.status != "optimal":
         return []
     rows = []
@@ -51,19 +55,26 @@ def binding_rows(problem: DispatchProblem, opf) -> list[dict]:
             "bus": int(problem.voltage_buses[j]),
             "bound": "vmin" if price > 0 else "vmax",
             "v_pu": float(opf.v_pu[j]),
-            "price_eur_per_mwh": price,
+            "opf_price_eur_per_mwh": price,
+            "engine_price_eur_per_mwh": None if engine is None else float(engine[j]),
+            "price_eur_per_mwh": price,  # deprecated: opf_price_eur_per_mwh
             "dual_eur_per_h_pu2": abs(price) / float(problem.voltage_scale[j]),
         })  # fmt: skip
     return rows
 
 
 def voltage_summary(
-    problem: DispatchProblem, minutes: Sequence[int], p_kw: np.ndarray, opf: Sequence
+    problem: DispatchProblem,
+    minutes: Sequence[int],
+    p_kw: np.ndarray,
+    opf: Sequence,
+    engine_prices: np.ndarray | None = None,
 ) -> dict:
     """The ``voltage`` object: limits, monitored buses, the run's LinDistFlow extremes (with
     their bus and minute), the LinDistFlow OPF's lowest voltage, the minutes where a voltage
     row binds in the OPF and the binding buses of the minute with the highest voltage price
-    (``binding_minute``; a snapshot: its minute if any binds)."""
+    (``binding_minute``; a snapshot: its minute if any binds), with the run's own prices there
+    from ``engine_prices`` (EUR/MWh, steps x monitored buses, :func:`binding_rows`)."""
     v = lindistflow_v_pu(problem, p_kw, minutes)
     low = np.unravel_index(np.argmin(v), v.shape)
     high = np.unravel_index(np.argmax(v), v.shape)
@@ -71,6 +82,9 @@ def voltage_summary(
     opf_low = min((float(np.min(o.v_pu)) for o in feasible), default=None)
     priced = [float(np.max(np.abs(o.voltage_price), initial=0.0)) for o in feasible]
     worst = feasible[int(np.argmax(priced))] if feasible else None
+    engine = None
+    if worst is not None and engine_prices is not None:
+        engine = np.atleast_2d(engine_prices)[list(minutes).index(worst.minute)]
     return {
         "vmin_pu": problem.vmin_pu if problem.vmin_pu > 0.0 else None,  # None: no bound
         "vmax_pu": problem.vmax_pu if problem.vmax_pu < 2.0 else None,
@@ -81,7 +95,7 @@ def voltage_summary(
         "v_max_pu": float(v[high]),
         "v_max_bus": int(problem.voltage_buses[high[1]]),
         "opf_v_min_pu": opf_low,
-        "binding": [] if worst is None else binding_rows(problem, worst),
+        "binding": [] if worst is None else binding_rows(problem, worst, engine),
         "binding_minute": None
         if worst is None or not max(priced) > BINDING_PRICE
         else int(worst.minute),

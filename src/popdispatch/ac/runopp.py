@@ -8,27 +8,22 @@ other generator is a controllable static generator held at unity power factor (`
 every bus between ``vmin`` and ``vmax``; lines with a ``limit_kw`` rated at the current of that
 power at nominal voltage and unity power factor (as the AC check rates them). pandapower's
 interior-point OPF (PYPOWER's PIPS) is slow and can fail to converge: a failure is
-:class:`ACOpfError`, for callers to report and skip.
+:class:`ACOpfError`, for callers to report and skip. The net is built by the one pandapower
+builder, :func:`popdispatch.ac.pandapower_net.pandapower_network`, as the export's is.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from popdispatch.ac.network import load_q_per_kw, nominal_kv, rated_current_a
+from popdispatch.ac.network import load_q_per_kw, nominal_kv
+from popdispatch.ac.pandapower_net import pandapower_network, with_q
 from popdispatch.constants import KW_PER_MW
-from popdispatch.errors import FeederError
 from popdispatch.feeder.model import Feeder
-
-#: Current rating (kA) of a line without a limit: far above anything a feeder carries, yet
-#: finite enough for PIPS (measured on case33bw: 1e6 kA made runopp fail to converge, 1, 10
-#: and 100 kA give the same optimum).
-UNLIMITED_KA = 100.0
 
 
 class ACOpfError(RuntimeError):
@@ -92,53 +87,12 @@ def _result_p(net: Any, kind: str, index: int) -> float:
 
 
 def _network(feeder, load_kw, vmin_pu, vmax_pu, source_pu, load_pf, vn_kv):
-    """The pandapower net and, per generator, its element ``(kind, index)``."""
-    import pandapower as pp
-
-    kv = nominal_kv(feeder, vn_kv)
-    net = pp.create_empty_network(sn_mva=1.0)
-    for bus in feeder.buses.index:
-        # the source is an ideal voltage source (as in the AC check), not a free OPF variable
-        low, high = (source_pu, source_pu) if bus == feeder.source_bus else (vmin_pu, vmax_pu)
-        pp.create_bus(net, vn_kv=kv, index=int(bus), min_vm_pu=low, max_vm_pu=high)
-    for name, ln in feeder.lines.iterrows():
-        limited = math.isfinite(ln.limit_kw)
-        pp.create_line_from_parameters(
-            net, int(ln.from_bus), int(ln.to_bus), length_km=1.0, r_ohm_per_km=ln.r_ohm,
-            x_ohm_per_km=ln.x_ohm, c_nf_per_km=0.0,
-            max_i_ka=float(rated_current_a(ln.limit_kw, kv)) / 1e3 if limited else UNLIMITED_KA,
-            max_loading_percent=100.0, name=str(name),
-        )  # fmt: skip
+    """The pandapower net and, per generator, its element ``(kind, index)``
+    (:func:`popdispatch.ac.pandapower_net.pandapower_network`, ``sgen`` form)."""
     ratio, _ = load_q_per_kw(feeder, load_pf)
-    for (name, load), kw, q in zip(feeder.loads.iterrows(), load_kw, ratio, strict=True):
-        pp.create_load(net, int(load.bus), p_mw=kw / KW_PER_MW, q_mvar=kw * q / KW_PER_MW,
-                       name=str(name), controllable=False)  # fmt: skip
-    return net, _generators(net, feeder, source_pu)
-
-
-def _generators(net, feeder: Feeder, source_pu: float) -> list[tuple[str, int]]:
-    import pandapower as pp
-
-    at_source = feeder.generators.bus == feeder.source_bus
-    if at_source.sum() != 1:
-        raise FeederError(
-            f"the AC OPF anchor needs exactly one generator at the source bus {feeder.source_bus} "
-            f"of feeder {feeder.name!r} (it prices the external grid); found {int(at_source.sum())}"
-        )
-    elements = []
-    for name, g in feeder.generators.iterrows():
-        limits = {"min_p_mw": g.pmin_kw / KW_PER_MW, "max_p_mw": g.pmax_kw / KW_PER_MW}
-        if at_source[name]:
-            index = pp.create_ext_grid(net, int(g.bus), vm_pu=source_pu, controllable=True,
-                                       min_q_mvar=-1e6, max_q_mvar=1e6, **limits)  # fmt: skip
-            kind = "ext_grid"
-        else:
-            index = pp.create_sgen(
-                net, int(g.bus), p_mw=0.0, q_mvar=0.0, controllable=True, min_q_mvar=0.0,
-                max_q_mvar=0.0, name=str(name), **limits,
-            )  # fmt: skip
-            kind = "sgen"
-        pp.create_poly_cost(net, index, kind, cp1_eur_per_mw=float(g.b),
-                            cp2_eur_per_mw2=float(g.c), cp0_eur=float(g.a))  # fmt: skip
-        elements.append((kind, int(index)))
-    return elements
+    return pandapower_network(
+        feeder.buses.index, feeder.lines, with_q(feeder.loads, load_kw, ratio),
+        feeder.generators, int(feeder.source_bus), nominal_kv(feeder, vn_kv),
+        dispatchable="sgen", voltage_limits_pu=(vmin_pu, vmax_pu), source_pu=source_pu,
+        name=feeder.name,
+    )  # fmt: skip

@@ -34,7 +34,8 @@ class Analyses(NamedTuple):
     ac_correct: bool = False
 
     def settings(self, settings):
-        """``settings`` with the voltage limits (exact mode becomes the voltage mode;
+        """``settings`` with the voltage limits (exact mode becomes the voltage mode), checked
+        by :class:`~popdispatch.online.RunSettings` (the one check of ``--vmin``/``--vmax``:
         :class:`~popdispatch.errors.OptionError`, exit 2, for bad limits or another mode)."""
         from dataclasses import replace
 
@@ -70,7 +71,11 @@ def analysis_options(func):
     @functools.wraps(func)
     def command(*args, ac, vn_kv, html, vmin, vmax, ac_correct, **kwargs):
         if ac_correct and click.get_current_context().info_name != "snapshot":
-            raise click.BadParameter("runs on snapshot only", param_hint="'--ac-correct'")
+            raise click.BadParameter(
+                "runs on snapshot only: a day's loss factors would change the generators' "
+                "costs step by step, which the day loop holds fixed (docs/voltage.md)",
+                param_hint="'--ac-correct'",
+            )
         if ac_correct and vmin is None and vmax is None:
             raise click.BadParameter("needs --vmin or --vmax", param_hint="'--ac-correct'")
         analyses = Analyses(ac or vn_kv is not None or ac_correct, vn_kv, html, vmin, vmax,
@@ -120,15 +125,13 @@ def analysis_options(func):
 
 def check_analyses(analyses: Analyses) -> None:
     """Before any work: the extras installed (exit 1 naming the extra) and ``--html``'s folder
-    there (exit 2) and writable (exit 1)."""
+    there (exit 2) and writable (exit 1). The voltage limits are the run settings' to check
+    (:class:`~popdispatch.online.RunSettings`, through :meth:`Analyses.settings`, which the
+    commands call before loading anything): one rule for Python and the command line."""
     from importlib.util import find_spec
 
     from popdispatch.cli.options import check_out
 
-    if analyses.vmin is not None or analyses.vmax is not None:
-        from popdispatch.ac.lindistflow import check_voltage_limits
-
-        check_voltage_limits(analyses.vmin, analyses.vmax)  # OptionError: exit 2
     wanted = [name for name, on in (("ac", analyses.ac), ("html", analyses.html)) if on]
     for name in wanted:
         module, extra = EXTRAS[name]
@@ -153,8 +156,10 @@ def snapshot_analyses(analyses, problem, profiles, result, summary: dict, progre
             ac = check_snapshot(problem, profiles, result, **analyses.model_options())
         summary["ac"] = ac.summary()
     if problem.n_voltage:
-        summary["voltage"] = _voltage(problem, [result.run.minute], result.run.setpoints_kw,
-                                      [result.opf], ac and ac.buses["v_pu"].min())  # fmt: skip
+        run = result.run
+        summary["voltage"] = _voltage(problem, [run.minute], run.setpoints_kw, [result.opf],
+                                      ac and ac.buses["v_pu"].min(),
+                                      run.voltage_price_eur_per_mwh)  # fmt: skip
     if analyses.ac_correct:
         summary["ac_correct"] = _corrected(analyses, problem, profiles, result, progress)
     if analyses.html is not None:
@@ -183,7 +188,8 @@ def day_analyses(analyses, problem, profiles, result, summary: dict, progress: P
     if problem.n_voltage:
         run = result.run
         summary["voltage"] = _voltage(problem, run.minutes, run.setpoints_kw, result.opf,
-                                      ac and float(ac.flows.v_pu.min()))  # fmt: skip
+                                      ac and float(ac.flows.v_pu.min()),
+                                      run.voltage_price_eur_per_mwh)  # fmt: skip
     if analyses.html is not None:
         from popdispatch.report.interactive import write_day_html
 
@@ -200,12 +206,12 @@ def day_analyses(analyses, problem, profiles, result, summary: dict, progress: P
     return steps
 
 
-def _voltage(problem, minutes, p_kw, opf, ac_v_min_pu: float | None) -> dict:
-    """The ``voltage`` JSON object (:func:`popdispatch.ac.report.voltage_summary`), with the
-    linearization error where the AC check ran."""
+def _voltage(problem, minutes, p_kw, opf, ac_v_min_pu: float | None, prices=None) -> dict:
+    """The ``voltage`` JSON object (:func:`popdispatch.ac.report.voltage_summary`; ``prices``:
+    the run's voltage prices, EUR/MWh), with the linearization error where the AC check ran."""
     from popdispatch.ac.report import linearization_error, voltage_summary
 
-    out = voltage_summary(problem, minutes, p_kw, opf)
+    out = voltage_summary(problem, minutes, p_kw, opf, prices)
     if ac_v_min_pu is not None:
         out.update(linearization_error(out, ac_v_min_pu))
     return out

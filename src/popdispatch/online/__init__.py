@@ -28,7 +28,7 @@ from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.integrate import Status
 from popdispatch.online.day import DayArrays
 from popdispatch.online.engine import Engine, MinuteRun, limited_flows_mw, overflow_kw
-from popdispatch.online.kkt import KktTolerances, kkt_violations
+from popdispatch.online.kkt import KktTolerances, kkt_violations, net_prices
 from popdispatch.online.settings import SHARES_NAME, X0_CHOICES, RunSettings, initial_shares
 from popdispatch.opf import generation_cost
 
@@ -40,6 +40,11 @@ class SnapshotResult:
     ``trajectory_kw``: set points per iteration (rows 0..last, columns generators);
     ``converged_at`` / ``first_congestion``: iterations (None if never);
     ``overflow_kw``: final overflow per limited line (max(|flow| - U, 0)).
+    ``line_price_eur_per_mwh`` (per limited line) and ``voltage_price_eur_per_mwh`` (per
+    monitored bus): the prices the engine's controllers broadcast at the end state, EUR/MWh
+    (:func:`~popdispatch.online.kkt.net_prices`: a line's ``mu_up - mu_down``, a bus's
+    ``mu_lo - mu_hi`` per MW equivalent); at a converged minute they are the DC-OPF's
+    (LinDistFlow OPF's) duals. ``None`` in a mode without price controllers (paper mode).
 
     Status semantics: ``converged`` means the dynamics came to rest (the stopping rule of
     :mod:`popdispatch.integrate`) and, in a mode that claims the DC-OPF (exact), that the end
@@ -64,6 +69,8 @@ class SnapshotResult:
     infeasible: bool = False
     stall_reason: str | None = None
     rest_at: int | None = None
+    line_price_eur_per_mwh: np.ndarray | None = None
+    voltage_price_eur_per_mwh: np.ndarray | None = None
 
     @property
     def setpoints_kw(self) -> np.ndarray:
@@ -102,6 +109,7 @@ def run_snapshot(
     rested = run.status == Status.CONVERGED
     reason = engine.stall_reasons(np.array([minute]), final[None], engine.z[None],
                                   np.array([rested]))[0]  # fmt: skip
+    line_price, voltage_price = _prices(engine, np.array([minute]), final[None], engine.z[None])
     return SnapshotResult(
         minute=minute,
         demand_kw=float(problem.demand[minute - 1] * KW_PER_MW),
@@ -117,7 +125,20 @@ def run_snapshot(
         infeasible=run.status == Status.INFEASIBLE,
         stall_reason=reason,
         rest_at=int(converged_at) if rested else None,
+        line_price_eur_per_mwh=None if line_price is None else line_price[0],
+        voltage_price_eur_per_mwh=None if voltage_price is None else voltage_price[0],
     )
+
+
+def _prices(
+    engine: Engine, minutes: np.ndarray, p_mw: np.ndarray, z: np.ndarray
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The engine's broadcast ``(line, voltage)`` prices (EUR/MWh, minutes x lines / buses)
+    at set points ``p_mw`` (MW) and controller states ``z``; ``(None, None)`` in a mode
+    without price controllers (paper mode)."""
+    if z.shape[1] == 0:
+        return None, None
+    return net_prices(engine.problem, minutes, p_mw, z, engine.constants.C)
 
 
 @dataclass(frozen=True)
@@ -132,6 +153,10 @@ class DayResult:
     in a mode that claims the DC-OPF, passing its KKT check; ``stalled`` means at rest but
     failing it (``stall_reasons`` maps such 1-based minutes to the reason). A stalled minute
     is never counted as converged.
+
+    ``line_price_eur_per_mwh`` (minutes, limited lines) and ``voltage_price_eur_per_mwh``
+    (minutes, monitored buses): the engine's broadcast prices at each minute's end, EUR/MWh,
+    as for a snapshot (``None`` in paper mode).
     """
 
     minutes: np.ndarray
@@ -149,6 +174,8 @@ class DayResult:
     infeasible: np.ndarray | None = None
     stalled: np.ndarray | None = None
     stall_reasons: dict[int, str] = field(default_factory=dict)
+    line_price_eur_per_mwh: np.ndarray | None = None
+    voltage_price_eur_per_mwh: np.ndarray | None = None
 
     @property
     def status(self) -> str:
@@ -176,8 +203,9 @@ def run_day(
 ) -> DayResult:
     """The online day: every minute continues from the previous state until converged.
 
-    ``minutes``: 1-based minutes to simulate in order (default the whole day 1..1440); each
-    minute warm-starts from the state the previous simulated minute ended in.
+    ``minutes``: 1-based steps of the problem's series to simulate in order (default all of
+    them, ``1..len(problem.demand)``: 1440 for a day of minutes, 96 for a day of 15-minute
+    SimBench steps); each step warm-starts from the state the previous simulated one ended in.
     ``progress``: called with each minute once it is done (e.g. to advance a progress bar);
     the compiled loop then runs in chunks of :data:`PROGRESS_CHUNK` minutes.
     """
@@ -205,6 +233,7 @@ def run_day(
     rested = out.status == Status.CONVERGED
     reasons = engine.stall_reasons(minutes, setpoints, out.states, rested)
     stalled = np.array([r is not None for r in reasons], dtype=bool)
+    line_price, voltage_price = _prices(engine, minutes, setpoints, out.states)
     return DayResult(
         minutes=minutes,
         settings=settings,
@@ -221,6 +250,8 @@ def run_day(
         infeasible=out.status == Status.INFEASIBLE,
         stalled=stalled,
         stall_reasons={int(m): r for m, r in zip(minutes, reasons, strict=True) if r},
+        line_price_eur_per_mwh=line_price,
+        voltage_price_eur_per_mwh=voltage_price,
     )
 
 

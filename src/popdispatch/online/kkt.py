@@ -91,12 +91,7 @@ def kkt_violations(
     p_mw, z = np.atleast_2d(p_mw), np.atleast_2d(z)
     n_lines = len(problem.limit)
     down = problem.down
-    flow = problem.line_load_flow[rows] - p_mw @ down.T
-    excess = np.concatenate([flow - problem.limit, -flow - problem.limit], axis=1)
-    C = np.asarray(C, dtype=float)
-    if C.ndim == 2:  # per minute and limited line, the same for both directions
-        C = np.concatenate([C, C], axis=1)
-    mu = np.maximum(0.0, z[:, : 2 * n_lines] + C * excess)
+    flow, mu = line_prices(problem, rows, p_mw, z, C)
     nu = mu[:, :n_lines] - mu[:, n_lines:]
     v_excess, v_mu = voltage_prices(problem, rows, p_mw, z, C)
     n_v = problem.n_voltage
@@ -118,6 +113,41 @@ def kkt_violations(
             )
         )
     return reasons
+
+
+def line_prices(
+    problem: DispatchProblem, rows: np.ndarray, p_mw: np.ndarray, z: np.ndarray, C
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(flow, mu)`` of the limited lines at 0-based ``rows`` (minutes - 1): the flows (MW,
+    minutes x lines) of set points ``p_mw`` (MW) and the broadcast prices ``mu = max(0, z +
+    C e)`` (EUR/MW, minutes x 2 lines: upward then downward; ``e`` the excess over the limit,
+    MW; ``C`` one value or one per minute and limited line, EUR/MW per MW)."""
+    flow = problem.line_load_flow[rows] - p_mw @ problem.down.T
+    excess = np.concatenate([flow - problem.limit, -flow - problem.limit], axis=1)
+    C = np.asarray(C, dtype=float)
+    if C.ndim == 2:  # per minute and limited line, the same for both directions
+        C = np.concatenate([C, C], axis=1)
+    return flow, np.maximum(0.0, z[:, : 2 * len(problem.limit)] + C * excess)
+
+
+def net_prices(
+    problem: DispatchProblem, minutes: np.ndarray, p_mw: np.ndarray, z: np.ndarray, C
+) -> tuple[np.ndarray, np.ndarray]:
+    """The prices the controllers broadcast at set points ``p_mw`` (minutes x generators, MW)
+    and controller states ``z`` (a mode with price controllers: exact, voltage) at the 1-based
+    ``minutes``: ``(line, voltage)``, EUR/MWh (= EUR/MW, Table I's cost per hour).
+
+    ``line`` (minutes x limited lines): ``nu_k = mu_up,k - mu_down,k`` (positive: the flow
+    towards the leaves binds); ``voltage`` (minutes x monitored buses): ``m_j = mu_lo,j -
+    mu_hi,j`` per MW equivalent (positive: ``vmin`` binds; modes/voltage.py). At a KKT point
+    they are the DC-OPF's duals, :attr:`popdispatch.opf.OpfResult.line_price` and
+    ``voltage_price``, with the same signs."""
+    rows = np.asarray(minutes, dtype=np.int64) - 1
+    p_mw, z = np.atleast_2d(p_mw), np.atleast_2d(z)
+    n_lines, n_v = len(problem.limit), problem.n_voltage
+    _, mu = line_prices(problem, rows, p_mw, z, C)
+    _, v_mu = voltage_prices(problem, rows, p_mw, z, C)
+    return mu[:, :n_lines] - mu[:, n_lines:], v_mu[:, :n_v] - v_mu[:, n_v:]
 
 
 def voltage_prices(

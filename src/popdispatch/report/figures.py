@@ -11,11 +11,13 @@ import functools
 import textwrap
 
 import numpy as np
+import pandas as pd
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from popdispatch.feeder.profiles import Timeline
 from popdispatch.feeder.reduction import ReducedFeeder
 from popdispatch.game.controllers import broadcast_signals, overflow_signal
 from popdispatch.game.fitness import FitnessParameters, barrier
@@ -344,32 +346,64 @@ def _subtree_lines(reduced: ReducedFeeder, line: int) -> np.ndarray:
 # -- figures 4-6: set points against the DC-OPF -------------------------------------------------
 
 
+def step_spans_h(steps: np.ndarray, timeline: Timeline | None = None) -> tuple[np.ndarray, ...]:
+    """``(start, end)`` of each 1-based step, hours from midnight of the series' first day:
+    from ``timeline`` (its step times and lengths: minutes of the ELV day, quarter hours of a
+    SimBench year, ...), else one-minute steps from midnight."""
+    steps = np.asarray(steps, dtype=np.int64)
+    if timeline is None:
+        return (steps - 1) / 60.0, steps / 60.0
+    times = timeline.times
+    if not isinstance(times, pd.TimedeltaIndex):  # dated: from the first day's midnight
+        times = times - times[0].normalize()
+    start = np.asarray(times[steps - 1].total_seconds(), dtype=float) / 3600.0
+    return start, start + np.asarray(timeline.hours, dtype=float)[steps - 1]
+
+
+def _time_label(start_h: np.ndarray, timeline: Timeline | None) -> str:
+    """The x label: time of day (a series past its first day: since that day's midnight),
+    naming a step length other than one minute."""
+    label = "time of day, h"
+    if len(start_h) and start_h.max() >= 24.0:
+        dated = timeline is not None and isinstance(timeline.times, pd.DatetimeIndex)
+        label = f"time since {timeline.times[0]:%Y-%m-%d} 00:00, h" if dated else "time, h"
+    step = 1.0 if timeline is None else timeline.step_minutes
+    if step is None:
+        return f"{label} (steps of varying length)"
+    return label if step == 1.0 else f"{label} ({step:g}-minute steps)"
+
+
 @styled
 def base_day_figure(
-    result: DayComparison, buses: list[int], profile_source: str | None = None
+    result: DayComparison,
+    buses: list[int],
+    profile_source: str | None = None,
+    timeline: Timeline | None = None,
 ) -> Figure:
     """Generator outputs over the day: dynamics solid, DC-OPF dashed, one panel per generator.
 
-    ``buses``: the original bus of each generator (for the panel titles). Minutes a generator
+    ``buses``: the original bus of each generator (for the panel titles). Steps a generator
     is offline (``result.run.online``, e.g. ``--event``) are shaded. ``profile_source`` (default
-    the run's) is named in the title: official or synthetic loads.
+    the run's) is named in the title: official or synthetic loads. ``timeline``: the series'
+    step times and lengths (:class:`~popdispatch.feeder.profiles.Timeline`; default one-minute
+    steps from midnight): each step's value is drawn at its end, in hours.
     """
     run = result.run
-    hours = run.minutes / 60.0
+    starts, hours = step_spans_h(run.minutes, timeline)
     colors = generator_colors(run.generators)
     fig, axes = new_figure(DOUBLE, 4.4, nrows=2, ncols=3, sharex=True)
     opf = result.opf_kw
     online = np.asarray(run.online, dtype=bool).reshape(len(hours), -1)
     for k, (ax, name) in enumerate(zip(axes.flat, run.generators, strict=False)):
-        _shade_offline(ax, run.minutes, online[:, k])
+        _shade_offline(ax, (starts, hours), online[:, k])
         ax.plot(hours, run.setpoints_kw[:, k], color=colors[name], label="dynamics")
         ax.plot(hours, opf[:, k], color="black", ls="--", lw=0.7, alpha=0.8, label="DC-OPF")
         _readable_y(ax)
         ax.set_title(f"{name} (bus {buses[k]})" + ("" if online[:, k].all() else ", outage"))
         ax.set_ylabel("output, kW")
-    _hours_axis(axes[0, 0], hours)
+    _hours_axis(axes[0, 0], starts, hours)
     for ax in axes[-1]:
-        ax.set_xlabel("time of day, h")
+        ax.set_xlabel(_time_label(starts, timeline))
     handles = [
         Line2D([], [], color="grey", label="dynamics (colour per generator)"),
         Line2D([], [], color="black", ls="--", lw=0.7, label="DC-OPF"),
@@ -386,10 +420,11 @@ def base_day_figure(
     return fig
 
 
-def _hours_axis(ax, hours: np.ndarray) -> None:
-    """The whole day with ticks every 6 h; a shorter span fills the (shared) axis."""
-    first, last = (float(hours.min()) - 1 / 60, float(hours.max())) if len(hours) else (0, 24)
-    if last - first >= 12.0:
+def _hours_axis(ax, starts: np.ndarray, ends: np.ndarray) -> None:
+    """The whole day with ticks every 6 h; a shorter span (or a longer series) fills the
+    (shared) axis. ``starts``/``ends``: the steps' spans, h."""
+    first, last = (float(starts.min()), float(ends.max())) if len(ends) else (0, 24)
+    if last - first >= 12.0 and last <= 24.0 + 1e-9:
         ax.set_xlim(0, 24)
         ax.set_xticks(range(0, 25, 6))
     else:
@@ -409,12 +444,14 @@ def _readable_y(ax, min_span_kw: float = 1.0) -> None:
 OFFLINE = {"facecolor": "#bbbbbb", "alpha": 0.5, "hatch": "///", "edgecolor": "#777777", "lw": 0}
 
 
-def _shade_offline(ax, minutes: np.ndarray, online: np.ndarray) -> None:
-    """Shade the spans of consecutive simulated minutes where the generator is offline."""
+def _shade_offline(ax, spans: tuple[np.ndarray, np.ndarray], online: np.ndarray) -> None:
+    """Shade the spans of consecutive simulated steps where the generator is offline
+    (``spans``: each step's start and end, h)."""
+    begin, end = spans
     off = np.concatenate([[False], ~online, [False]]).astype(int)
     starts, stops = np.flatnonzero(np.diff(off) == 1), np.flatnonzero(np.diff(off) == -1)
     for a, b in zip(starts, stops, strict=True):
-        ax.axvspan((minutes[a] - 1) / 60.0, minutes[b - 1] / 60.0, zorder=0, **OFFLINE)
+        ax.axvspan(begin[a], end[b - 1], zorder=0, **OFFLINE)
 
 
 def _iteration_axes(ax, run, opf_kw, colors) -> None:

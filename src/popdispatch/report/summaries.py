@@ -225,6 +225,7 @@ def snapshot_summary(
         "stall_reason": getattr(run, "stall_reason", None),
         "first_congestion_iteration": run.first_congestion,
         "max_overflow_kw": float(run.overflow_kw.max()) if run.overflow_kw.size else 0.0,
+        **snapshot_prices(problem, run, opf),
         "max_abs_error_kw": _finite(error),
         "cost_eur_per_h": cost,
         "opf_cost_eur_per_h": _finite(opf.cost),
@@ -233,6 +234,40 @@ def snapshot_summary(
         "cost_unit": "EUR/h",  # deprecated with cost
         "wall_seconds": run.wall_seconds,
     }
+
+
+def limited_line_buses(problem: DispatchProblem) -> list[tuple[int, int]]:
+    """``(from_bus, to_bus)`` of each limited line (the reduced feeder's, original numbers)."""
+    lines = problem.feeder.lines.iloc[np.asarray(problem.lines, dtype=int)]
+    return [(int(a), int(b)) for a, b in zip(lines.from_bus, lines.to_bus, strict=True)]
+
+
+def snapshot_prices(problem: DispatchProblem, run, opf: OpfResult) -> dict:
+    """``line_prices`` (per limited line: ``from_bus``, ``to_bus``) and ``voltage_prices``
+    (per monitored bus: ``bus``), each with ``price_eur_per_mwh``, the price the run's
+    controllers broadcast at its end state, and ``opf_price_eur_per_mwh``, the DC-OPF's
+    (LinDistFlow OPF's) dual of the same row (null where infeasible); EUR/MWh. A line's price
+    is ``mu_up - mu_down`` (positive: the flow towards the leaves binds), a bus's ``mu_lo -
+    mu_hi`` per MW equivalent (positive: vmin binds; docs/voltage.md). Both lists are null in
+    a mode without price controllers (paper mode)."""
+    line = getattr(run, "line_price_eur_per_mwh", None)
+    voltage = getattr(run, "voltage_price_eur_per_mwh", None)
+    if line is None:
+        return {"line_prices": None, "voltage_prices": None}
+    feasible = opf.status == "optimal"
+    lines = [
+        {"from_bus": a, "to_bus": b, "price_eur_per_mwh": float(price),
+         "opf_price_eur_per_mwh": _finite(dual) if feasible else None}
+        for (a, b), price, dual in zip(limited_line_buses(problem), line, opf.line_price,
+                                       strict=True)
+    ]  # fmt: skip
+    buses = [
+        {"bus": int(bus), "price_eur_per_mwh": float(price),
+         "opf_price_eur_per_mwh": _finite(dual) if feasible else None}
+        for bus, price, dual in zip(problem.voltage_buses, voltage, opf.voltage_price,
+                                    strict=True)
+    ]  # fmt: skip
+    return {"line_prices": lines, "voltage_prices": buses}
 
 
 def _snapshot_generators(
@@ -296,6 +331,10 @@ def day_summary(
     own over every simulated minute (deprecated twins: see the module docstring).
     ``price_runaway_minutes``: where exact mode's own infeasibility signal fired (line prices
     past their cap); the DC-OPF's verdict is the one that counts.
+    ``max_abs_price_gap_eur_per_mwh``: the largest difference between the run's own line and
+    voltage prices and the DC-OPF's duals over the converged minutes with a DC-OPF (EUR/MWh;
+    null in paper mode or without such minutes; per minute in ``day.csv``, see
+    :func:`price_columns`).
     ``minutes_outside_limits`` (and ``..._by_generator``) count minutes with a set point more
     than :data:`LIMIT_TOLERANCE_KW` outside its limits, ``max_outside_limits_kw`` the worst.
     """
@@ -327,10 +366,26 @@ def day_summary(
         "price_runaway_minutes": _runaway_minutes(run),
         "stalled_minutes": sorted(int(m) for m in getattr(run, "stall_reasons", {})),
         "converged_minutes": int(run.converged.sum()),
+        "max_abs_price_gap_eur_per_mwh": max_price_gap(result),
         **_day_comparison(problem, result, timeline.hours[run.minutes - 1]),
         "max_overflow_kw": float(run.overflow_kw.max()) if run.overflow_kw.size else 0.0,
         "wall_seconds": run.wall_seconds,
     }
+
+
+def max_price_gap(result: DayComparison) -> float | None:
+    """Largest ``|engine price - OPF dual|`` (EUR/MWh) over the converged minutes with a
+    DC-OPF, limited lines and monitored buses together; None in paper mode or without such
+    minutes (or without priced rows)."""
+    run = result.run
+    line = getattr(run, "line_price_eur_per_mwh", None)
+    if line is None:
+        return None
+    rows = np.flatnonzero(np.asarray(run.converged, bool) & np.asarray(result.feasible, bool))
+    engine = np.concatenate([line, run.voltage_price_eur_per_mwh], axis=1)[rows]
+    opf = np.array([np.concatenate([result.opf[r].line_price, result.opf[r].voltage_price])
+                    for r in rows]).reshape(engine.shape)  # fmt: skip
+    return float(np.max(np.abs(engine - opf))) if engine.size else None
 
 
 def _runaway_minutes(run) -> list[int]:
@@ -433,4 +488,29 @@ def day_table(
     table["opf_cost_eur_per_h"] = [o.cost for o in result.opf]
     overflow = run.overflow_kw
     table["max_overflow_kw"] = overflow.max(axis=1) if overflow.shape[1] else 0.0
+    if problem is not None:
+        table = pd.concat([table, price_columns(problem, result)], axis=1)
     return table
+
+
+def price_columns(problem: DispatchProblem, result: DayComparison) -> pd.DataFrame:
+    """Per minute, the run's broadcast prices and the DC-OPF's duals (EUR/MWh, as in
+    :func:`snapshot_prices`): ``line_{from}_{to}_price_eur_per_mwh`` and
+    ``line_{from}_{to}_opf_price_eur_per_mwh`` per limited line, ``bus_{j}_price_eur_per_mwh``
+    and ``bus_{j}_opf_price_eur_per_mwh`` per monitored bus (OPF empty where infeasible). No
+    columns in a mode without price controllers (paper mode)."""
+    run = result.run
+    line = getattr(run, "line_price_eur_per_mwh", None)
+    if line is None:
+        return pd.DataFrame(index=range(len(run.minutes)))
+    voltage = run.voltage_price_eur_per_mwh
+    opf_line = np.array([o.line_price for o in result.opf]).reshape(line.shape)
+    opf_voltage = np.array([o.voltage_price for o in result.opf]).reshape(voltage.shape)
+    columns = {}
+    for k, (a, b) in enumerate(limited_line_buses(problem)):
+        columns[f"line_{a}_{b}_price_eur_per_mwh"] = line[:, k]
+        columns[f"line_{a}_{b}_opf_price_eur_per_mwh"] = opf_line[:, k]
+    for j, bus in enumerate(problem.voltage_buses):
+        columns[f"bus_{int(bus)}_price_eur_per_mwh"] = voltage[:, j]
+        columns[f"bus_{int(bus)}_opf_price_eur_per_mwh"] = opf_voltage[:, j]
+    return pd.DataFrame(columns, index=range(len(run.minutes)))
