@@ -29,8 +29,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from popdispatch import cache
 from popdispatch.errors import ProfileError
 from popdispatch.feeder.profiles import MINUTES_PER_DAY, LoadProfiles
+from popdispatch.readers.manifest import Inputs, code_hash, split_current
 from popdispatch.readers.opendss import _LOAD_KEYS, Statement, find_file, parse_statements
 
 #: Environment variable naming a profile folder (used by :func:`resolve_profiles`).
@@ -38,16 +40,25 @@ PROFILES_ENV = "POPDISPATCH_PROFILES"
 #: The shipped default profiles, in ``popdispatch/data``.
 DEFAULT_PROFILES_FILE = "default_profiles.csv.gz"
 
+#: Cache entry of a profile folder's table (:mod:`popdispatch.cache`) and its layout version.
+PROFILES_CACHE, PROFILES_FORMAT = "profiles", 1
+
 _LOADSHAPE_KEYS = {"npts", "minterval", "sinterval", "interval", "mult", "useactual"}
 _SHAPE_NUMBER = re.compile(r"(\d+)$")
 
 
-def read_profiles(folder: str | Path) -> LoadProfiles:
+def read_profiles(folder: str | Path, use_cache: bool = True) -> LoadProfiles:
     """Read the official per-load profiles from ``folder`` (OpenDSS form or IEEE CSV form).
 
     Returns :class:`~popdispatch.feeder.profiles.LoadProfiles` with index ``minute`` 1..1440,
     one column per load (in file order, names as spelled there, e.g. ``LOAD1``), values in kW,
     and ``source = "official profiles: <absolute folder>"``.
+
+    ``use_cache``: take the table from the on-disk cache (:mod:`popdispatch.cache`) when an
+    entry for this folder exists and every file and folder the read looked at still has the
+    size and modification time it had then (:mod:`popdispatch.readers.manifest`); otherwise
+    read the files and store the table for the next process. A warm read of the official
+    folder takes about 5 ms instead of about 0.15 s.
     """
     root = Path(folder).expanduser()
     if not root.is_dir():
@@ -58,17 +69,67 @@ def read_profiles(folder: str | Path) -> LoadProfiles:
     except OSError as exc:
         raise ProfileError(f"profile folder {root} is unreadable: {exc}") from None
     source = f"official profiles: {root}"
-    loads_txt = find_file(root, "Loads.txt", ProfileError)
-    if loads_txt is not None:
-        kw = _read_opendss_form(root, loads_txt)
-    else:
-        loads_csv = find_file(root, "Loads.csv", ProfileError)
-        if loads_csv is None:
-            raise ProfileError(
-                f"{root}: neither Loads.txt (OpenDSS form) nor Loads.csv (IEEE CSV form)"
-            )
-        kw = _read_csv_form(root, loads_csv)
+    key = profiles_cache_key(root)
+    if use_cache:
+        cached = _from_cache(key)
+        if cached is not None:
+            return LoadProfiles(cached, source)
+    inputs = Inputs()
+    kw = _read_folder(root, inputs)
+    if use_cache:
+        arrays = {"kw": kw.to_numpy(float), "loads": np.array(list(kw.columns), dtype=str)}
+        cache.save_arrays(PROFILES_CACHE, key, {**arrays, **inputs.arrays()})
     return LoadProfiles(kw, source)
+
+
+def profiles_cache_key(root: Path) -> dict:
+    """The cache key of the profile folder ``root`` (absolute): the folder, the layout and
+    package versions and the code of the readers (the inputs' sizes and times are checked
+    apart, :func:`popdispatch.readers.manifest.split_current`)."""
+    from popdispatch import __version__
+
+    code = code_hash("readers/profiles.py", "readers/opendss.py", "readers/manifest.py")
+    return {
+        "what": "load profile folder",
+        "folder": str(root),
+        "format": PROFILES_FORMAT,
+        "popdispatch": __version__,
+        "code": code,
+    }
+
+
+def _from_cache(key: dict) -> pd.DataFrame | None:
+    """The cached table under ``key`` if its inputs are unchanged and it is sound, else None."""
+    arrays = split_current(cache.load_arrays(PROFILES_CACHE, key))
+    if arrays is None or set(arrays) != {"kw", "loads"}:
+        return None
+    kw, loads = arrays["kw"], arrays["loads"]
+    if kw.dtype.kind != "f" or kw.shape != (MINUTES_PER_DAY, len(loads)) or not len(loads):
+        return None
+    if loads.dtype.kind != "U" or len(set(loads.tolist())) != len(loads):
+        return None
+    if not (np.isfinite(kw).all() and (kw >= 0).all()):
+        return None
+    table = pd.DataFrame(
+        kw,
+        index=pd.RangeIndex(1, MINUTES_PER_DAY + 1, name="minute"),
+        columns=pd.Index(loads.tolist(), dtype=object, name="load"),
+    )
+    return table
+
+
+def _read_folder(root: Path, inputs: Inputs) -> pd.DataFrame:
+    """The kW table of a profile folder, every file and folder looked at added to ``inputs``."""
+    inputs.add(root)
+    loads_txt = inputs.add(find_file(root, "Loads.txt", ProfileError), root)
+    if loads_txt is not None:
+        return _read_opendss_form(root, loads_txt, inputs)
+    loads_csv = inputs.add(find_file(root, "Loads.csv", ProfileError), root)
+    if loads_csv is None:
+        raise ProfileError(
+            f"{root}: neither Loads.txt (OpenDSS form) nor Loads.csv (IEEE CSV form)"
+        )
+    return _read_csv_form(root, loads_csv, inputs)
 
 
 def _table(columns: dict[str, np.ndarray]) -> pd.DataFrame:
@@ -121,11 +182,11 @@ def _check_values(values: list[str], path: Path, load: str, first_line: int) -> 
 # -- OpenDSS form -------------------------------------------------------------------------------
 
 
-def _read_opendss_form(root: Path, loads_txt: Path) -> pd.DataFrame:
+def _read_opendss_form(root: Path, loads_txt: Path, inputs: Inputs) -> pd.DataFrame:
     loads = parse_statements(loads_txt, "Load", _LOAD_KEYS, ProfileError)
     if not loads:
         raise ProfileError(f"{loads_txt}: no Load statements")
-    shapes_txt = find_file(root, "LoadShapes.txt", ProfileError)
+    shapes_txt = inputs.add(find_file(root, "LoadShapes.txt", ProfileError), root)
     shapes: dict[str, Statement] | None = None
     if shapes_txt is not None:
         shapes = {
@@ -154,6 +215,7 @@ def _read_opendss_form(root: Path, loads_txt: Path) -> pd.DataFrame:
         path = find_file(root, relative, ProfileError)
         if path is None or not path.is_file():
             raise ProfileError(f"{root}: missing profile file {relative} for load {load.name!r}")
+        inputs.add(path, root)
         if path not in cache:
             cache[path] = _read_mult_file(path, load.name)
         columns[load.name] = cache[path] * scale
@@ -206,7 +268,7 @@ def _csv_rows(path: Path, what: str) -> list[list[str]]:
         raise ProfileError(f"cannot read {what} {path}: {exc}") from None
 
 
-def _read_csv_form(root: Path, loads_csv: Path) -> pd.DataFrame:
+def _read_csv_form(root: Path, loads_csv: Path, inputs: Inputs) -> pd.DataFrame:
     rows = _csv_rows(loads_csv, "load table")
     header_at = next((i for i, row in enumerate(rows) if row and row[0].lower() == "name"), None)
     if header_at is None:
@@ -244,6 +306,7 @@ def _read_csv_form(root: Path, loads_csv: Path) -> pd.DataFrame:
         path = find_file(profiles_dir, relative, ProfileError)
         if path is None or not path.is_file():
             raise ProfileError(f"{profiles_dir}: missing profile file {relative} for load {name!r}")
+        inputs.add(path, root)
         columns[name] = _read_profile_csv(path, name) * scale
     if not columns:
         raise ProfileError(f"{loads_csv}: no loads below the header")
