@@ -7,8 +7,8 @@ converts to MW). Buses are identified by integer ids (the IEEE numbers for ``iee
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
-import networkx as nx
 import numpy as np
 import pandas as pd
 from scipy.sparse import csr_array
@@ -17,6 +17,9 @@ from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 from popdispatch.errors import FeederError
 from popdispatch.feeder.tree import Tree, build_tree
 from popdispatch.feeder.tree import path_lines as tree_path_lines
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 BUS_COLUMNS = ["x", "y"]
 LINE_COLUMNS = ["from_bus", "to_bus", "length_km", "r_ohm", "x_ohm", "limit_kw"]
@@ -70,6 +73,8 @@ class Feeder:
 
     def graph(self) -> nx.Graph:
         """The feeder as an undirected networkx graph; edges carry the line name as ``line``."""
+        import networkx as nx  # only here: importing networkx costs about 0.2 s
+
         g = nx.Graph()
         g.add_nodes_from(self.buses.index.tolist())
         g.add_edges_from(
