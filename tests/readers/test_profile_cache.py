@@ -5,6 +5,7 @@ corrupt entry or a disabled cache falls back to reading the files."""
 from __future__ import annotations
 
 import os
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,13 @@ import pytest
 from popdispatch import cache
 from popdispatch.errors import ProfileError
 from popdispatch.readers import profiles as reader
-from popdispatch.readers.profiles import PROFILES_CACHE, profiles_cache_key, read_profiles
+from popdispatch.readers.profiles import (
+    DEFAULT_PROFILES_FILE,
+    PROFILES_CACHE,
+    default_profiles,
+    profiles_cache_key,
+    read_profiles,
+)
 
 from helpers import MISSING_OFFICIAL, find_official_folder
 
@@ -167,3 +174,16 @@ def test_official_folder_cached_equals_fresh(cache_dir, no_read):
     warm = read_profiles(OFFICIAL)
     pd.testing.assert_frame_equal(warm.kw, fresh.kw, check_exact=True)
     assert warm.source == fresh.source
+
+
+def test_shipped_default_cached_equals_the_file(cache_dir, monkeypatch):
+    resource = resources.files("popdispatch") / "data" / DEFAULT_PROFILES_FILE
+    with resources.as_file(resource) as path:
+        expected = np.loadtxt(path, delimiter=",", comments="#", skiprows=4)  # numpy reader
+    first = default_profiles()
+    monkeypatch.setattr(pd, "read_csv", None)  # a second read can only come from the cache
+    warm = default_profiles()
+    pd.testing.assert_frame_equal(warm.kw, first.kw, check_exact=True)
+    assert warm.source == first.source and warm.source.startswith("synthetic default")
+    np.testing.assert_array_equal(warm.kw.index.to_numpy(), expected[:, 0])
+    np.testing.assert_array_equal(warm.kw.to_numpy(), expected[:, 1:])
