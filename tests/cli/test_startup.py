@@ -1,0 +1,79 @@
+"""What the quick commands import (issue 13): ``--help`` and a warm ``cases`` never import numba
+(about 0.7 s of import and first-call set-up), and the package's lazy namespaces import a reader
+or feeder module only when one of its names is used. Each check runs in a fresh interpreter,
+since this test process has imported everything already."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from popdispatch import cache
+from popdispatch.feeder import cases
+
+SRC = Path(__file__).resolve().parents[2] / "src"
+HEAVY = ("numba", "pandas", "scipy", "networkx", "tqdm", "pandapower", "matplotlib")
+
+
+def imported_after(code: str) -> set[str]:
+    """The heavy top-level modules imported by running ``code`` in a fresh interpreter."""
+    probe = f"{code}\nimport json, sys\nprint(json.dumps(sorted(sys.modules)))"
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")]),
+    }
+    done = subprocess.run(
+        [sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True
+    )
+    modules = set(json.loads(done.stdout.strip().splitlines()[-1]))
+    return modules
+
+
+def _cli(args: list[str]) -> str:
+    return (
+        "from popdispatch.cli.process import main\n"
+        "import contextlib, io\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        f"    try:\n        main({args!r})\n    except SystemExit:\n        pass"
+    )
+
+
+def test_help_imports_no_engine():
+    modules = imported_after(_cli(["--help"]))
+    assert not {m for m in HEAVY if m in modules}
+
+
+def test_warm_cases_imports_no_numba():
+    names = list(cases.CASES)
+    if cases.simbench_available():
+        names += [cases.SIMBENCH_PREFIX + code for code in cases.SIMBENCH_CODES]
+    # a warm cache: counts stored under the key list_cases asks for (reading every case with
+    # pandapower to fill it takes about 20 s and is tested in tests/readers/test_pandapower.py)
+    n = len(names)
+    counts = {
+        "name": np.array(names, dtype=str),
+        "buses": np.full(n, 3, dtype=np.int64),
+        "lines": np.full(n, 2, dtype=np.int64),
+        "loads": np.ones(n, dtype=np.int64),
+        "total_load_kw": np.ones(n),
+    }
+    assert cache.save_arrays(cases.CASES_CACHE, cases._cases_cache_key(names), counts)
+    modules = imported_after(_cli(["cases", "--quiet"]))
+    assert "numba" not in modules and "pandapower" not in modules and "tqdm" not in modules
+
+
+def test_lazy_namespaces():
+    modules = imported_after(
+        "from popdispatch.readers import read_profiles\nimport popdispatch.feeder"
+    )
+    assert "popdispatch.readers.profiles" in modules
+    lazy = ("matpower", "pandapower", "opendss_direct", "series")
+    assert not {f"popdispatch.readers.{m}" for m in lazy} & modules
+    assert "popdispatch.feeder.synthetic" not in modules and "networkx" not in modules
+    modules = imported_after("from popdispatch.feeder import synthetic_feeder, Feeder")
+    assert {"popdispatch.feeder.synthetic", "popdispatch.feeder.model"} <= modules
