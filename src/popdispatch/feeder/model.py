@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 from scipy.sparse import csr_array
-from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
 from popdispatch.errors import FeederError
 from popdispatch.feeder.tree import Tree, build_tree
@@ -171,6 +170,10 @@ def _check_radial(feeder: Feeder) -> None:
             f"line {lines.index[parallel.argmax()]!r} is parallel to another line: feeder is "
             "meshed (popdispatch supports radial feeders only)"
         )
+    # imported here: scipy.sparse.csgraph imports scipy.linalg (about 0.2 s), which a run on a
+    # cached problem (popdispatch.feeder.cached) never needs
+    from scipy.sparse.csgraph import connected_components
+
     graph = csr_array((np.ones(len(lines), dtype=np.int8), (ends_a, ends_b)), shape=(n, n))
     _, component = connected_components(graph, directed=False)
     source = buses.index.get_loc(feeder.source_bus)
@@ -192,6 +195,8 @@ def _loop_message(feeder: Feeder, ends_a: np.ndarray, ends_b: np.ndarray, source
     yet connected by earlier lines: the first line it rejects closes a loop with earlier lines
     only, the path between its ends in the spanning tree.
     """
+    from scipy.sparse.csgraph import minimum_spanning_tree
+
     n = len(feeder.buses)
     order = np.arange(1, len(ends_a) + 1, dtype=float)  # weights must be positive
     spanning = minimum_spanning_tree(csr_array((order, (ends_a, ends_b)), shape=(n, n)))
