@@ -77,3 +77,32 @@ def test_lazy_namespaces():
     assert "popdispatch.feeder.synthetic" not in modules and "networkx" not in modules
     modules = imported_after("from popdispatch.feeder import synthetic_feeder, Feeder")
     assert {"popdispatch.feeder.synthetic", "popdispatch.feeder.model"} <= modules
+
+
+def test_quick_progress_never_imports_tqdm():
+    code = (
+        "from popdispatch.report.progress import Progress\n"
+        "loud, quiet = Progress(False), Progress(True)\n"
+        "assert sum(loud.iterate(range(1000), 'quick', 1000)) == 499500\n"
+        "assert list(quiet.iterate(range(3), 'quiet', 3)) == [0, 1, 2]\n"
+        "with loud.counter('quick', 10) as advance:\n"
+        "    for _ in range(10):\n"
+        "        advance()"
+    )
+    assert "tqdm" not in imported_after(code)
+
+
+def test_late_bar_counts_from_the_start(monkeypatch):
+    """A bar due after DELAY_S (here 0 s) is made then and continues the count."""
+    import io
+
+    from popdispatch.report import progress
+
+    monkeypatch.setattr(progress, "DELAY_S", 0.0)
+    out = io.StringIO()
+    bar = progress._DelayedBar("slow", 7, {"file": out, "leave": True, "mininterval": 0.0})
+    for _ in range(7):
+        bar.advance()
+    assert bar.bar is not None and bar.bar.n == 7
+    bar.close()
+    assert "slow" in out.getvalue() and "7/7" in out.getvalue()
