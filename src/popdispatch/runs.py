@@ -325,8 +325,7 @@ def load_run(
         series = series_for(source, feeder, profiles, loads, minute, progress)
     else:  # ieee-elv: the profiles (and their note) first, as before
         series = load_profiles(profiles, minute, progress)
-        with progress.step(f"loading {source.label}"):
-            problem = _elv_run_problem(source, series, limits)
+        problem = _elv_run_problem(source, series, limits, progress)
         series = series.for_loads(problem.feeder.original.loads.index)
         check_step(minute, series)
         if isinstance(minutes, Span):
@@ -343,14 +342,15 @@ def load_run(
 
 
 def _elv_run_problem(
-    source: FeederSource, series: LoadProfiles, limits: Sequence[Limit]
+    source: FeederSource, series: LoadProfiles, limits: Sequence[Limit], progress: Progress
 ) -> DispatchProblem:
     """The problem of the ieee-elv feeder (built in, or from OpenDSS files) with ``series``
     and path ``limits``, from the on-disk cache where the built-in case was built before
     (:mod:`popdispatch.feeder.cached`: skips reading and reducing the feeder, ~0.25 s)."""
 
     def build() -> DispatchProblem:
-        feeder = load_feeder(source)
+        with progress.step(f"loading {source.label}"):
+            feeder = load_feeder(source)
         check_limits(limits, feeder)
         return elv_problem(series.for_loads(feeder.loads.index), limits, feeder, check=False)
 
