@@ -106,3 +106,27 @@ def test_late_bar_counts_from_the_start(monkeypatch):
     assert bar.bar is not None and bar.bar.n == 7
     bar.close()
     assert "slow" in out.getvalue() and "7/7" in out.getvalue()
+
+
+def test_command_help_imports_no_engine():
+    for command in ("day", "snapshot", "agents"):
+        modules = imported_after(_cli([command, "--help"]))
+        assert not {m for m in HEAVY if m in modules}, command
+
+
+def test_help_lists_the_engines_own_names():
+    from popdispatch.cli import options
+
+    for choice in (options.DYNAMICS_CHOICE, options.MODE_CHOICE, options.GRAPH_CHOICE,
+                   options.WARM_START_CHOICE):  # fmt: skip
+        assert choice.shown == choice.choices, choice.source
+
+
+def test_bad_choice_is_a_usage_error():
+    from click.testing import CliRunner
+
+    from popdispatch.cli import cli
+
+    result = CliRunner().invoke(cli, ["day", "--mode", "fast"])
+    assert result.exit_code == 2
+    assert "'fast' is not one of 'paper', 'exact', 'voltage'" in result.output
