@@ -31,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 COMMANDS = {
     "day --mode exact": ["day", "--mode", "exact", "--quiet"],
     "--help": ["--help"],
+    "day --help": ["day", "--help"],
     "cases": ["cases", "--quiet"],
 }
 
