@@ -13,7 +13,7 @@ import click
 from popdispatch.cli.analyses import Analyses, analysis_options
 from popdispatch.cli.options import (
     MODE_CHOICE,
-    EngineChoice,
+    WARM_START_CHOICE,
     EventType,
     MinutesType,
     build,
@@ -170,7 +170,7 @@ def snapshot(
 @steps_options
 @option(
     "--warm-start",
-    type=EngineChoice("popdispatch.warm_start:WARM_STARTS"),
+    type=WARM_START_CHOICE,
     help="How a minute starts from the last: shares (the paper's rule, p = x * new demand; "
     "paper mode's default), setpoints (set points kept, the demand step taken by the "
     "generators inside their limits) or merit (set points kept, the step placed in merit "

@@ -138,21 +138,43 @@ FOLDER = click.Path(exists=True, file_okay=False, dir_okay=True, readable=True, 
 
 class EngineChoice(click.Choice):
     """A choice among names the engine defines (``"module:ATTRIBUTE"``), looked up only when
-    click needs them (parsing, help): importing the CLI must not import the engine (numba)."""
+    click parses a value: importing the CLI must not import the engine (numba).
 
-    def __init__(self, source: str, case_sensitive: bool = True) -> None:
+    ``shown``: the names the help lists without importing the engine (``--help`` of a command
+    took about 1 s of numba and pandas imports for three lists of names); parsing always
+    checks against the engine's own names, and tests/cli/test_startup.py checks the two agree.
+    """
+
+    def __init__(
+        self, source: str, case_sensitive: bool = True, shown: tuple[str, ...] = ()
+    ) -> None:
         self.source = source
         self.case_sensitive = case_sensitive
+        self.shown = shown
 
     @property
     def choices(self) -> tuple[str, ...]:
         module, _, attribute = self.source.partition(":")
         return tuple(getattr(importlib.import_module(module), attribute))
 
+    def get_metavar(self, param, ctx) -> str | None:
+        if not self.shown:
+            return super().get_metavar(param, ctx)
+        names = "|".join(self.shown)
+        return f"[{names}]" if param.param_type_name == "option" else f"{{{names}}}"
 
-DYNAMICS_CHOICE = EngineChoice("popdispatch.dynamics:DYNAMICS")
-MODE_CHOICE = EngineChoice("popdispatch.modes:MODES")
-GRAPH_CHOICE = EngineChoice("popdispatch.dynamics.graph:GRAPHS")
+
+DYNAMICS_CHOICE = EngineChoice(
+    "popdispatch.dynamics:DYNAMICS",
+    shown=("smith", "replicator", "local-replicator", "distributed-smith"),
+)
+MODE_CHOICE = EngineChoice("popdispatch.modes:MODES", shown=("paper", "exact", "voltage"))
+GRAPH_CHOICE = EngineChoice(
+    "popdispatch.dynamics.graph:GRAPHS", shown=("complete", "ring", "path", "star")
+)
+WARM_START_CHOICE = EngineChoice(
+    "popdispatch.warm_start:WARM_STARTS", shown=("shares", "setpoints", "merit")
+)
 
 
 option = click.option

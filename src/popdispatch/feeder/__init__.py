@@ -1,39 +1,48 @@
-"""Radial feeders: the model, built-in cases, synthetic feeders, key-node reduction, DC flows."""
+"""Radial feeders: the model, built-in cases, synthetic feeders, key-node reduction, DC flows.
 
-from popdispatch.feeder.cases import elv_snapshot_566_kw, ieee_elv, list_cases, load_case
-from popdispatch.feeder.generators import make_fleet, paper_fleet, read_fleet
-from popdispatch.feeder.model import Feeder
-from popdispatch.feeder.reduction import ReducedFeeder, reduce_feeder
-from popdispatch.feeder.synthetic import synthetic_feeder, synthetic_load_kw, synthetic_profiles
-from popdispatch.feeder.tree import (
-    Tree,
-    build_tree,
-    depths,
-    downstream,
-    line_flows,
-    path_sums,
-    subtree_sums,
-)
+The submodules are imported when a name is first used (PEP 562), so that importing one of
+them (``popdispatch.feeder.profiles``, say) does not import the built-in cases, the synthetic
+feeders and the reduction with it.
+"""
 
-__all__ = [
-    "Feeder",
-    "ReducedFeeder",
-    "Tree",
-    "build_tree",
-    "depths",
-    "downstream",
-    "elv_snapshot_566_kw",
-    "ieee_elv",
-    "line_flows",
-    "list_cases",
-    "load_case",
-    "make_fleet",
-    "paper_fleet",
-    "path_sums",
-    "read_fleet",
-    "reduce_feeder",
-    "subtree_sums",
-    "synthetic_feeder",
-    "synthetic_load_kw",
-    "synthetic_profiles",
-]
+from importlib import import_module
+
+#: Where each public name lives (module under ``popdispatch.feeder``).
+_HOMES = {
+    "elv_snapshot_566_kw": "cases",
+    "ieee_elv": "cases",
+    "list_cases": "cases",
+    "load_case": "cases",
+    "make_fleet": "generators",
+    "paper_fleet": "generators",
+    "read_fleet": "generators",
+    "Feeder": "model",
+    "ReducedFeeder": "reduction",
+    "reduce_feeder": "reduction",
+    "synthetic_feeder": "synthetic",
+    "synthetic_load_kw": "synthetic",
+    "synthetic_profiles": "synthetic",
+    "Tree": "tree",
+    "build_tree": "tree",
+    "depths": "tree",
+    "downstream": "tree",
+    "line_flows": "tree",
+    "path_sums": "tree",
+    "subtree_sums": "tree",
+}
+
+__all__ = sorted(_HOMES)
+
+
+def __getattr__(name: str):
+    """The public name ``name`` from its submodule, imported on first use (PEP 562)."""
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(f"{__name__}.{home}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

@@ -7,16 +7,18 @@ converts to MW). Buses are identified by integer ids (the IEEE numbers for ``iee
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
-import networkx as nx
 import numpy as np
 import pandas as pd
 from scipy.sparse import csr_array
-from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
 from popdispatch.errors import FeederError
 from popdispatch.feeder.tree import Tree, build_tree
 from popdispatch.feeder.tree import path_lines as tree_path_lines
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 BUS_COLUMNS = ["x", "y"]
 LINE_COLUMNS = ["from_bus", "to_bus", "length_km", "r_ohm", "x_ohm", "limit_kw"]
@@ -70,6 +72,8 @@ class Feeder:
 
     def graph(self) -> nx.Graph:
         """The feeder as an undirected networkx graph; edges carry the line name as ``line``."""
+        import networkx as nx  # only here: importing networkx costs about 0.2 s
+
         g = nx.Graph()
         g.add_nodes_from(self.buses.index.tolist())
         g.add_edges_from(
@@ -166,6 +170,10 @@ def _check_radial(feeder: Feeder) -> None:
             f"line {lines.index[parallel.argmax()]!r} is parallel to another line: feeder is "
             "meshed (popdispatch supports radial feeders only)"
         )
+    # imported here: scipy.sparse.csgraph imports scipy.linalg (about 0.2 s), which a run on a
+    # cached problem (popdispatch.feeder.cached) never needs
+    from scipy.sparse.csgraph import connected_components
+
     graph = csr_array((np.ones(len(lines), dtype=np.int8), (ends_a, ends_b)), shape=(n, n))
     _, component = connected_components(graph, directed=False)
     source = buses.index.get_loc(feeder.source_bus)
@@ -187,6 +195,8 @@ def _loop_message(feeder: Feeder, ends_a: np.ndarray, ends_b: np.ndarray, source
     yet connected by earlier lines: the first line it rejects closes a loop with earlier lines
     only, the path between its ends in the spanning tree.
     """
+    from scipy.sparse.csgraph import minimum_spanning_tree
+
     n = len(feeder.buses)
     order = np.arange(1, len(ends_a) + 1, dtype=float)  # weights must be positive
     spanning = minimum_spanning_tree(csr_array((order, (ends_a, ends_b)), shape=(n, n)))

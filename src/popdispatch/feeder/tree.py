@@ -15,7 +15,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import csr_array
-from scipy.sparse.csgraph import depth_first_order
 
 from popdispatch.errors import FeederError
 
@@ -73,6 +72,10 @@ def build_tree(n_nodes: int, ends_a: np.ndarray, ends_b: np.ndarray, root: int =
     ends = np.concatenate([ends_a, ends_b])
     if len(ends) and (ends.min() < 0 or ends.max() >= n_nodes):
         raise FeederError("lines do not form a tree: network is meshed or disconnected")
+    # imported here: scipy.sparse.csgraph imports scipy.linalg (about 0.2 s), which a run on a
+    # cached problem (popdispatch.feeder.cached) never needs
+    from scipy.sparse.csgraph import depth_first_order
+
     graph = csr_array(
         (np.ones(len(ends_a), dtype=np.int8), (ends_a, ends_b)), shape=(n_nodes, n_nodes)
     )

@@ -29,8 +29,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from popdispatch import cache
 from popdispatch.errors import ProfileError
 from popdispatch.feeder.profiles import MINUTES_PER_DAY, LoadProfiles
+from popdispatch.readers.manifest import Inputs, code_hash, split_current
 from popdispatch.readers.opendss import _LOAD_KEYS, Statement, find_file, parse_statements
 
 #: Environment variable naming a profile folder (used by :func:`resolve_profiles`).
@@ -38,16 +40,25 @@ PROFILES_ENV = "POPDISPATCH_PROFILES"
 #: The shipped default profiles, in ``popdispatch/data``.
 DEFAULT_PROFILES_FILE = "default_profiles.csv.gz"
 
+#: Cache entry of a profile folder's table (:mod:`popdispatch.cache`) and its layout version.
+PROFILES_CACHE, PROFILES_FORMAT = "profiles", 1
+
 _LOADSHAPE_KEYS = {"npts", "minterval", "sinterval", "interval", "mult", "useactual"}
 _SHAPE_NUMBER = re.compile(r"(\d+)$")
 
 
-def read_profiles(folder: str | Path) -> LoadProfiles:
+def read_profiles(folder: str | Path, use_cache: bool = True) -> LoadProfiles:
     """Read the official per-load profiles from ``folder`` (OpenDSS form or IEEE CSV form).
 
     Returns :class:`~popdispatch.feeder.profiles.LoadProfiles` with index ``minute`` 1..1440,
     one column per load (in file order, names as spelled there, e.g. ``LOAD1``), values in kW,
     and ``source = "official profiles: <absolute folder>"``.
+
+    ``use_cache``: take the table from the on-disk cache (:mod:`popdispatch.cache`) when an
+    entry for this folder exists and every file and folder the read looked at still has the
+    size and modification time it had then (:mod:`popdispatch.readers.manifest`); otherwise
+    read the files and store the table for the next process. A warm read of the official
+    folder takes about 5 ms instead of about 0.15 s.
     """
     root = Path(folder).expanduser()
     if not root.is_dir():
@@ -58,17 +69,78 @@ def read_profiles(folder: str | Path) -> LoadProfiles:
     except OSError as exc:
         raise ProfileError(f"profile folder {root} is unreadable: {exc}") from None
     source = f"official profiles: {root}"
-    loads_txt = find_file(root, "Loads.txt", ProfileError)
+    key = profiles_cache_key(root)
+    if use_cache:
+        cached = _from_cache(key)
+        if cached is not None:
+            return LoadProfiles(cached[0], source)
+    inputs = Inputs()
+    profiles = LoadProfiles(_read_folder(root, inputs), source)
+    if use_cache:
+        _save(key, profiles, inputs)
+    return profiles
+
+
+def profiles_cache_key(root: Path) -> dict:
+    """The cache key of the profile folder (or shipped file) ``root`` (absolute): it, the layout and
+    package versions and the code of the readers (the inputs' sizes and times are checked
+    apart, :func:`popdispatch.readers.manifest.split_current`)."""
+    from popdispatch import __version__
+
+    code = code_hash("readers/profiles.py", "readers/opendss.py", "readers/manifest.py")
+    return {
+        "what": "load profiles",
+        "path": str(root),
+        "format": PROFILES_FORMAT,
+        "popdispatch": __version__,
+        "code": code,
+    }
+
+
+def _from_cache(key: dict, with_source: bool = False) -> tuple[pd.DataFrame, str] | None:
+    """``(table, source)`` cached under ``key`` if its inputs are unchanged and it is sound,
+    else None (``source`` is the stored one with ``with_source``, else empty)."""
+    arrays = split_current(cache.load_arrays(PROFILES_CACHE, key))
+    names = {"kw", "loads", "source"} if with_source else {"kw", "loads"}
+    if arrays is None or set(arrays) != names:
+        return None
+    kw, loads = arrays["kw"], arrays["loads"]
+    if kw.dtype.kind != "f" or kw.shape != (MINUTES_PER_DAY, len(loads)) or not len(loads):
+        return None
+    if loads.dtype.kind != "U" or len(set(loads.tolist())) != len(loads):
+        return None
+    if not (np.isfinite(kw).all() and (kw >= 0).all()):
+        return None
+    table = pd.DataFrame(
+        kw,
+        index=pd.RangeIndex(1, MINUTES_PER_DAY + 1, name="minute"),
+        columns=pd.Index(loads.tolist(), dtype=object, name="load"),
+    )
+    return table, str(arrays["source"]) if with_source else ""
+
+
+def _save(key: dict, profiles: LoadProfiles, inputs: Inputs) -> None:
+    """Store ``profiles`` under ``key`` with the manifest of ``inputs`` (the source too when
+    the key is not a folder's, whose source is derived from the folder)."""
+    kw = profiles.kw
+    arrays = {"kw": kw.to_numpy(float), "loads": np.array([str(c) for c in kw.columns])}
+    if not profiles.source.startswith("official profiles: "):
+        arrays["source"] = np.array(profiles.source)
+    cache.save_arrays(PROFILES_CACHE, key, {**arrays, **inputs.arrays()})
+
+
+def _read_folder(root: Path, inputs: Inputs) -> pd.DataFrame:
+    """The kW table of a profile folder, every file and folder looked at added to ``inputs``."""
+    inputs.add(root)
+    loads_txt = inputs.add(find_file(root, "Loads.txt", ProfileError), root)
     if loads_txt is not None:
-        kw = _read_opendss_form(root, loads_txt)
-    else:
-        loads_csv = find_file(root, "Loads.csv", ProfileError)
-        if loads_csv is None:
-            raise ProfileError(
-                f"{root}: neither Loads.txt (OpenDSS form) nor Loads.csv (IEEE CSV form)"
-            )
-        kw = _read_csv_form(root, loads_csv)
-    return LoadProfiles(kw, source)
+        return _read_opendss_form(root, loads_txt, inputs)
+    loads_csv = inputs.add(find_file(root, "Loads.csv", ProfileError), root)
+    if loads_csv is None:
+        raise ProfileError(
+            f"{root}: neither Loads.txt (OpenDSS form) nor Loads.csv (IEEE CSV form)"
+        )
+    return _read_csv_form(root, loads_csv, inputs)
 
 
 def _table(columns: dict[str, np.ndarray]) -> pd.DataFrame:
@@ -121,11 +193,11 @@ def _check_values(values: list[str], path: Path, load: str, first_line: int) -> 
 # -- OpenDSS form -------------------------------------------------------------------------------
 
 
-def _read_opendss_form(root: Path, loads_txt: Path) -> pd.DataFrame:
+def _read_opendss_form(root: Path, loads_txt: Path, inputs: Inputs) -> pd.DataFrame:
     loads = parse_statements(loads_txt, "Load", _LOAD_KEYS, ProfileError)
     if not loads:
         raise ProfileError(f"{loads_txt}: no Load statements")
-    shapes_txt = find_file(root, "LoadShapes.txt", ProfileError)
+    shapes_txt = inputs.add(find_file(root, "LoadShapes.txt", ProfileError), root)
     shapes: dict[str, Statement] | None = None
     if shapes_txt is not None:
         shapes = {
@@ -154,6 +226,7 @@ def _read_opendss_form(root: Path, loads_txt: Path) -> pd.DataFrame:
         path = find_file(root, relative, ProfileError)
         if path is None or not path.is_file():
             raise ProfileError(f"{root}: missing profile file {relative} for load {load.name!r}")
+        inputs.add(path, root)
         if path not in cache:
             cache[path] = _read_mult_file(path, load.name)
         columns[load.name] = cache[path] * scale
@@ -206,7 +279,7 @@ def _csv_rows(path: Path, what: str) -> list[list[str]]:
         raise ProfileError(f"cannot read {what} {path}: {exc}") from None
 
 
-def _read_csv_form(root: Path, loads_csv: Path) -> pd.DataFrame:
+def _read_csv_form(root: Path, loads_csv: Path, inputs: Inputs) -> pd.DataFrame:
     rows = _csv_rows(loads_csv, "load table")
     header_at = next((i for i, row in enumerate(rows) if row and row[0].lower() == "name"), None)
     if header_at is None:
@@ -244,6 +317,7 @@ def _read_csv_form(root: Path, loads_csv: Path) -> pd.DataFrame:
         path = find_file(profiles_dir, relative, ProfileError)
         if path is None or not path.is_file():
             raise ProfileError(f"{profiles_dir}: missing profile file {relative} for load {name!r}")
+        inputs.add(path, root)
         columns[name] = _read_profile_csv(path, name) * scale
     if not columns:
         raise ProfileError(f"{loads_csv}: no loads below the header")
@@ -281,10 +355,20 @@ def default_profiles() -> LoadProfiles:
     57.358 kW (the official feeder's peak, below the paper fleet's 65 kW); stored rounded to 1 W.
     ``source`` is the file's first comment line, e.g.
     ``"synthetic default (richardsonpy CREST, seed 20240566, scaled to a 57.358 kW peak)"``.
+    Kept in the on-disk cache like a profile folder (:func:`read_profiles`; about 3 ms warm
+    instead of 25 ms).
     """
     resource = resources.files("popdispatch") / "data" / DEFAULT_PROFILES_FILE
     try:
         with resources.as_file(resource) as path:
+            # cached only where the file is installed as itself (not extracted from a zip)
+            installed = Path(str(resource)).is_file()
+            key = profiles_cache_key(Path(path).resolve()) if installed else None
+            cached = _from_cache(key, with_source=True) if key is not None else None
+            if cached is not None:
+                return LoadProfiles(*cached)
+            inputs = Inputs()
+            inputs.add(Path(path).resolve())
             table = pd.read_csv(path, comment="#", index_col="minute")
             with gzip.open(path, "rt", encoding="ascii") as handle:
                 source = handle.readline().lstrip("#").strip()
@@ -292,7 +376,10 @@ def default_profiles() -> LoadProfiles:
         raise ProfileError(f"cannot read the shipped default profiles {resource}: {exc}") from None
     table.index = pd.RangeIndex(1, len(table) + 1, name="minute")
     table.columns.name = "load"
-    return LoadProfiles(table.astype(float), source)
+    profiles = LoadProfiles(table.astype(float), source)
+    if key is not None:
+        _save(key, profiles, inputs)
+    return profiles
 
 
 def resolve_profiles(folder: str | Path | None = None) -> LoadProfiles:

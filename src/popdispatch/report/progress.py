@@ -1,7 +1,8 @@
 """Progress on stderr (tqdm): bars for loops, an elapsed-time spinner for long single calls.
 
 Nothing is shown for steps shorter than one second, nor at all when ``quiet``. Standard output
-is never touched (it carries ``--json``).
+is never touched (it carries ``--json``). tqdm itself (about 40 ms to import) is imported only
+once a bar is due, i.e. after its first second, so quick commands never import it.
 """
 
 from __future__ import annotations
@@ -46,14 +47,23 @@ class Progress:
 
     def iterate(self, items: Iterable, description: str, total: int | None = None) -> Iterator:
         """Iterate over ``items`` with a progress bar."""
-        yield from tqdm(items, desc=description, total=total, **self._bar_options())
+        if self.quiet:
+            yield from items
+            return
+        with self.counter(description, total) as advance:
+            for item in items:
+                yield item
+                advance()
 
     @contextlib.contextmanager
-    def counter(self, description: str, total: int) -> Iterator:
+    def counter(self, description: str, total: int | None) -> Iterator:
         """A progress bar over ``total`` units; yields ``advance(_)`` to call once per unit."""
-        bar = tqdm(desc=description, total=total, **self._bar_options())
+        if self.quiet:
+            yield lambda *_: None
+            return
+        bar = _DelayedBar(description, total, self._bar_options())
         try:
-            yield lambda *_: bar.update(1)
+            yield bar.advance
         finally:
             bar.close()
 
@@ -109,6 +119,32 @@ class Progress:
                 bar.refresh()
                 sys.stderr.write("\n")
             bar.close()
+
+
+class _DelayedBar:
+    """A tqdm bar made only once ``DELAY_S`` has passed since the bar was asked for (tqdm's own
+    ``delay`` needs tqdm imported first); it then starts from the count and the time so far."""
+
+    def __init__(self, description: str, total: int | None, options: dict) -> None:
+        self.description, self.total, self.options = description, total, options
+        self.start = time.time()  # tqdm's clock
+        self.count = 0
+        self.bar = None
+
+    def advance(self, *_) -> None:
+        """One unit done."""
+        self.count += 1
+        if self.bar is not None:
+            self.bar.update(1)
+        elif time.time() - self.start > DELAY_S:
+            options = {**self.options, "delay": 0.0}
+            self.bar = tqdm(desc=self.description, total=self.total, initial=self.count, **options)
+            self.bar.start_t = self.start  # elapsed time and rate from the first unit
+            self.bar.refresh()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 def _write(line: str) -> None:
