@@ -177,10 +177,10 @@ def day_analyses(analyses, problem, profiles, result, summary: dict, progress: P
     check's and, with voltage limits, the LinDistFlow ``v_min_pu``/``v_max_pu`` of the
     monitored buses (:func:`popdispatch.ac.report.voltage_columns`); ``None`` without
     either."""
-    from popdispatch.ac import check_day
-
     ac = None
     if analyses.ac:
+        from popdispatch.ac import check_day
+
         with progress.step(f"AC power flows of {len(result.run.minutes)} steps"):
             ac = check_day(problem, profiles, result, **analyses.model_options())
         hours = profiles.timeline.hours[ac.steps.index.to_numpy() - 1]

@@ -217,7 +217,7 @@ def day(
     if out is not None:
         table = day_table(result, problem, series.timeline)
         table = table if ac_steps is None else table.join(ac_steps, on="minute")
-        write_day(out, summary, table, result, problem, progress)
+        write_day(out, summary, table, result, problem, progress, series.timeline)
     emit(stamp(summary), as_json, day_text(summary))
     if summary["infeasible_minutes"]:
         raise Failure(infeasible_day_message(summary))

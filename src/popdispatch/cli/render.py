@@ -34,13 +34,16 @@ def write_snapshot(out: Path, summary: dict, table, result, progress: Progress) 
         folder.write_json("summary.json", stamp(summary))
 
 
-def write_day(out: Path, summary: dict, table, result, problem, progress: Progress) -> None:
+def write_day(out: Path, summary: dict, table, result, problem, progress: Progress,
+              timeline=None) -> None:  # fmt: skip
+    """``day.csv``, the set-point figure (on ``timeline``'s own time axis, if given) and
+    ``summary.json`` into ``out``, staged and renamed into place."""
     from popdispatch.report import figures
     from popdispatch.report.summaries import generator_buses
 
     with progress.step(f"writing {out}"), staged_folder(out) as folder:
         folder.write_csv("day.csv", table)
-        fig = figures.base_day_figure(result, generator_buses(problem))
+        fig = figures.base_day_figure(result, generator_buses(problem), timeline=timeline)
         figures.save_figure(fig, folder.file("setpoints"))
         folder.write_json("summary.json", stamp(summary))
 

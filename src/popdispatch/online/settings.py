@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
-import networkx as nx
 import numpy as np
 
 from popdispatch.dynamics import DYNAMICS, GRAPHS, get_dynamics
@@ -16,6 +16,9 @@ from popdispatch.integrate import Integrator
 from popdispatch.modes import get_mode
 from popdispatch.modes.exact import ExactConstants
 from popdispatch.warm_start import WARM_STARTS
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 SHARES_NAME = "shares"  # the paper's warm start, the only one for modes without limits
 
