@@ -94,6 +94,17 @@ def test_tree_rates_equal_the_dense_preconditioner(problem, seed):
         [flow - problem.limit, -flow - problem.limit]), rtol=1e-12, atol=1e-12)  # fmt: skip
 
 
+def test_run_settings_carry_the_law_to_the_engine(problem):
+    """``RunSettings.exact.price_law`` reaches the compiled parameters (as a plain int, one
+    compiled signature); paper mode's constants carry none and run the plain law's record."""
+    from popdispatch.online import Engine, RunSettings
+
+    tree = Engine(problem, RunSettings(mode="exact", exact=ExactConstants(price_law="tree")))
+    assert tree.params.price_law == PriceLaw.TREE and type(tree.params.price_law) is int
+    assert Engine(problem, RunSettings(mode="exact")).params.price_law == PriceLaw.PLAIN
+    assert Engine(problem, RunSettings(mode="paper")).params.price_law == PriceLaw.PLAIN
+
+
 def test_price_law_is_chosen_by_name_and_unknown_names_are_refused():
     assert ExactConstants(price_law="tree").price_law is PriceLaw.TREE
     assert ExactConstants(price_law=1).price_law is PriceLaw.TREE
