@@ -1,7 +1,7 @@
 """Exact mode on every scale (issue 12): iterations, evaluations and distance to the DC-OPF.
 
 Usage: python benchmarks/bench_scale.py [--cases SUBSTRING,...] [--sizes 1000,10000,100000]
-    [--horizon 3000] [--rtol 1e-5]
+    [--horizon 3000] [--rtol 1e-5] [--laws plain,tree]
 
 For every case of ``benchmarks/scale_cases.py`` (the built-in cases and MATPOWER radial cases
 without and with a binding limit, synthetic 1k/10k/100k feeders with every candidate line
@@ -10,7 +10,8 @@ settings (tolerance 1e-6 of demand) up to ``--horizon`` iterations, against the 
 (``popdispatch.opf.solve_opf``). Prints one row per case: buses, limited lines (binding ones),
 iterations, game/field evaluations per iteration, the largest ``|p - p_opf|`` (kW) and its
 bound ``max(1e-6 * demand, 0.001 kW)``, the status and the engine's time (kernels compiled
-beforehand; one run, not a median: the iteration counts are the point).
+beforehand; one run, not a median: the iteration counts are the point). ``--laws``: the price
+laws to run on every case, one row each (``modes.exact.PriceLaw``; default: both).
 """
 
 from __future__ import annotations
@@ -30,15 +31,19 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from scale_cases import all_cases, matpower_missing  # noqa: E402
 
+from popdispatch.game.parameters import PriceLaw  # noqa: E402
 from popdispatch.integrate import Status  # noqa: E402
 from popdispatch.online import Engine, RunSettings, initial_shares  # noqa: E402
 from popdispatch.opf import solve_opf  # noqa: E402
 
 
-def run_case(problem, horizon: int, rtol: float | None = None) -> dict:
-    """One exact-mode snapshot of minute 1 from uniform shares, and its DC-OPF (``rtol``:
-    the Heun error control instead of the mode's default)."""
+def run_case(
+    problem, horizon: int, rtol: float | None = None, law: PriceLaw = PriceLaw.PLAIN
+) -> dict:
+    """One exact-mode snapshot of minute 1 from uniform shares with price law ``law``, and its
+    DC-OPF (``rtol``: the Heun error control instead of the mode's default)."""
     settings = RunSettings(mode="exact")
+    settings = replace(settings, exact=replace(settings.exact, price_law=law))
     integrator = replace(settings.stepping, max_iterations=horizon)
     if rtol is not None:
         integrator = replace(integrator, rtol=rtol)
@@ -76,18 +81,20 @@ def main() -> None:
     parser.add_argument("--sizes", default="1000,10000,100000")
     parser.add_argument("--horizon", type=int, default=3000)
     parser.add_argument("--rtol", type=float, default=None,
-                        help="Heun error control (default: exact mode's, 1e-4)")  # fmt: skip
+                        help="Heun error control (default: exact mode's, 1e-5)")  # fmt: skip
+    parser.add_argument("--laws", default="plain,tree", help="price laws, comma-separated")
     args = parser.parse_args()
     wanted = [w for w in args.cases.split(",") if w]
     sizes = tuple(int(s) for s in args.sizes.split(",") if s)
+    laws = [PriceLaw.parse(w) for w in args.laws.split(",") if w]
     print(
         f"# popdispatch exact mode on every scale, {date.today()}, "
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}"
     )
-    print("| case | buses | limits | limited (binding) | iterations | evaluations/iteration "
-          "| max abs(p - p_opf), kW | bound, kW | status | engine ms |")  # fmt: skip
-    print("| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | --- | ---: |")
+    print("| case | buses | limits | limited (binding) | price law | iterations | evaluations"
+          "/iteration | max abs(p - p_opf), kW | bound, kW | status | engine ms |")  # fmt: skip
+    print("| --- | ---: | --- | ---: | --- | ---: | ---: | ---: | ---: | --- | ---: |")
     for name, limits, build in all_cases(sizes):
         if wanted and not any(w in name for w in wanted):
             continue
@@ -95,14 +102,16 @@ def main() -> None:
             print(f"| {name} | skipped: {matpower_missing(name)} |")
             continue
         problem = build()
-        row = run_case(problem, args.horizon, args.rtol)
         buses = problem.feeder.original.buses.shape[0]
-        print(
-            f"| {name} | {buses} | {limits} | {row['lines']} ({row['binding']}) | "
-            f"{row['iterations']} | {row['evaluations']:.1f} | {row['error_kw']:.2g} | "
-            f"{row['bound_kw']:.2g} | {row['status']} | {row['seconds'] * 1e3:.1f} |",
-            flush=True,
-        )
+        for law in laws:
+            row = run_case(problem, args.horizon, args.rtol, law)
+            print(
+                f"| {name} | {buses} | {limits} | {row['lines']} ({row['binding']}) | "
+                f"{law.name.lower()} | {row['iterations']} | {row['evaluations']:.1f} | "
+                f"{row['error_kw']:.2g} | {row['bound_kw']:.2g} | {row['status']} | "
+                f"{row['seconds'] * 1e3:.1f} |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

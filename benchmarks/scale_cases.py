@@ -1,6 +1,7 @@
 """The problems of the exact-mode scale study (issue 12): every built-in case, the MATPOWER
 radial cases, synthetic feeders and a feeder scaled by 100, each without and with a binding
-limit. Shared by ``benchmarks/bench_scale.py`` and ``tests/test_exact_scale.py``.
+limit. Shared by ``benchmarks/bench_scale.py``, ``tests/test_exact_mode.py`` and
+``tests/modes/test_price_law.py``.
 
 Cases without a priced fleet get :func:`test_fleet`: the source and three DGs at the buses a
 third, two thirds and all the way down the deepest path, with distinct costs and capacities

@@ -6,6 +6,7 @@ constructor here), never by position.
 
 from __future__ import annotations
 
+from enum import IntEnum
 from typing import NamedTuple
 
 import numba as nb
@@ -15,6 +16,33 @@ from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.problem import DispatchProblem
 
 NO_VOLTAGE_ROWS = np.zeros((0, 0))  # empty: nothing in it to change
+
+
+class PriceLaw(IntEnum):
+    """How exact mode's line controllers move their prices (modes/exact.py, docs/exact-mode.md).
+
+    ``PLAIN``: each price integrates its own line's overflow (dual ascent, one controller per
+    line, its own measurement only). ``TREE``: the prices of the active (priced or overflowing)
+    lines integrate their overflows preconditioned by the tree of active lines, ``nu' =
+    price_rate * L^-T W^-1 L^-1 eps`` ("Nested limits"); each controller also reads the
+    excesses of its nearest active neighbours on the tree. Same rest points (the DC-OPF).
+    """
+
+    PLAIN = 0
+    TREE = 1
+
+    @classmethod
+    def parse(cls, value: str | int) -> PriceLaw:
+        """A law from its name (``"plain"``, ``"tree"``, any case) or number; an unknown one
+        raises :class:`~popdispatch.errors.OptionError` naming ``--price-law``."""
+        if isinstance(value, str) and value.strip().upper() in cls.__members__:
+            return cls[value.strip().upper()]
+        if not isinstance(value, str | bool) and value in set(cls):
+            return cls(value)
+        from popdispatch.errors import OptionError
+
+        names = ", ".join(m.name.lower() for m in cls)
+        raise OptionError(f"unknown price law {value!r} (known: {names})", "--price-law")
 
 
 class GameParameters(NamedTuple):
@@ -37,14 +65,20 @@ class GameParameters(NamedTuple):
     # per monitored bus and generator, d(v^2)/dp over the bus's scale (modes/voltage.py);
     # (0, 0) without voltage limits (the default, for records built by hand in tests)
     voltage_sens: np.ndarray = NO_VOLTAGE_ROWS
+    # exact mode's price law, an int of PriceLaw (a plain int, so one compiled signature)
+    price_law: int = int(PriceLaw.PLAIN)
 
     @classmethod
     def of(cls, problem: DispatchProblem, fp: FitnessParameters) -> GameParameters:
+        """The parameters of ``problem`` with the constants ``fp`` (EUR/MW); the price law is
+        ``fp.price_law`` where the constants carry one (exact mode's, modes/exact.py
+        :func:`~popdispatch.modes.exact.game_constants`), else :attr:`PriceLaw.PLAIN`."""
         return cls(
             problem.b, problem.c, problem.pmin, problem.pmax, float(fp.B), float(fp.m),
             float(fp.C), float(fp.gain), float(fp.price_rate), problem.limit,
             problem.generator_line, problem.line_up, problem.line_preorder,
             np.ascontiguousarray(problem.voltage_sens, dtype=float),
+            int(PriceLaw.parse(getattr(fp, "price_law", PriceLaw.PLAIN))),
         )  # fmt: skip
 
 

@@ -19,12 +19,17 @@ import numpy as np
 
 from popdispatch.game.fitness import FitnessParameters, fitness_into
 from popdispatch.game.flows import broadcast, limited_line_flows
+from popdispatch.game.parameters import PriceLaw
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.modes.mechanism import Mode, ModeCode
 
 #: Default dimensionless constants (:class:`ExactConstants`), measured on every case of
 #: benchmarks/bench_scale.py (docs/exact-mode.md, "Every scale").
 GAIN, WEIGHT, PRICE_RATE = 1000.0, 2.5, 1500.0
+#: :attr:`PriceLaw.TREE` as the plain int the compiled kernels compare with.
+TREE = int(PriceLaw.TREE)
+#: Generators a region of the active tree without any counts as (see :func:`region_weight`).
+EMPTY_REGION = 1e-4
 
 
 @dataclass(frozen=True)
@@ -38,17 +43,30 @@ class ExactConstants:
     gain : revision rate per unit of fitness difference, 1/s.
     C : augmented-Lagrangian weight, ``S`` per unit of overflow.
     price_rate : how fast a price (units of ``S``) integrates its overflow (units of ``P``), 1/s.
+    price_law : how the line prices move (:class:`~popdispatch.game.parameters.PriceLaw`, or
+        its name): ``PLAIN`` (each line its own overflow) or ``TREE`` (preconditioned by the
+        tree of active lines; docs/exact-mode.md, "Nested limits").
     """
 
     gain: float = GAIN
     C: float = WEIGHT
     price_rate: float = PRICE_RATE
+    price_law: PriceLaw = PriceLaw.PLAIN
 
     def __post_init__(self) -> None:
         for name in ("gain", "C", "price_rate"):
             value = getattr(self, name)
             if not (value > 0 and value < float("inf")):
                 raise ValueError(f"exact-mode constant {name} must be finite and > 0, got {value}")
+        object.__setattr__(self, "price_law", PriceLaw.parse(self.price_law))
+
+
+@dataclass(frozen=True)
+class ExactFitnessParameters(FitnessParameters):
+    """Exact mode's EUR/MW constants (:class:`FitnessParameters`) and its price law, which
+    :meth:`~popdispatch.game.parameters.GameParameters.of` passes to the kernels."""
+
+    price_law: PriceLaw = PriceLaw.PLAIN
 
 
 def scales(problem: DispatchProblem) -> tuple[float, float]:
@@ -65,11 +83,12 @@ def scales(problem: DispatchProblem) -> tuple[float, float]:
 def game_constants(problem: DispatchProblem, constants: ExactConstants) -> FitnessParameters:
     """The EUR/MW constants of the game for ``problem``: ``gain = gain / S`` (fitness per unit
     of spread), ``C = C S / P``, ``price_rate = price_rate S / P`` (:func:`scales`), ``B = 0``
-    (a common shift of fitness, which no pairwise comparison sees) and no barrier."""
+    (a common shift of fitness, which no pairwise comparison sees) and no barrier; the price
+    law is the constants'."""
     spread, demand = scales(problem)
-    return FitnessParameters(
+    return ExactFitnessParameters(
         B=0.0, m=0.0, C=constants.C * spread / demand, gain=constants.gain / spread,
-        price_rate=constants.price_rate * spread / demand,
+        price_rate=constants.price_rate * spread / demand, price_law=constants.price_law,
     )  # fmt: skip
 
 
@@ -95,24 +114,27 @@ def line_signals(p, z, params, minute, work, signal, z_rate):
     the controllers' rates into ``z_rate``; returns ``(congestion, residual)``.
 
     For limited line ``k`` the controllers keep prices ``z[k]`` (flow above ``+U``) and
-    ``z[L + k]`` (flow below ``-U``), integrating the excess at ``price_rate`` (``z_rate``).
-    The broadcast price is :func:`line_price`; the net price ``nu`` goes as ``+nu / 2`` to the
-    generators below the line and ``-nu / 2`` to those above (incentive to the receiving side,
-    penalty to the sending side). Returns the largest ``|nu|`` (EUR/MW) and the largest
-    distance from complementary slackness (MW).
+    ``z[L + k]`` (flow below ``-U``), which move by ``params.price_law``: :func:`plain_rates`
+    (each integrates its own excess at ``price_rate``) or :func:`tree_rates`. The broadcast
+    price is :func:`line_price`; the net price ``nu`` goes as ``+nu / 2`` to the generators
+    below the line and ``-nu / 2`` to those above (incentive to the receiving side, penalty to
+    the sending side). Returns the largest ``|nu|`` (EUR/MW) and the largest distance from
+    complementary slackness (MW).
     """
     flow, parent_side, child_side = work.flow, work.parent_side, work.child_side
-    limit, C, price_rate = params.limit, params.C, params.price_rate
+    limit, C = params.limit, params.C
     n_lines = limit.shape[0]
     limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
                        params.line_preorder, flow)  # fmt: skip
+    if params.price_law == TREE:
+        tree_rates(z, params, minute, work, z_rate)
+    else:
+        plain_rates(flow, limit, params.price_rate, z_rate)
     congestion = 0.0
     residual = 0.0
     for k in range(n_lines):
         excess_up = flow[k] - limit[k]
         excess_down = -flow[k] - limit[k]
-        z_rate[k] = price_rate * excess_up
-        z_rate[n_lines + k] = price_rate * excess_down
         residual = max(residual, dual_residual(excess_up, z[k]))
         residual = max(residual, dual_residual(excess_down, z[n_lines + k]))
         nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C)
@@ -122,6 +144,101 @@ def line_signals(p, z, params, minute, work, signal, z_rate):
     broadcast(parent_side, child_side, params.generator_line, params.line_up,
               params.line_preorder, work.path, signal)  # fmt: skip
     return congestion, residual
+
+
+@nb.njit(cache=True, inline="always")
+def plain_rates(flow, limit, price_rate, z_rate):
+    """The plain law (dual ascent): ``z' = price_rate * excess`` per line and direction
+    (EUR/MW per s; ``flow``, ``limit`` MW)."""
+    n_lines = limit.shape[0]
+    for k in range(n_lines):
+        z_rate[k] = price_rate * (flow[k] - limit[k])
+        z_rate[n_lines + k] = price_rate * (-flow[k] - limit[k])
+
+
+@nb.njit(cache=True, inline="always")
+def active_direction(z_up, z_down, excess_up, excess_down):
+    """Which direction of a line its price acts in: +1 (flow above ``+U``: priced or
+    overflowing), -1 (below ``-U``), 0 (neither, or both at once)."""
+    up = z_up > 0.0 or excess_up > 0.0
+    down = z_down > 0.0 or excess_down > 0.0
+    if up and not down:
+        return 1.0
+    if down and not up:
+        return -1.0
+    return 0.0
+
+
+@nb.njit(cache=True, inline="always")
+def region_weight(own, below):
+    """Inverse weight ``1 / w`` of a region of the active tree: generators below its line over
+    those in the region itself (1 for a line without active lines below it)."""
+    return (below + EMPTY_REGION) / (own + EMPTY_REGION)
+
+
+@nb.njit(cache=True, inline="always")
+def tree_rates(z, params, minute, work, z_rate):
+    """The tree law: the rates of the active lines' prices preconditioned by the tree of
+    active lines, ``nu' = price_rate * (M eps)``, ``M = L^-T W^-1 L^-1`` (docs/exact-mode.md,
+    "Nested limits"), into ``z_rate`` (EUR/MW per s). Reads the flows in ``work.flow`` (MW).
+
+    ``eps``: each active line's excess in its active direction (MW); ``L^-1 eps`` leaves
+    ``g_k = eps_k - sum eps_c`` over the nearest active lines ``c`` below ``k``; ``L^-T``
+    subtracts the value of the nearest active line ``a`` above: ``(M eps)_k = g_k / w_k -
+    g_a / w_a``. Lines neither priced nor overflowing keep ``z' = price_rate * excess``.
+    Scratch: ``work.parent_side`` (direction), ``child_side`` (``g``), ``path`` (nearest
+    active ancestor) and ``z_rate`` itself (generators in each line's region and below it).
+    """
+    flow, sign, g, above = work.flow, work.parent_side, work.child_side, work.path
+    limit, price_rate = params.limit, params.price_rate
+    line_up, preorder = params.line_up, params.line_preorder
+    n_lines = limit.shape[0]
+    own, below = z_rate[:n_lines], z_rate[n_lines:]
+    tradable_below(params.generator_line, line_up, preorder, minute.lo, minute.hi, below)
+    for r in range(n_lines):  # pre-order: direction, excess, nearest active ancestor
+        k = preorder[r]
+        s = active_direction(z[k], z[n_lines + k], flow[k] - limit[k], -flow[k] - limit[k])
+        sign[k] = s
+        g[k] = flow[k] - s * limit[k] if s != 0.0 else 0.0
+        own[k] = below[k]
+        up = line_up[k]
+        above[k] = -1.0 if up < 0 else (float(up) if sign[up] != 0.0 else above[up])
+    for k in range(n_lines):  # g = L^-1 eps; own: generators in each line's own region
+        a = int(above[k])
+        if sign[k] != 0.0 and a >= 0:
+            g[a] -= flow[k] - sign[k] * limit[k]
+            own[a] -= below[k]
+    # post-order: a line reads its ancestor's g, own and below before they are overwritten
+    for r in range(n_lines - 1, -1, -1):
+        k = preorder[r]
+        s = sign[k]
+        step = 0.0
+        if s != 0.0:
+            a = int(above[k])
+            step = g[k] * region_weight(own[k], below[k])
+            if a >= 0:
+                step -= g[a] * region_weight(own[a], below[a])
+        z_rate[k] = price_rate * (flow[k] - limit[k])
+        z_rate[n_lines + k] = price_rate * (-flow[k] - limit[k])
+        if s > 0.0:
+            z_rate[k] = price_rate * step
+        elif s < 0.0:
+            z_rate[n_lines + k] = -price_rate * step
+
+
+@nb.njit(cache=True, inline="always")
+def tradable_below(generator_line, line_up, preorder, lo, hi, below):
+    """Per limited line, the online generators with room to trade (``hi > lo``) below it,
+    into ``below``."""
+    below[:] = 0.0
+    for i in range(generator_line.shape[0]):
+        k = generator_line[i]
+        if k >= 0 and hi[i] > lo[i]:
+            below[k] += 1.0
+    for r in range(preorder.shape[0] - 1, -1, -1):
+        k = preorder[r]
+        if line_up[k] >= 0:
+            below[line_up[k]] += below[k]
 
 
 @nb.njit(cache=True, inline="always")
