@@ -28,7 +28,7 @@ from popdispatch.constants import KW_PER_MW
 from popdispatch.dynamics import communication_graph, get_dynamics
 from popdispatch.errors import OptionError
 from popdispatch.game.controllers import NodeControllers
-from popdispatch.game.parameters import MinuteInputs
+from popdispatch.game.parameters import MinuteInputs, PriceLaw
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.modes import get_mode
 from popdispatch.online.settings import RunSettings, initial_shares
@@ -326,6 +326,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     if not problem.online[minute - 1].all():
         off = ", ".join(problem.generators[~problem.online[minute - 1]])
         raise OptionError(f"the agents run with every generator online (offline: {off})")
+    check_settings(settings)
     mode = get_mode(settings.mode)
     dynamics = get_dynamics(settings.dynamics)
     field_code = dynamics.bounded_field if mode.bounded else dynamics.field
@@ -362,6 +363,17 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     _check_events(faults.events, names, controllers)
     return AgentSystem(plant, controllers, generators, inverters, network, graph, demand,
                        source)  # fmt: skip
+
+
+def check_settings(settings: RunSettings) -> None:
+    """Refuse run settings the agents cannot honour: a price law other than plain (their node
+    controllers hear only their own lines; the tree law needs its neighbours' excesses)."""
+    if settings.exact.price_law != PriceLaw.PLAIN:
+        raise OptionError(
+            "the agents' node controllers run the plain price law (each hears only its own "
+            "lines; the tree law needs its neighbours' excesses)",
+            "--price-law",
+        )
 
 
 def _check_events(events, generators: list[str], controllers: dict) -> None:

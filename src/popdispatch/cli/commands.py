@@ -126,8 +126,8 @@ def opf(minute: int, limits, profiles, source, as_json: bool, quiet: bool) -> in
 @json_option
 @quiet_option
 def snapshot(
-    minute, limits, dynamics, mode, x0, graph, constants, profiles, source, out, analyses,
-    as_json, quiet,
+    minute, limits, dynamics, mode, x0, graph, constants, price_law, profiles, source, out,
+    analyses, as_json, quiet,
 ) -> int:  # fmt: skip
     """One minute of dynamics: trajectory, convergence, comparison with the DC-OPF.
 
@@ -139,7 +139,8 @@ def snapshot(
 
     progress = Progress(quiet)
     check_out(out)
-    settings = analyses.settings(settings_from(dynamics, mode, x0, graph, None, constants))
+    settings = analyses.settings(settings_from(dynamics, mode, x0, graph, None, constants,
+                                                price_law))  # fmt: skip
     check_shares(x0, progress, source)
     announce_compile(progress)
     problem, series = build(source, profiles, minute, limits, progress)
@@ -183,8 +184,8 @@ def snapshot(
 @json_option
 @quiet_option
 def day(
-    limits, dynamics, mode, x0, graph, constants, events, minutes, warm_start, profiles, source,
-    out, analyses, as_json, quiet,
+    limits, dynamics, mode, x0, graph, constants, price_law, events, minutes, warm_start, profiles,
+    source, out, analyses, as_json, quiet,
 ) -> int:  # fmt: skip
     """The online day: every minute continues from the last (warm start), against the DC-OPF.
 
@@ -205,7 +206,8 @@ def day(
 
     progress = Progress(quiet)
     check_out(out)
-    settings = analyses.settings(settings_from(dynamics, mode, x0, graph, warm_start, constants))
+    settings = analyses.settings(settings_from(dynamics, mode, x0, graph, warm_start,
+                                                constants, price_law))  # fmt: skip
     check_shares(x0, progress, source)
     announce_compile(progress)
     problem, series = build(source, profiles, None, limits, progress, events, minutes)

@@ -292,7 +292,8 @@ out_option = option(
 
 
 def run_options(func):
-    """``--dynamics``, ``--mode``, ``--x0`` and ``--graph``."""
+    """``--dynamics``, ``--mode``, ``--x0``, ``--graph``, ``--constants`` and
+    ``--price-law``."""
     decorators = [
         option(
             "--dynamics",
@@ -328,6 +329,15 @@ def run_options(func):
             type=ConstantsType(),
             help="The game's constants, e.g. B=1000,m=400,C=1000 (paper, on MW: B EUR/MW, m and "
             "C EUR/MW^2; exact mode also gain and price_rate); others keep their defaults.",
+        ),
+        option(
+            "--price-law",
+            type=click.Choice(["plain", "tree"], case_sensitive=False),
+            default="plain",
+            show_default=True,
+            help="Exact mode's line-price law: plain (each controller integrates its own "
+            "line's overflow) or tree (preconditioned by the tree of active limited lines: the "
+            "same optimum, far fewer iterations where limits nest; docs/exact-mode.md).",
         ),
     ]
     for decorate in reversed(decorators):
@@ -380,13 +390,18 @@ def feeder_options(func):
 
 
 def settings_from(
-    dynamics: str, mode: str, x0, graph: str, warm_start: str | None = None, constants=None
-):
+    dynamics: str, mode: str, x0, graph: str, warm_start: str | None = None, constants=None,
+    price_law: str = "plain",
+):  # fmt: skip
     """The run's :class:`~popdispatch.online.RunSettings`; ``constants`` (``--constants``, a
-    :class:`~popdispatch.game.fitness.FitnessParameters`) replace the default ones."""
+    :class:`~popdispatch.game.fitness.FitnessParameters`) replace the default ones;
+    ``price_law`` (``--price-law``) is exact mode's
+    (:class:`~popdispatch.game.parameters.PriceLaw`)."""
+    from popdispatch.modes.exact import ExactConstants
     from popdispatch.online import RunSettings
 
-    settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0, warm_start=warm_start)
+    settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0, warm_start=warm_start,
+                           exact=ExactConstants(price_law=price_law))  # fmt: skip
     return settings if constants is None else replace(settings, fitness=constants)
 
 

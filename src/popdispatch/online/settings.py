@@ -11,6 +11,7 @@ import numpy as np
 from popdispatch.dynamics import DYNAMICS, GRAPHS, get_dynamics
 from popdispatch.errors import OptionError
 from popdispatch.game.fitness import FitnessParameters
+from popdispatch.game.parameters import PriceLaw
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import Integrator
 from popdispatch.modes import get_mode
@@ -78,6 +79,7 @@ class RunSettings:
           zero share stays there (extinction), so the DC-OPF is out of reach (``--mode``);
         - a graph other than ``complete`` with dynamics that ignore it (smith, replicator:
           paper eqs. 9 and 13 compare every pair) (``--graph``);
+        - a price law other than plain outside exact (voltage) mode (``--price-law``);
         - the ``setpoints`` warm start in a mode without generator limits in its revision rule
           (paper mode continues the shares, eq. 10's ``x``; ``--warm-start``).
         """
@@ -110,6 +112,12 @@ class RunSettings:
             )
         self._validate_warm_start(mode)
         self._validate_voltage(mode)
+        if self.exact.price_law != PriceLaw.PLAIN and not mode.claims_dc_opf:
+            raise OptionError(
+                f"the {self.exact.price_law.name.lower()} price law moves exact mode's line "
+                f"prices; {mode.name} mode has none (use --mode exact)",
+                "--price-law",
+            )
         if self.tol_floor_kw is not None and not self.tol_floor_kw > 0:
             raise OptionError(
                 f"tolerance floor must be positive, got {self.tol_floor_kw} kW", "--tol-floor-kw"
