@@ -55,14 +55,35 @@ def project_to_box(x, lo, hi):
     """Euclidean projection of ``x`` onto ``{lo <= x <= hi, sum x = 1}`` (bisection on a shift).
 
     Used when the demand changes between minutes: ``hi = Pmax / P_d`` moves, and a warm-started
-    share may sit above its new limit.
+    share may sit above its new limit. Written as loops (the same operations in the same order
+    as ``np.minimum(np.maximum(x - shift, lo), hi).sum()``): numba compiles array expressions
+    with their broadcasting checks several times slower (first run, issue 13).
     """
-    low = np.min(x - hi) - 1.0
-    high = np.max(x - lo) + 1.0
+    n = x.shape[0]
+    low = np.inf
+    high = -np.inf
+    for i in range(n):
+        low = min(low, x[i] - hi[i])
+        high = max(high, x[i] - lo[i])
+    low -= 1.0
+    high += 1.0
     for _ in range(200):
         shift = 0.5 * (low + high)
-        if np.minimum(np.maximum(x - shift, lo), hi).sum() > 1.0:
+        if _clipped_sum(x, lo, hi, shift) > 1.0:
             low = shift
         else:
             high = shift
-    return np.minimum(np.maximum(x - 0.5 * (low + high), lo), hi)
+    shift = 0.5 * (low + high)
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = min(max(x[i] - shift, lo[i]), hi[i])
+    return out
+
+
+@nb.njit(cache=True, inline="always")
+def _clipped_sum(x, lo, hi, shift):
+    """``sum_i min(max(x_i - shift, lo_i), hi_i)``, summed in index order."""
+    total = 0.0
+    for i in range(x.shape[0]):
+        total += min(max(x[i] - shift, lo[i]), hi[i])
+    return total
