@@ -103,7 +103,7 @@ def weights(tag, x, lo, hi, active, w, v, room):
     raise TypeError("weights() runs in compiled code only; use field_weights")
 
 
-@overload(weights)
+@overload(weights, inline="always")
 def _weights(tag, x, lo, hi, active, w, v, room):
     kernel = _KERNELS.get(getattr(tag, "instance_class", None))
     if kernel is None:

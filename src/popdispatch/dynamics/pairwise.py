@@ -72,10 +72,49 @@ def sort_by_fitness(f, order):
             moves += 1
         order[s + 1] = item
         if moves > 8 * n + 64:
-            ranked = np.argsort(f, kind="mergesort")
-            for k in range(n):
-                order[k] = ranked[k]
+            merge_sort(f, order)
             return
+
+
+@nb.njit(cache=True)
+def merge_sort(f, order):
+    """``order[:] = np.argsort(f, kind="mergesort")`` (the same permutation: a stable sort of
+    ``0..n-1`` by ``f``), bottom-up. numba's ``argsort`` compiled for about 3 s of every first
+    run for this fallback, which a run rarely takes (issue 13)."""
+    n = order.shape[0]
+    for k in range(n):
+        order[k] = k
+    scratch = np.empty(n, dtype=order.dtype)
+    width = 1
+    passes = 0
+    source, target = order, scratch
+    while width < n:
+        for left in range(0, n, 2 * width):
+            middle = min(left + width, n)
+            right = min(left + 2 * width, n)
+            a, b, out = left, middle, left
+            while a < middle and b < right:
+                if f[source[b]] < f[source[a]]:  # ties keep the left run first: stable
+                    target[out] = source[b]
+                    b += 1
+                else:
+                    target[out] = source[a]
+                    a += 1
+                out += 1
+            while a < middle:
+                target[out] = source[a]
+                a += 1
+                out += 1
+            while b < right:
+                target[out] = source[b]
+                b += 1
+                out += 1
+        source, target = target, source
+        width *= 2
+        passes += 1
+    if passes % 2 == 1:  # the sorted run is in the scratch
+        for k in range(n):
+            order[k] = source[k]
 
 
 @nb.njit(cache=True, inline="always")
@@ -273,7 +312,7 @@ def _graph_class(graph) -> type | None:
     return cls if cls in (CompleteGraph, SparseGraph) else None
 
 
-@overload(graph_flows_of)
+@overload(graph_flows_of, inline="always")
 def _graph_flows_of(graph, f, w, v, order, inflow, outflow):
     cls = _graph_class(graph)
     if cls is CompleteGraph:
@@ -293,7 +332,7 @@ def _graph_flows_of(graph, f, w, v, order, inflow, outflow):
     return None
 
 
-@overload(sort_for)
+@overload(sort_for, inline="always")
 def _sort_for(graph, f, order):
     cls = _graph_class(graph)
     if cls is CompleteGraph:

@@ -88,9 +88,9 @@ def integrate(x, z, term, params, minute, ws, stepper, rule, h_try, history):
         if first_congestion < 0 and congested > 0.0:
             first_congestion = k
         status, calm, converged_at = check(rule, ring, k, z, residual, calm, demand, still)
-        if status == Status.CONVERGED and final_residual(
-            x, z, term, params, minute, ws
-        ) > tolerance(rule, demand):
+        # (without controller states the residual is 0 everywhere: nothing to read again)
+        reread = status == Status.CONVERGED and z.shape[0] > 0
+        if reread and final_residual(x, z, term, params, minute, ws) > tolerance(rule, demand):
             # the steppers' residual is read where each step starts, so the last step's end
             # state (the one reported, and checked against the KKT conditions) is read here
             status, calm = Status.NOT_CONVERGED, 0

@@ -70,7 +70,7 @@ def payoff(mode, p, z, params, minute, work, f, z_rate):
     raise TypeError("payoff() runs in compiled code only; call the mode's own payoff")
 
 
-@overload(payoff)
+@overload(payoff, inline="always")
 def _payoff(mode, p, z, params, minute, work, f, z_rate):
     kernel = _PAYOFFS.get(getattr(mode, "instance_class", None))
     if kernel is None:
@@ -120,7 +120,9 @@ def evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, param
     for i in range(x.shape[0]):
         p[i] = x[i] * demand
     # the mode's payoff map, the field's weights and the graph's sums, each chosen by its
-    # record's class when numba compiles (Term): no branch, and nothing else compiled
+    # record's class when numba compiles (Term): no branch, nothing else compiled, and each
+    # inlined (overload inline="always"; called, each call reference-counted the records'
+    # arrays: the paper minute took 2.5 ms instead of 1.5 ms)
     congestion, residual = payoff(term.mode, p, z, params, minute, work, f, z_rate)
     weights(term.field, x, minute.lo, minute.hi, minute.active, w, v, room)
     graph = term.graph
