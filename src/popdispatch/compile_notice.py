@@ -2,8 +2,12 @@
 
 The engine's kernels are compiled by numba on first use and cached on disk (``cache=True``):
 the first run after installing or updating popdispatch (or with an empty ``NUMBA_CACHE_DIR``)
-spends about 30-40 s compiling (2026-12-01, 2-core machine: 29 s of CPU for ``popdispatch
-day --mode exact``; 72 s before issue 13), later processes load them in under half a second.
+compiles the kernels of its own run configuration (mode, dynamic, graph, stepper, warm start:
+:mod:`popdispatch.integrate.term`): 2026-12-02, 2-core machine under load, whole commands
+``popdispatch day --mode exact`` about 21-26 s of CPU, ``popdispatch day`` (paper) about 18-21
+s (76 and 75 s before, measured in the same run: ``benchmarks/bench_first_run.py``); a run
+of another configuration later compiles its own once more. Later processes load them in
+under half a second.
 The CLI calls :func:`kernels_cached` before the engine runs so that it can say so on stderr
 instead of staying silent.
 
@@ -35,7 +39,8 @@ DAY_LOOP = "popdispatch.online.day:integrate_day"
 
 COMPILE_NOTICE = (
     "compiling the engine's kernels (first run after installing or updating popdispatch, or "
-    "an empty numba cache): about 30-60 s, once; later runs load them from numba's disk cache"
+    "an empty numba cache, or a mode, dynamic or graph not run before): about 20-40 s, once; "
+    "later runs load them from numba's disk cache"
 )
 
 

@@ -33,11 +33,18 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+#: Room (in units in the last place of the upper limit) below which a strategy counts as at its
+#: upper limit.
+ROOM_ULPS = 16.0
+
 
 @nb.njit(cache=True, inline="always")
 def capacity_smith_weights(x, lo, hi, active, w, v, room):
     """Receiver weight ``1[x < hi]``, movable mass ``x - lo``, room ``hi - x`` (dimensionless
-    shares); a strategy with no width (offline, ``hi = lo``) takes no part."""
+    shares); a strategy with no width (offline, ``hi = lo``) takes no part. Room of at most
+    :data:`ROOM_ULPS` units in the last place of ``hi`` is none: the limiter lands a receiver on
+    its limit up to round-off, and a full generator left a few ulp below it would stay a
+    receiver, its inflow limited (the flows summed again) at every step."""
     for i in range(x.shape[0]):
         width = hi[i] - lo[i]
         if width <= 0.0 or not active[i]:
@@ -46,6 +53,8 @@ def capacity_smith_weights(x, lo, hi, active, w, v, room):
             room[i] = 0.0
             continue
         room[i] = max(hi[i] - x[i], 0.0)
+        if room[i] <= ROOM_ULPS * np.spacing(hi[i]):
+            room[i] = 0.0  # a few ulp below its limit: at it (not a receiver)
         w[i] = 1.0 if room[i] > 0.0 else 0.0
         v[i] = max(x[i] - lo[i], 0.0)
 
