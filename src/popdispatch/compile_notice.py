@@ -3,11 +3,12 @@
 The engine's kernels are compiled by numba on first use and cached on disk (``cache=True``):
 the first run after installing or updating popdispatch (or with an empty ``NUMBA_CACHE_DIR``)
 compiles the kernels of its own run configuration (mode, dynamic, graph, stepper, warm start:
-:mod:`popdispatch.integrate.term`): 2026-12-02, 2-core machine under load, whole commands
-``popdispatch day --mode exact`` about 21-26 s of CPU, ``popdispatch day`` (paper) about 18-21
-s (76 and 75 s before, measured in the same run: ``benchmarks/bench_first_run.py``); a run
-of another configuration later compiles its own once more. Later processes load them in
-under half a second.
+:mod:`popdispatch.integrate.term`). Measured 2026-12-02 on the 2-core machine (load 1,
+``benchmarks/bench_first_run.py``, whole commands, CPU seconds, before issue 13's second round
+in brackets, same run): ``popdispatch day --mode exact`` 19.9 s (61.0 s), ``popdispatch day``
+16.5 s (65.9 s), the exact congestion snapshot 25.6 s (52.7 s). A run of another
+configuration later compiles its own once more. Later processes load them in under half a
+second.
 The CLI calls :func:`kernels_cached` before the engine runs so that it can say so on stderr
 instead of staying silent.
 
