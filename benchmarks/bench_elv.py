@@ -6,7 +6,7 @@ Usage: python benchmarks/bench_elv.py [--profiles DIR] [--repeat N] [--modes exa
     [--no-opf] [--old SRC] [--command]
 Prints medians of N runs (after one warm-up run that compiles the kernels or loads them).
 
-- ``--old SRC``: also time the exact-mode day of another checkout's ``src`` folder (e.g.
+- ``--old SRC``: also time the day of each mode in another checkout's ``src`` folder (e.g.
   ``/tmp/oldtree/src``) in a child process, alternating rounds with this checkout's, and print
   the ratio of the medians (both after their own warm-up).
 - ``--command``: also time the whole ``popdispatch day --mode exact`` command (a new process
@@ -44,7 +44,7 @@ from popdispatch.online import RunSettings, run_day
 from popdispatch.readers import read_profiles
 from popdispatch.scenarios import elv_problem
 problem = elv_problem(read_profiles(sys.argv[1]))
-settings = RunSettings(mode="exact")
+settings = RunSettings(mode=sys.argv[3])
 run_day(problem, settings)
 for _ in range(int(sys.argv[2])):
     print(run_day(problem, settings).wall_seconds, flush=True)
@@ -93,11 +93,11 @@ def lean_qp_day(problem) -> None:
         clarabel.DefaultSolver(P, q, A, rhs, cones, settings).solve()
 
 
-def old_checkout_day(src: str, profiles: str, rounds: int) -> list[float]:
-    """Engine seconds of the exact-mode day with ``src`` first on the path (child process)."""
+def old_checkout_day(src: str, profiles: str, rounds: int, mode: str = "exact") -> list[float]:
+    """Engine seconds of the ``mode`` day with ``src`` first on the path (child process)."""
     env = {**os.environ, "PYTHONPATH": src}
     out = subprocess.run(
-        [sys.executable, "-c", CHILD, profiles, str(rounds)],
+        [sys.executable, "-c", CHILD, profiles, str(rounds), mode],
         env=env, capture_output=True, text=True, check=True,
     )  # fmt: skip
     return [float(line) for line in out.stdout.split()]
@@ -181,24 +181,26 @@ def main() -> None:
         memory = peak_memory_mb(lambda: run_day(day_problem, RunSettings(mode="exact")))
         print(f"peak Python memory of the exact-mode day run: {memory:.1f} MiB (tracemalloc)")
     if args.old:
-        compare_old(day_problem, args.old, args.profiles, args.repeat)
+        for mode in modes:
+            compare_old(day_problem, args.old, args.profiles, args.repeat, mode)
     if args.command:
         seconds = command_seconds(args.profiles, args.repeat)
         print(f"whole command popdispatch day --mode exact (warm cache): {seconds:.2f} s")
 
 
-def compare_old(problem, old_src: str, profiles: str, repeat: int) -> None:
-    """Alternate rounds of this checkout's exact day and ``old_src``'s; print both medians."""
-    settings = RunSettings(mode="exact")
+def compare_old(problem, old_src: str, profiles: str, repeat: int, mode: str = "exact") -> None:
+    """Alternate rounds of this checkout's ``mode`` day and ``old_src``'s; print both
+    medians."""
+    settings = RunSettings(mode=mode)
     run_day(problem, settings)
     new: list[float] = []
     old: list[float] = []
     for _ in range(repeat):
-        old += old_checkout_day(old_src, profiles, 3)
+        old += old_checkout_day(old_src, profiles, 3, mode)
         new += [run_day(problem, settings).wall_seconds for _ in range(3)]
     ratio = statistics.median(old) / statistics.median(new)
     print(
-        f"exact-mode day, alternating {repeat} rounds of 3: this checkout "
+        f"{mode}-mode day, alternating {repeat} rounds of 3: this checkout "
         f"{statistics.median(new):.4f} s, {old_src} {statistics.median(old):.4f} s "
         f"({ratio:.2f}x faster here)"
     )

@@ -2,8 +2,13 @@
 
 The engine's kernels are compiled by numba on first use and cached on disk (``cache=True``):
 the first run after installing or updating popdispatch (or with an empty ``NUMBA_CACHE_DIR``)
-spends about 30-40 s compiling (2026-12-01, 2-core machine: 29 s of CPU for ``popdispatch
-day --mode exact``; 72 s before issue 13), later processes load them in under half a second.
+compiles the kernels of its own run configuration (mode, dynamic, graph, stepper, warm start:
+:mod:`popdispatch.integrate.term`). Measured 2026-12-02 on the 2-core machine (load 1,
+``benchmarks/bench_first_run.py``, whole commands, CPU seconds, before issue 13's second round
+in brackets, same run): ``popdispatch day --mode exact`` 19.9 s (61.0 s), ``popdispatch day``
+16.5 s (65.9 s), the exact congestion snapshot 25.6 s (52.7 s). A run of another
+configuration later compiles its own once more. Later processes load them in under half a
+second.
 The CLI calls :func:`kernels_cached` before the engine runs so that it can say so on stderr
 instead of staying silent.
 
@@ -16,6 +21,10 @@ written by another numba version or older than the source file all read as empty
 from __future__ import annotations
 
 import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from popdispatch.online.settings import RunSettings
 
 #: The kernels every engine run compiles (``module:function``): the day loop (a single minute
 #: runs as a day of one row) and the game and field it calls; their callees are compiled and
@@ -26,21 +35,79 @@ ENTRY_POINTS = (
     "popdispatch.game.flows:limited_ancestors",
 )
 
+#: The day loop: compiled once per run configuration (see :func:`kernels_cached`).
+DAY_LOOP = "popdispatch.online.day:integrate_day"
+
 COMPILE_NOTICE = (
     "compiling the engine's kernels (first run after installing or updating popdispatch, or "
-    "an empty numba cache): about 30-60 s, once; later runs load them from numba's disk cache"
+    "an empty numba cache, or a mode, dynamic or graph not run before): about 20-40 s, once; "
+    "later runs load them from numba's disk cache"
 )
 
 
-def kernels_cached() -> bool | None:
+def kernels_cached(settings: RunSettings | None = None) -> bool | None:
     """True if numba's disk cache holds an up-to-date entry for every entry point, False if
-    one must be compiled, None if that cannot be told (then say nothing)."""
+    one must be compiled, None if that cannot be told (then say nothing).
+
+    The engine compiles its day loop once per run configuration (the record classes of the
+    mode, field, graph, stepper and warm start, :func:`run_classes`): with ``settings``, the
+    day loop's entry must be one compiled for that configuration; without, any entry will do.
+    """
     try:
         for entry in ENTRY_POINTS:
-            module, _, name = entry.partition(":")
-            dispatcher = getattr(importlib.import_module(module), name)
-            if not dispatcher._cache._cache_file._load_index():
+            index = _dispatcher(entry)._cache._cache_file._load_index()
+            if not index:
                 return False
+        if settings is not None:
+            wanted = run_classes(settings)
+            if wanted is None:
+                return None
+            index = _dispatcher(DAY_LOOP)._cache._cache_file._load_index()
+            return any(wanted <= _classes(key[0]) for key in index)
     except Exception:  # numba internals differ: no notice rather than a wrong one
         return None
     return True
+
+
+def run_classes(settings: RunSettings) -> set[type] | None:
+    """The record classes that select the compiled kernels of a run with ``settings`` (as
+    :class:`~popdispatch.online.engine.Engine` builds them), None for settings that cannot
+    run."""
+    from popdispatch.dynamics import get_dynamics
+    from popdispatch.dynamics.fields import field_tag
+    from popdispatch.dynamics.pairwise import CompleteGraph, SparseGraph
+    from popdispatch.integrate.steppers import method_tag
+    from popdispatch.modes import get_mode
+    from popdispatch.modes.mechanism import mode_tag
+    from popdispatch.warm_start import WARM_STARTS, start_tag
+
+    mode = get_mode(settings.mode)
+    dynamics = get_dynamics(settings.dynamics)
+    field = dynamics.bounded_field if mode.bounded else dynamics.field
+    if field is None:
+        return None
+    complete = not dynamics.uses_graph or settings.graph == "complete"
+    policy = WARM_STARTS[settings.warm_start_policy]
+    return {
+        type(field_tag(field)), type(mode_tag(mode.code)),
+        CompleteGraph if complete else SparseGraph,
+        type(method_tag(settings.stepping.method_code)), type(start_tag(policy, mode.bounded)),
+    }  # fmt: skip
+
+
+def _dispatcher(entry: str):
+    module, _, name = entry.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def _classes(types: tuple) -> set[type]:
+    """The Python classes of every named record in a compiled signature, nested ones too."""
+    found: set[type] = set()
+    stack = list(types)
+    while stack:
+        item = stack.pop()
+        cls = getattr(item, "instance_class", None)
+        if cls is not None:
+            found.add(cls)
+        stack.extend(getattr(item, "types", ()) if cls is not None else ())
+    return found

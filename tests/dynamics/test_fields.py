@@ -37,3 +37,21 @@ def test_compiled_weights_equal_the_reference(field):
     inflow, outflow = pair_flows(f, *weights(field, x, lo, hi, active)[:2], complete)
     rate = field_rate(field, x, f, complete, lo, hi, active)
     np.testing.assert_allclose(rate, inflow - outflow, rtol=0, atol=1e-14)
+
+
+def test_a_strategy_a_few_ulp_below_its_upper_limit_is_at_it():
+    """Capacity-constrained Smith: room of at most ROOM_ULPS units in the last place of ``hi``
+    is no room (no receiver weight), so round-off left by the limiter's landing does not make
+    a full generator a receiver; a strategy a little further below still is one."""
+    from popdispatch.dynamics.capacity import ROOM_ULPS, capacity_smith_weights
+
+    hi = np.array([0.7, 0.7, 0.7, 0.5])
+    ulp = np.spacing(0.7)
+    x = np.array([0.7 - 2 * ulp, 0.7 - ROOM_ULPS * ulp, 0.7 - 2 * ROOM_ULPS * ulp, 0.1])
+    lo = np.zeros(4)
+    w, v, room = np.empty(4), np.empty(4), np.empty(4)
+    capacity_smith_weights(x, lo, hi, np.ones(4, dtype=bool), w, v, room)
+    np.testing.assert_array_equal(w, [0.0, 0.0, 1.0, 1.0])
+    np.testing.assert_array_equal(room[:2], [0.0, 0.0])
+    assert room[2] == hi[2] - x[2] > 0.0
+    np.testing.assert_array_equal(v, x - lo)  # the senders' side is untouched

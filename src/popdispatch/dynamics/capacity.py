@@ -33,11 +33,18 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+#: Room (in units in the last place of the upper limit) below which a strategy counts as at its
+#: upper limit.
+ROOM_ULPS = 16.0
+
 
 @nb.njit(cache=True, inline="always")
 def capacity_smith_weights(x, lo, hi, active, w, v, room):
     """Receiver weight ``1[x < hi]``, movable mass ``x - lo``, room ``hi - x`` (dimensionless
-    shares); a strategy with no width (offline, ``hi = lo``) takes no part."""
+    shares); a strategy with no width (offline, ``hi = lo``) takes no part. Room of at most
+    :data:`ROOM_ULPS` units in the last place of ``hi`` is none: the limiter lands a receiver on
+    its limit up to round-off, and a full generator left a few ulp below it would stay a
+    receiver, its inflow limited (the flows summed again) at every step."""
     for i in range(x.shape[0]):
         width = hi[i] - lo[i]
         if width <= 0.0 or not active[i]:
@@ -46,6 +53,8 @@ def capacity_smith_weights(x, lo, hi, active, w, v, room):
             room[i] = 0.0
             continue
         room[i] = max(hi[i] - x[i], 0.0)
+        if room[i] <= ROOM_ULPS * np.spacing(hi[i]):
+            room[i] = 0.0  # a few ulp below its limit: at it (not a receiver)
         w[i] = 1.0 if room[i] > 0.0 else 0.0
         v[i] = max(x[i] - lo[i], 0.0)
 
@@ -55,14 +64,35 @@ def project_to_box(x, lo, hi):
     """Euclidean projection of ``x`` onto ``{lo <= x <= hi, sum x = 1}`` (bisection on a shift).
 
     Used when the demand changes between minutes: ``hi = Pmax / P_d`` moves, and a warm-started
-    share may sit above its new limit.
+    share may sit above its new limit. Written as loops (the same operations in the same order
+    as ``np.minimum(np.maximum(x - shift, lo), hi).sum()``): numba compiles array expressions
+    with their broadcasting checks several times slower (first run, issue 13).
     """
-    low = np.min(x - hi) - 1.0
-    high = np.max(x - lo) + 1.0
+    n = x.shape[0]
+    low = np.inf
+    high = -np.inf
+    for i in range(n):
+        low = min(low, x[i] - hi[i])
+        high = max(high, x[i] - lo[i])
+    low -= 1.0
+    high += 1.0
     for _ in range(200):
         shift = 0.5 * (low + high)
-        if np.minimum(np.maximum(x - shift, lo), hi).sum() > 1.0:
+        if _clipped_sum(x, lo, hi, shift) > 1.0:
             low = shift
         else:
             high = shift
-    return np.minimum(np.maximum(x - 0.5 * (low + high), lo), hi)
+    shift = 0.5 * (low + high)
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = min(max(x[i] - shift, lo[i]), hi[i])
+    return out
+
+
+@nb.njit(cache=True, inline="always")
+def _clipped_sum(x, lo, hi, shift):
+    """``sum_i min(max(x_i - shift, lo_i), hi_i)``, summed in index order."""
+    total = 0.0
+    for i in range(x.shape[0]):
+        total += min(max(x[i] - shift, lo[i]), hi[i])
+    return total

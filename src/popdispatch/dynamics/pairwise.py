@@ -12,12 +12,45 @@ On the complete graph both sums come from one sort of the fitness and running su
 O(n log n) instead of O(n^2) pairs; on a communication graph (CSR adjacency) they cost O(edges).
 The running sums add only non-negative terms (fitness steps times partial sums), so equal
 fitness gives exactly zero flow and there is no cancellation.
+
+The engine passes the graph as a :class:`CompleteGraph` or :class:`SparseGraph` record; the
+record's class picks the kernel when numba compiles (:func:`graph_flows_of`,
+:func:`sort_for`), so a run compiles the sums of its own graph only.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
+from numba.extending import overload
+
+
+class Graph(NamedTuple):
+    """The communication graph as the compiled kernels take it: its symmetric adjacency in
+    CSR form (``indptr``, ``indices``; empty for the complete graph). The class says which
+    sums run (see :func:`graph_flows_of`)."""
+
+    indptr: np.ndarray
+    indices: np.ndarray
+
+
+class CompleteGraph(Graph):
+    """The complete graph: sorted running sums, O(n log n)."""
+
+    __slots__ = ()
+
+
+class SparseGraph(Graph):
+    """A communication graph: sums over its edges and the relay, O(edges)."""
+
+    __slots__ = ()
+
+
+def graph_of(complete: bool, indptr: np.ndarray, indices: np.ndarray) -> Graph:
+    """The graph record: complete, else the CSR adjacency ``indptr``, ``indices`` (int64)."""
+    return (CompleteGraph if complete else SparseGraph)(indptr, indices)
 
 
 @nb.njit(cache=True, inline="always")
@@ -39,8 +72,49 @@ def sort_by_fitness(f, order):
             moves += 1
         order[s + 1] = item
         if moves > 8 * n + 64:
-            order[:] = np.argsort(f, kind="mergesort")
+            merge_sort(f, order)
             return
+
+
+@nb.njit(cache=True)
+def merge_sort(f, order):
+    """``order[:] = np.argsort(f, kind="mergesort")`` (the same permutation: a stable sort of
+    ``0..n-1`` by ``f``), bottom-up. numba's ``argsort`` compiled for about 3 s of every first
+    run for this fallback, which a run rarely takes (issue 13)."""
+    n = order.shape[0]
+    for k in range(n):
+        order[k] = k
+    scratch = np.empty(n, dtype=order.dtype)
+    width = 1
+    passes = 0
+    source, target = order, scratch
+    while width < n:
+        for left in range(0, n, 2 * width):
+            middle = min(left + width, n)
+            right = min(left + 2 * width, n)
+            a, b, out = left, middle, left
+            while a < middle and b < right:
+                if f[source[b]] < f[source[a]]:  # ties keep the left run first: stable
+                    target[out] = source[b]
+                    b += 1
+                else:
+                    target[out] = source[a]
+                    a += 1
+                out += 1
+            while a < middle:
+                target[out] = source[a]
+                a += 1
+                out += 1
+            while b < right:
+                target[out] = source[b]
+                b += 1
+                out += 1
+        source, target = target, source
+        width *= 2
+        passes += 1
+    if passes % 2 == 1:  # the sorted run is in the scratch
+        for k in range(n):
+            order[k] = source[k]
 
 
 @nb.njit(cache=True, inline="always")
@@ -218,3 +292,59 @@ def pairwise_flows(f, w, v, complete, indptr, indices, order, inflow, outflow):
     else:
         graph_flows(f, w, v, indptr, indices, inflow, outflow)
         relay_flows(f, w, v, indptr, indices, order, inflow, outflow)
+
+
+def graph_flows_of(graph, f, w, v, order, inflow, outflow):
+    """:func:`pairwise_flows` on ``graph`` (a :class:`CompleteGraph`, ``order`` already
+    sorted, or a :class:`SparseGraph`), the kernel chosen by the record's class when numba
+    types the call; compiled code only."""
+    raise TypeError("graph_flows_of() runs in compiled code only; use pairwise_flows")
+
+
+def sort_for(graph, f, order):
+    """:func:`sort_by_fitness` where ``graph`` is complete (the only graph whose sums read the
+    order), nothing on a :class:`SparseGraph`; compiled code only."""
+    raise TypeError("sort_for() runs in compiled code only; use sort_by_fitness")
+
+
+def _graph_class(graph) -> type | None:
+    cls = getattr(graph, "instance_class", None)
+    return cls if cls in (CompleteGraph, SparseGraph) else None
+
+
+@overload(graph_flows_of, inline="always")
+def _graph_flows_of(graph, f, w, v, order, inflow, outflow):
+    cls = _graph_class(graph)
+    if cls is CompleteGraph:
+
+        def complete(graph, f, w, v, order, inflow, outflow):
+            complete_graph_flows(f, w, v, order, inflow, outflow)
+
+        return complete
+    if cls is SparseGraph:
+
+        def sparse(graph, f, w, v, order, inflow, outflow):
+            indptr, indices = graph.indptr, graph.indices
+            graph_flows(f, w, v, indptr, indices, inflow, outflow)
+            relay_flows(f, w, v, indptr, indices, order, inflow, outflow)
+
+        return sparse
+    return None
+
+
+@overload(sort_for, inline="always")
+def _sort_for(graph, f, order):
+    cls = _graph_class(graph)
+    if cls is CompleteGraph:
+
+        def complete(graph, f, order):
+            sort_by_fitness(f, order)
+
+        return complete
+    if cls is SparseGraph:
+
+        def sparse(graph, f, order):
+            pass
+
+        return sparse
+    return None

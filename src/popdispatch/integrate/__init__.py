@@ -26,6 +26,7 @@ from popdispatch.integrate.steppers import (
     Method,
     StepperSettings,
     Workspace,
+    method_tag,
     workspace,
 )
 from popdispatch.integrate.stopping import ROUND_OFF, Status, StopRule
@@ -94,7 +95,7 @@ class Integrator:
         """The stepper's settings for the compiled kernels; ``price_scale`` (EUR/MW) turns
         ``price_atol`` into EUR/MW."""
         return StepperSettings(
-            int(self.method_code), float(self.dt), int(self.substeps), float(self.rtol),
+            method_tag(self.method_code), float(self.dt), int(self.substeps), float(self.rtol),
             float(self.atol), float(self.price_atol * price_scale),
         )  # fmt: skip
 

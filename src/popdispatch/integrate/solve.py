@@ -5,9 +5,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numba as nb
-import numpy as np
 
-from popdispatch.integrate.steppers import advance, evaluate_stage
+from popdispatch.integrate.steppers import advance, copy_into, evaluate_stage
 from popdispatch.integrate.stopping import Status, at_rest, check, tolerance
 
 
@@ -21,6 +20,15 @@ class Outcome(NamedTuple):
     converged_at: int
     first_congestion: int
     h_try: float
+
+
+@nb.njit(cache=True, inline="always")
+def equal(a, b):
+    """Are the vectors ``a`` and ``b`` (same length) equal element by element?"""
+    for i in range(a.shape[0]):  # noqa: SIM110 (numba compiles no generator expression)
+        if a[i] != b[i]:
+            return False
+    return True
 
 
 @nb.njit(cache=True, inline="always")
@@ -66,10 +74,11 @@ def integrate(x, z, term, params, minute, ws, stepper, rule, h_try, history):
         # later iterations would repeat it, so they are recorded without being recomputed.
         still = stationary
         if not stationary:
-            last_x[:] = x
-            last_z[:] = z
-            congested, residual, h_try = advance(x, z, term, params, minute, ws, stepper, h_try)
-            stationary = np.array_equal(x, last_x) and np.array_equal(z, last_z)
+            copy_into(x, last_x)
+            copy_into(z, last_z)
+            congested, residual, h_try = advance(stepper.method, x, z, term, params, minute, ws,
+                                                 stepper, h_try)  # fmt: skip
+            stationary = equal(x, last_x) and equal(z, last_z)
             still = at_rest(x, last_x, z, last_z)
         row = k % size
         for i in range(x.shape[0]):
@@ -79,9 +88,9 @@ def integrate(x, z, term, params, minute, ws, stepper, rule, h_try, history):
         if first_congestion < 0 and congested > 0.0:
             first_congestion = k
         status, calm, converged_at = check(rule, ring, k, z, residual, calm, demand, still)
-        if status == Status.CONVERGED and final_residual(
-            x, z, term, params, minute, ws
-        ) > tolerance(rule, demand):
+        # (without controller states the residual is 0 everywhere: nothing to read again)
+        reread = status == Status.CONVERGED and z.shape[0] > 0
+        if reread and final_residual(x, z, term, params, minute, ws) > tolerance(rule, demand):
             # the steppers' residual is read where each step starts, so the last step's end
             # state (the one reported, and checked against the KKT conditions) is read here
             status, calm = Status.NOT_CONVERGED, 0

@@ -37,8 +37,9 @@ from typing import NamedTuple
 
 import numba as nb
 import numpy as np
+from numba.extending import overload
 
-from popdispatch.dynamics.pairwise import pairwise_flows
+from popdispatch.dynamics.pairwise import graph_flows_of
 from popdispatch.game.parameters import GameWork
 from popdispatch.integrate.term import Stage, evaluate
 
@@ -50,17 +51,41 @@ class Method(IntEnum):
     HEUN = 1
 
 
+class MethodTag(NamedTuple):
+    """A method as the compiled kernels take it: its :class:`Method` value in ``code``; the
+    *class* picks the stepper when numba compiles (:func:`advance`), so a run compiles one."""
+
+    code: int
+
+
+class EulerTag(MethodTag):
+    """Fixed limited Euler substeps (:func:`advance_euler`)."""
+
+    __slots__ = ()
+
+
+class HeunTag(MethodTag):
+    """Adaptive Heun with the stiffness cap (:func:`advance_heun`)."""
+
+    __slots__ = ()
+
+
+def method_tag(method: Method) -> MethodTag:
+    """The compile-time record of ``method``."""
+    return (EulerTag if Method(method) == Method.EULER else HeunTag)(int(method))
+
+
 #: Largest ``h * rate`` a Heun step may take (its stability interval on the real axis is 2).
 STABLE_STEP = 1.5
 
 
 class StepperSettings(NamedTuple):
     """What a stepper takes (from :meth:`popdispatch.integrate.Integrator.stepper`): method
-    (its integer value, see :class:`~popdispatch.integrate.term.Term`), iteration ``dt`` (s),
+    (a :class:`MethodTag`, see :func:`advance`), iteration ``dt`` (s),
     Euler ``substeps``, Heun error control ``rtol``, ``atol`` (shares) and ``price_atol``
     (EUR/MW)."""
 
-    method: Method
+    method: MethodTag
     dt: float
     substeps: int
     rtol: float
@@ -120,6 +145,14 @@ def workspace(n: int, n_lines: int, n_states: int, window: int) -> Workspace:
     )  # fmt: skip
 
 
+@nb.njit(cache=True, inline="always")
+def copy_into(source, target):
+    """``target[:] = source`` as a loop (same length): numba compiles an array assignment
+    with its broadcasting checks, seconds of the first run (issue 13)."""
+    for i in range(source.shape[0]):
+        target[i] = source[i]
+
+
 @nb.njit(cache=True)
 def evaluate_stage(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, params, minute,
                    work):  # fmt: skip
@@ -136,11 +169,11 @@ def evaluate_stage(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term,
 
 
 @nb.njit(cache=True)
-def limited_flows(f, w, v, complete, indptr, indices, order, inflow, outflow):
-    """:func:`~popdispatch.dynamics.pairwise.pairwise_flows` of limited weights, compiled once
-    and called by the limiter's four sites (inlined, numba typed and LLVM optimised a copy
-    of both graph kernels at each)."""
-    pairwise_flows(f, w, v, complete, indptr, indices, order, inflow, outflow)
+def limited_flows(f, w, v, graph, order, inflow, outflow):
+    """:func:`~popdispatch.dynamics.pairwise.graph_flows_of` of limited weights on ``graph``,
+    compiled once and called by the limiter's four sites (inlined, numba typed and LLVM
+    optimised a copy at each)."""
+    graph_flows_of(graph, f, w, v, order, inflow, outflow)
 
 
 @nb.njit(cache=True)
@@ -160,7 +193,7 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
     about 1400 steps on 6 generators) a quarter of its time when the limiter was a function.
     """
     lim_w, lim_v, lim_in, lim_out = lim.w, lim.v, lim.inflow, lim.outflow
-    complete, indptr, indices = term.complete, term.indptr, term.indices
+    graph = term.graph
     congested = 0.0
     residual = 0.0
     for step in range(steps):
@@ -180,7 +213,7 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
                 senders = True
         into = inflow
         if senders:
-            limited_flows(f, w, lim_v, complete, indptr, indices, order, lim_in, lim_out)
+            limited_flows(f, w, lim_v, graph, order, lim_in, lim_out)
             into = lim_in
         limited_any = senders
         for i in range(x.shape[0]):
@@ -189,7 +222,7 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
                 lim_w[i] = w[i] * (room[i] / (h * into[i]))
                 limited_any = True
         if limited_any:
-            limited_flows(f, lim_w, lim_v, complete, indptr, indices, order, lim_in, lim_out)
+            limited_flows(f, lim_w, lim_v, graph, order, lim_in, lim_out)
             for i in range(x.shape[0]):
                 x_out[i] = x[i] + h * (lim_in[i] - lim_out[i])
         else:
@@ -224,7 +257,7 @@ def advance_euler(x, z, term, params, minute, ws, stepper):
 
 @nb.njit(cache=True, inline="always")
 def heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2, v2, in2, out2,
-                     zr2, order2, lim1, lim2, complete, indptr, indices, x_out, z_out):  # fmt: skip
+                     zr2, order2, lim1, lim2, graph, x_out, z_out):  # fmt: skip
     """``x_out = x + h/2 (k1 + k2)`` from the raw flows at both points, flux-limited as one step.
 
     Where the combined step would carry a strategy past its movable mass or its room, the
@@ -234,7 +267,7 @@ def heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2,
     ``order1``, ``f2`` .. ``order2``: the arrays of the :class:`Stage` of each point that are
     read (taken apart once per iteration by :func:`advance_heun`: numba reference-counts
     every array of a record handed to an inlined function, at every step); ``lim1``,
-    ``lim2``: scratch :class:`Limited`; ``complete``, ``indptr``, ``indices``: the
+    ``lim2``: scratch :class:`Limited`; ``graph``: the
     :class:`~popdispatch.integrate.term.Term`'s graph.
     """
     sw1, sv1, sin1, sout1 = lim1.w, lim1.v, lim1.inflow, lim1.outflow
@@ -251,8 +284,8 @@ def heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2,
             senders = True
         sv1[i], sv2[i] = alpha * v1[i], alpha * v2[i]
     if senders:
-        limited_flows(f1, w1, sv1, complete, indptr, indices, order1, sin1, sout1)
-        limited_flows(f2, w2, sv2, complete, indptr, indices, order2, sin2, sout2)
+        limited_flows(f1, w1, sv1, graph, order1, sin1, sout1)
+        limited_flows(f2, w2, sv2, graph, order2, sin2, sout2)
     limited = senders
     for i in range(x.shape[0]):
         beta = 1.0
@@ -262,8 +295,8 @@ def heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2,
             limited = True
         sw1[i], sw2[i] = beta * w1[i], beta * w2[i]
     if limited:
-        limited_flows(f1, sw1, sv1, complete, indptr, indices, order1, sin1, sout1)
-        limited_flows(f2, sw2, sv2, complete, indptr, indices, order2, sin2, sout2)
+        limited_flows(f1, sw1, sv1, graph, order1, sin1, sout1)
+        limited_flows(f2, sw2, sv2, graph, order2, sin2, sout2)
         for i in range(x.shape[0]):
             x_out[i] = x[i] + half * (sin1[i] - sout1[i] + sin2[i] - sout2[i])
     else:
@@ -319,7 +352,7 @@ def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
     zr1, order1 = one.z_rate, one.order
     p2, f2, w2, v2, room2 = two.p, two.f, two.w, two.v, two.room
     in2, out2, zr2, order2 = two.inflow, two.outflow, two.z_rate, two.order
-    complete, indptr, indices = term.complete, term.indptr, term.indices
+    graph = term.graph
     remaining = dt
     congested = 0.0
     residual = 0.0
@@ -340,14 +373,13 @@ def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
         evaluate_stage(x1, z1, p2, f2, w2, v2, room2, in2, out2, zr2, order2, term, params,
                        minute, work)  # fmt: skip
         heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2, v2, in2,
-                         out2, zr2, order2, lim1, lim2, complete, indptr, indices, x2,
-                         z2)  # fmt: skip
+                         out2, zr2, order2, lim1, lim2, graph, x2, z2)  # fmt: skip
         err = error_norm(x2, x1, z2, z1, rtol, atol, price_atol)
         rate = stiffness(h, x, z, v1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,
                          price_atol)  # fmt: skip
         if err <= 1.0:
-            x[:] = x2
-            z[:] = z2
+            copy_into(x2, x)
+            copy_into(z2, z)
             remaining -= h
             fresh = False
         else:
@@ -358,11 +390,27 @@ def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
     return congested, residual, min(h_try, dt)
 
 
-@nb.njit(cache=True, inline="always")
-def advance(x, z, term, params, minute, ws, stepper, h_try):
-    """One iteration by the stepper's method; ``(congested, residual, next h_try)`` (Euler
-    leaves ``h_try`` as it is)."""
-    if stepper.method == Method.EULER:
-        congested, residual = advance_euler(x, z, term, params, minute, ws, stepper)
-        return congested, residual, h_try
-    return advance_heun(x, z, term, params, minute, ws, stepper, h_try)
+def advance(method, x, z, term, params, minute, ws, stepper, h_try):
+    """One iteration by the stepper ``method`` (a :class:`MethodTag`, the stepper's own);
+    ``(congested, residual, next h_try)`` (Euler leaves ``h_try`` as it is). Compiled code
+    only: the stepper is chosen by the tag's class when numba types the call."""
+    raise TypeError("advance() runs in compiled code only")
+
+
+@overload(advance)
+def _advance(method, x, z, term, params, minute, ws, stepper, h_try):
+    cls = getattr(method, "instance_class", None)
+    if cls is EulerTag:
+
+        def euler(method, x, z, term, params, minute, ws, stepper, h_try):
+            congested, residual = advance_euler(x, z, term, params, minute, ws, stepper)
+            return congested, residual, h_try
+
+        return euler
+    if cls is HeunTag:
+
+        def heun(method, x, z, term, params, minute, ws, stepper, h_try):
+            return advance_heun(x, z, term, params, minute, ws, stepper, h_try)
+
+        return heun
+    return None

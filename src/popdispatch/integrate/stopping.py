@@ -115,8 +115,9 @@ def check(rule, ring, k, z, residual, calm, demand, still):
     within the minute's tolerance ``max(tol_rel * demand, tol_mw)`` (``demand`` in MW), and
     the iteration of convergence (-1 unless converged). ``still``: the iteration left the
     state unchanged within round-off (:func:`at_rest`), for the fixed-point stop."""
-    if z.shape[0] > 0 and z.max() > rule.z_cap:
-        return Status.INFEASIBLE, calm, -1
+    for line in range(z.shape[0]):
+        if z[line] > rule.z_cap:
+            return Status.INFEASIBLE, calm, -1
     tol = tolerance(rule, demand)
     # the residual within tolerance over the whole last window, not at one sample: the
     # price loop can oscillate with a period of 2-3 iterations whose window means agree

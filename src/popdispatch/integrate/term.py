@@ -2,8 +2,8 @@
 
 ``x' = inflow - outflow`` of the pairwise flows (:mod:`popdispatch.dynamics.pairwise`) whose
 fitness is the mode's payoff map (``payoff`` of the mode's module in :mod:`popdispatch.modes`,
-reached by its :class:`~popdispatch.modes.ModeCode`) and whose weights are the dynamic's
-(:func:`popdispatch.dynamics.fields.field_weights`); ``z' = z_rate``, the mode's
+reached by its :class:`~popdispatch.modes.mechanism.ModeTag`, :func:`payoff`) and whose
+weights are the dynamic's (:func:`popdispatch.dynamics.fields.weights`); ``z' = z_rate``, the mode's
 controller-state map. One evaluation fills a :class:`Stage`; the steppers combine stages.
 """
 
@@ -13,34 +13,73 @@ from typing import NamedTuple
 
 import numba as nb
 import numpy as np
+from numba.extending import overload
 
-from popdispatch.dynamics.fields import Field, field_weights
-from popdispatch.dynamics.pairwise import pairwise_flows, sort_by_fitness
+from popdispatch.dynamics.fields import Field, FieldTag, field_tag, weights
+from popdispatch.dynamics.pairwise import (
+    CompleteGraph,
+    Graph,
+    graph_flows_of,
+    graph_of,
+    sort_for,
+)
 from popdispatch.modes import ModeCode
 from popdispatch.modes.exact import payoff as exact_payoff
+from popdispatch.modes.mechanism import ExactTag, ModeTag, PaperTag, VoltageTag, mode_tag
 from popdispatch.modes.paper import payoff as paper_payoff
 from popdispatch.modes.voltage import payoff as voltage_payoff
 
 
 class Term(NamedTuple):
-    """Which field and game: the dynamic's :class:`~popdispatch.dynamics.fields.Field`, the
-    mode's :class:`~popdispatch.modes.ModeCode` and the communication graph (complete, else
-    its symmetric adjacency in CSR form).
+    """Which field and game: the dynamic's :class:`~popdispatch.dynamics.fields.FieldTag`, the
+    mode's :class:`~popdispatch.modes.mechanism.ModeTag` and the communication
+    :class:`~popdispatch.dynamics.pairwise.Graph` (complete, else its symmetric adjacency in
+    CSR form).
 
-    Build it with :meth:`of`: the enums cross into the kernels as their integer values
-    (compared there with the enum members), because numba types an ``IntEnum`` member passed
-    from Python slowly (about 40-70 us per call, as much as a whole exact-mode minute).
+    Each is a small record whose *class* names the kernel (one class per weight kernel, mode
+    and kind of graph): numba compiles the term once per combination of classes and, in each,
+    only the kernels it names, where a branch on an integer code compiled every mode, field
+    and graph into every run (issue 13: the first run's compilation). Build it with
+    :meth:`of`.
     """
 
-    field: Field
-    mode: ModeCode
-    complete: bool
-    indptr: np.ndarray
-    indices: np.ndarray
+    field: FieldTag
+    mode: ModeTag
+    graph: Graph
 
     @classmethod
     def of(cls, field: Field, mode: ModeCode, complete: bool, indptr, indices) -> Term:
-        return cls(int(field), int(mode), bool(complete), indptr, indices)
+        """The term of ``field`` and ``mode`` on the complete graph, else on the graph of CSR
+        adjacency ``indptr``, ``indices``."""
+        return cls(field_tag(field), mode_tag(mode), graph_of(complete, indptr, indices))
+
+    @property
+    def complete(self) -> bool:
+        """Is the communication graph complete?"""
+        return isinstance(self.graph, CompleteGraph)
+
+
+_PAYOFFS = {PaperTag: paper_payoff, ExactTag: exact_payoff, VoltageTag: voltage_payoff}
+
+
+def payoff(mode, p, z, params, minute, work, f, z_rate):
+    """The payoff map of ``mode`` (a :class:`~popdispatch.modes.mechanism.ModeTag`): fitness
+    into ``f`` (EUR/MW) and controller rates into ``z_rate`` at set points ``p`` (MW) and
+    controller states ``z``; ``(congestion, residual)``. Compiled code only: the mode's kernel
+    is chosen by the tag's class when numba types the call."""
+    raise TypeError("payoff() runs in compiled code only; call the mode's own payoff")
+
+
+@overload(payoff, inline="always")
+def _payoff(mode, p, z, params, minute, work, f, z_rate):
+    kernel = _PAYOFFS.get(getattr(mode, "instance_class", None))
+    if kernel is None:
+        return None
+
+    def impl(mode, p, z, params, minute, work, f, z_rate):
+        return kernel(p, z, params, minute, work, f, z_rate)
+
+    return impl
 
 
 class Stage(NamedTuple):
@@ -80,18 +119,13 @@ def evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, param
     demand = minute.demand
     for i in range(x.shape[0]):
         p[i] = x[i] * demand
-    # the mode's payoff map by static dispatch (numba caches it on disk, unlike a function
-    # argument), straight to the mode's kernel: a dispatching layer between would hand the
-    # records on once more, and numba reference-counts their arrays at every inlined call
-    if term.mode == ModeCode.PAPER:
-        congestion, residual = paper_payoff(p, z, params, minute, work, f, z_rate)
-    elif term.mode == ModeCode.EXACT:
-        congestion, residual = exact_payoff(p, z, params, minute, work, f, z_rate)
-    else:
-        congestion, residual = voltage_payoff(p, z, params, minute, work, f, z_rate)
-    field_weights(term.field, x, minute.lo, minute.hi, minute.active, w, v, room)
-    complete = term.complete
-    if complete:
-        sort_by_fitness(f, order)
-    pairwise_flows(f, w, v, complete, term.indptr, term.indices, order, inflow, outflow)
+    # the mode's payoff map, the field's weights and the graph's sums, each chosen by its
+    # record's class when numba compiles (Term): no branch, nothing else compiled, and each
+    # inlined (overload inline="always"; called, each call reference-counted the records'
+    # arrays: the paper minute took 2.5 ms instead of 1.5 ms)
+    congestion, residual = payoff(term.mode, p, z, params, minute, work, f, z_rate)
+    weights(term.field, x, minute.lo, minute.hi, minute.active, w, v, room)
+    graph = term.graph
+    sort_for(graph, f, order)
+    graph_flows_of(graph, f, w, v, order, inflow, outflow)
     return congestion, residual

@@ -14,9 +14,10 @@ defaults. All modes take the same arguments
 depend on the mode.
 
 Adding a mode: a module here with ``payoff`` and ``MODE``, a :class:`ModeCode` member, an entry
-in :data:`MODES` and a branch in :func:`popdispatch.integrate.term.evaluate`. The branch is the
-static dispatch numba needs to cache the engine on disk (a kernel taking a function argument
-recompiles in every process).
+in :data:`MODES`, a :class:`~popdispatch.modes.mechanism.ModeTag` class and its kernel in
+:data:`popdispatch.integrate.term._PAYOFFS`. The tag's class picks the kernel when numba
+compiles: a static dispatch that numba caches on disk (a kernel taking a function argument
+recompiles in every process) and that compiles a run's own mode only.
 """
 
 from __future__ import annotations

@@ -5,8 +5,9 @@ map* ``(p, z) -> fitness`` and the *controller-state map* ``(p, z) -> z'``, with
 mode's dimension (:attr:`Mode.controller_states`). Both maps are one compiled kernel per mode,
 ``payoff(p, z, params, minute, work, fitness, z_rate) -> (congestion, residual)``, in the mode's
 own module (:mod:`popdispatch.modes.paper`, :mod:`popdispatch.modes.exact`,
-:mod:`popdispatch.modes.voltage`), reached by the mode's :class:`ModeCode` in
-:func:`popdispatch.integrate.term.evaluate`.
+:mod:`popdispatch.modes.voltage`), reached by the mode's :class:`ModeTag` in
+:func:`popdispatch.integrate.term.evaluate`: the tag's class picks the kernel when numba
+compiles, so a run compiles its own mode's payoff only.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.problem import DispatchProblem
@@ -33,12 +34,46 @@ def _unit_price_scale(problem: DispatchProblem) -> float:
 
 
 class ModeCode(IntEnum):
-    """The compiled payoff map of a mode (its branch in
-    :func:`popdispatch.integrate.term.evaluate`)."""
+    """The compiled payoff map of a mode (its kernel in
+    :func:`popdispatch.integrate.term.payoff`, by its :class:`ModeTag`)."""
 
     PAPER = 0
     EXACT = 1
     VOLTAGE = 2
+
+
+class ModeTag(NamedTuple):
+    """A mode as the compiled kernels take it: its :class:`ModeCode` value in ``code``; the
+    *class* (one per mode) picks the payoff kernel when numba compiles
+    (:func:`popdispatch.integrate.term.payoff`)."""
+
+    code: int
+
+
+class PaperTag(ModeTag):
+    """Paper mode's payoff (:mod:`popdispatch.modes.paper`)."""
+
+    __slots__ = ()
+
+
+class ExactTag(ModeTag):
+    """Exact mode's payoff (:mod:`popdispatch.modes.exact`)."""
+
+    __slots__ = ()
+
+
+class VoltageTag(ModeTag):
+    """Voltage mode's payoff (:mod:`popdispatch.modes.voltage`)."""
+
+    __slots__ = ()
+
+
+_TAGS = {ModeCode.PAPER: PaperTag, ModeCode.EXACT: ExactTag, ModeCode.VOLTAGE: VoltageTag}
+
+
+def mode_tag(code: ModeCode) -> ModeTag:
+    """The compile-time record of the mode ``code``."""
+    return _TAGS[ModeCode(code)](int(code))
 
 
 @dataclass(frozen=True)

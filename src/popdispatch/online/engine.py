@@ -17,7 +17,7 @@ from popdispatch.modes import get_mode
 from popdispatch.online.day import DayArrays, DayInputs, integrate_day
 from popdispatch.online.kkt import KktTolerances, kkt_violations
 from popdispatch.online.settings import RunSettings
-from popdispatch.warm_start import SHARES, WARM_STARTS, WarmStart
+from popdispatch.warm_start import WARM_STARTS, WarmStart, start_tag
 
 
 class MinuteRun(NamedTuple):
@@ -61,6 +61,11 @@ class Engine:
             problem.n_generators, len(problem.limit), len(self.z), integrator.window
         )
         self.h_try = integrator.dt
+
+    @property
+    def policy(self) -> WarmStart:
+        """The warm start between minutes (the settings' policy, or the mode's default)."""
+        return WARM_STARTS[self.settings.warm_start_policy]
 
     @property
     def evaluations(self) -> int:
@@ -119,7 +124,10 @@ class Engine:
             integrator = replace(integrator, max_iterations=int(max_iterations))
         rows = integrator.max_iterations + 1 if record else 0
         out = DayArrays.empty(1, len(x), len(self.z), rows)
-        self._integrate(x, np.array([minute]), out, integrator, SHARES)
+        # the day's own policy: with no minute before (previous demand 0) every policy starts
+        # from the shares, so a minute runs the same compiled day loop as the day (one
+        # compilation for both on the first run)
+        self._integrate(x, np.array([minute]), out, integrator, self.policy)
         steps = int(out.iterations[0])
         trajectory = out.history[: steps + 1] if record else out.history
         return MinuteRun(trajectory, x, Status(int(out.status[0])), int(out.converged_at[0]),
@@ -127,19 +135,19 @@ class Engine:
 
     def run_day_chunk(self, x: np.ndarray, minutes: np.ndarray, out: DayArrays) -> None:
         """Run consecutive ``minutes`` (1-based) from shares ``x`` (updated in place)."""
-        policy = WARM_STARTS[self.settings.warm_start_policy]
-        self._integrate(x, minutes, out, self.settings.stepping, policy)
+        self._integrate(x, minutes, out, self.settings.stepping, self.policy)
 
     def _integrate(
         self, x: np.ndarray, minutes: np.ndarray, out: DayArrays, integrator, policy: WarmStart
     ) -> None:
         """The compiled day loop over ``minutes`` with ``integrator`` and warm start ``policy``
-        (its integer: numba types an IntEnum member slowly, about 40 us a call)."""
+        (as its :class:`~popdispatch.warm_start.StartTag`: numba types an IntEnum member
+        slowly, about 40 us a call, and the tag's class lets it compile this policy only)."""
         problem = self.problem
         rows = np.asarray(minutes) - 1
         day = DayInputs(
-            problem.demand[rows], problem.load_flow[rows], problem.online[rows], int(policy),
-            self.mode.bounded, out.last_demand,
+            problem.demand[rows], problem.load_flow[rows], problem.online[rows],
+            start_tag(policy, self.mode.bounded), out.last_demand,
         )  # fmt: skip
         self.h_try, out.last_demand = integrate_day(
             x, self.z, self.term, self.params, day, self.ws, integrator.stepper(self.price_scale),

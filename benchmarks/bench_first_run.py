@@ -1,0 +1,94 @@
+"""Benchmark: the first run after install (numba's disk cache empty), per command.
+
+Usage: python benchmarks/bench_first_run.py [--old SRC] [--repeat N] [--profiles DIR]
+    [--commands day-exact,day-paper,snapshot-exact]
+
+Each run is a new ``python -m popdispatch.cli ...`` process with an empty ``NUMBA_CACHE_DIR``
+(a fresh temporary folder: nothing in the checkout is deleted), so numba compiles every kernel
+the command uses; the next run in the same folder is timed too (the warm cache). Prints, per
+command, the medians of ``N`` rounds of the child's CPU seconds (user + system, from
+``getrusage``: on a shared machine it moves less with the load than the wall clock) and wall
+seconds. With ``--old SRC`` (e.g. a ``git archive main`` unpacked in ``/tmp/kbase``: its
+``src``) every round also runs that checkout, alternating, and the ratio of the CPU medians
+is printed (issue 13: first run under 20 s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from datetime import date
+from pathlib import Path
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+COMMANDS = {
+    "day-exact": ["day", "--mode", "exact"],
+    "day-paper": ["day"],
+    "snapshot-exact": ["snapshot", "--minute", "566", "--limit", "505:666=28", "--mode", "exact"],
+}
+
+
+def run_once(src: str, args: list[str], cache: str, profiles: str | None) -> tuple[float, float]:
+    """``(CPU s, wall s)`` of one ``popdispatch`` command importing ``src``, numba's cache in
+    ``cache``."""
+    env = {**os.environ, "PYTHONPATH": src, "NUMBA_CACHE_DIR": cache}
+    if profiles:
+        env["POPDISPATCH_PROFILES"] = profiles
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    done = subprocess.run(
+        [sys.executable, "-m", "popdispatch.cli", *args, "-q", "--json"],
+        env=env, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        raise SystemExit(f"{' '.join(args)} failed ({src}): {done.stderr.strip()[-400:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return cpu, wall
+
+
+def cold_and_warm(src: str, args: list[str], profiles: str | None) -> dict[str, tuple]:
+    """The command on an empty cache, then again on the cache it left."""
+    with tempfile.TemporaryDirectory(prefix="popdispatch-first-run-") as cache:
+        return {"cold": run_once(src, args, cache, profiles),
+                "warm": run_once(src, args, cache, profiles)}  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--old", help="src folder of another checkout to time alternately")
+    parser.add_argument("--repeat", type=int, default=1, help="rounds (each compiles afresh)")
+    parser.add_argument("--profiles", default=os.environ.get("POPDISPATCH_PROFILES"))
+    parser.add_argument("--commands", default=",".join(COMMANDS))
+    options = parser.parse_args()
+    trees = {"this": SRC} | ({"old": options.old} if options.old else {})
+    print(f"{date.today()} {platform.node()} {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")
+    for name in options.commands.split(","):
+        args = COMMANDS[name]
+        runs: dict[str, list[dict]] = {tree: [] for tree in trees}
+        for _ in range(options.repeat):
+            for tree, src in trees.items():  # alternating: the load drifts alike for both
+                runs[tree].append(cold_and_warm(src, args, options.profiles))
+        medians = {}
+        for tree, rounds in runs.items():
+            cpu = statistics.median(r["cold"][0] for r in rounds)
+            wall = statistics.median(r["cold"][1] for r in rounds)
+            warm = statistics.median(r["warm"][1] for r in rounds)
+            medians[tree] = cpu
+            print(f"{name:15s} {tree:5s} first run {cpu:6.1f} s CPU, {wall:6.1f} s wall; "
+                  f"warm cache {warm:5.2f} s wall  (popdispatch {' '.join(args)})")  # fmt: skip
+        if "old" in medians:
+            print(f"{name:15s} first-run CPU this/old = {medians['this'] / medians['old']:.2f}")
+
+
+if __name__ == "__main__":
+    main()
