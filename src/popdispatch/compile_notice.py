@@ -89,7 +89,7 @@ def run_classes(settings: RunSettings) -> set[type] | None:
     complete = not dynamics.uses_graph or settings.graph == "complete"
     policy = WARM_STARTS[settings.warm_start_policy]
     return {
-        type(field_tag(field)), type(mode_tag(mode.code)),
+        type(field_tag(field)), type(mode_tag(mode.code, settings.exact.price_law)),
         CompleteGraph if complete else SparseGraph,
         type(method_tag(settings.stepping.method_code)), type(start_tag(policy, mode.bounded)),
     }  # fmt: skip

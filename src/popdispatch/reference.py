@@ -18,6 +18,7 @@ import networkx as nx
 import numpy as np
 
 from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.dynamics.capacity import ROOM_ULPS
 from popdispatch.dynamics.fields import Field
 from popdispatch.dynamics.pairwise import RELAY_MASS
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
@@ -110,6 +111,7 @@ def weights(field: Field, x, lo, hi, active):
         width = hi - lo
         part = active & (width > 0.0)
         room = np.where(part, np.maximum(hi - x, 0.0), 0.0)
+        room = np.where(room <= ROOM_ULPS * np.spacing(hi), 0.0, room)  # at its limit
         w = np.where(room > 0.0, 1.0, 0.0)
         return w, np.where(part, np.maximum(x - lo, 0.0), 0.0), room
     share = np.where(active, np.maximum(x, 0.0), 0.0)

@@ -12,7 +12,13 @@ import pytest
 
 from popdispatch.errors import OptionError
 from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs, PriceLaw
-from popdispatch.modes.exact import EMPTY_REGION, ExactConstants, game_constants, payoff
+from popdispatch.modes.exact import (
+    EMPTY_REGION,
+    ExactConstants,
+    game_constants,
+    payoff,
+    tree_payoff,
+)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import scale_cases  # noqa: E402  (the benchmark's synthetic feeders)
@@ -29,7 +35,8 @@ def _payoff(problem, law, p, z):
     params = GameParameters.of(problem, fp)
     minute = MinuteInputs.of(problem, 1)
     fitness, z_rate = np.empty(len(p)), np.empty(len(z))
-    payoff(p, z, params, minute, GameWork.empty(len(problem.limit)), fitness, z_rate)
+    kernel = tree_payoff if law == PriceLaw.TREE else payoff
+    kernel(p, z, params, minute, GameWork.empty(len(problem.limit)), fitness, z_rate)
     return fitness, z_rate, fp, minute
 
 
@@ -95,14 +102,16 @@ def test_tree_rates_equal_the_dense_preconditioner(problem, seed):
 
 
 def test_run_settings_carry_the_law_to_the_engine(problem):
-    """``RunSettings.exact.price_law`` reaches the compiled parameters (as a plain int, one
-    compiled signature); paper mode's constants carry none and run the plain law's record."""
+    """``RunSettings.exact.price_law`` reaches the engine as its term's compile-time mode
+    record (a choice of kernel, so a run compiles only its own law); paper mode has no line
+    prices and keeps its record."""
+    from popdispatch.modes.mechanism import ExactTag, ExactTreeTag, PaperTag
     from popdispatch.online import Engine, RunSettings
 
     tree = Engine(problem, RunSettings(mode="exact", exact=ExactConstants(price_law="tree")))
-    assert tree.params.price_law == PriceLaw.TREE and type(tree.params.price_law) is int
-    assert Engine(problem, RunSettings(mode="exact")).params.price_law == PriceLaw.PLAIN
-    assert Engine(problem, RunSettings(mode="paper")).params.price_law == PriceLaw.PLAIN
+    assert type(tree.term.mode) is ExactTreeTag
+    assert type(Engine(problem, RunSettings(mode="exact")).term.mode) is ExactTag
+    assert type(Engine(problem, RunSettings(mode="paper")).term.mode) is PaperTag
 
 
 def test_price_law_is_chosen_by_name_and_unknown_names_are_refused():

@@ -142,7 +142,7 @@ def snapshot(
     settings = analyses.settings(settings_from(dynamics, mode, x0, graph, None, constants,
                                                 price_law))  # fmt: skip
     check_shares(x0, progress, source)
-    announce_compile(progress)
+    announce_compile(progress, settings)
     problem, series = build(source, profiles, minute, limits, progress)
     problem = analyses.problem(problem, series, settings)
     with progress.step(f"minute {minute}: {dynamics} dynamics and DC-OPF"):
@@ -209,7 +209,7 @@ def day(
     settings = analyses.settings(settings_from(dynamics, mode, x0, graph, warm_start,
                                                 constants, price_law))  # fmt: skip
     check_shares(x0, progress, source)
-    announce_compile(progress)
+    announce_compile(progress, settings)
     problem, series = build(source, profiles, None, limits, progress, events, minutes)
     problem = analyses.problem(problem, series, settings)
     result = run_day_vs_opf(problem, settings, minutes.of(series), progress)
@@ -258,7 +258,7 @@ def reproduce(profiles, out, mode, minutes, html, as_json, quiet) -> None:
     check_out(out)
     Analyses(html=out if html else None).check()  # the extra; out itself checked above
     settings = settings_from("smith", mode, "uniform", "complete")
-    announce_compile(progress)
+    announce_compile(progress, settings)
     day_profiles = runs.load_profiles(profiles, None, progress)
     span = np.arange(minutes[0], minutes[1] + 1) if minutes else None
     rep = run_reproduction(day_profiles, settings, span, progress)

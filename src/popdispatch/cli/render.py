@@ -17,11 +17,12 @@ def emit(summary: dict, as_json: bool, text: str) -> None:
     click.echo(json_text(summary) if as_json else text, nl=not as_json)
 
 
-def announce_compile(progress: Progress) -> None:
-    """Say on stderr (unless quiet) that the engine's kernels compile now, when they must."""
+def announce_compile(progress: Progress, settings=None) -> None:
+    """Say on stderr (unless quiet) that the engine's kernels compile now, when they must
+    (for the run configuration of ``settings``, a RunSettings, if given)."""
     from popdispatch.compile_notice import COMPILE_NOTICE, kernels_cached
 
-    if kernels_cached() is False:
+    if kernels_cached(settings) is False:
         progress.note(COMPILE_NOTICE)
 
 

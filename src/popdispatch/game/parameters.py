@@ -65,20 +65,15 @@ class GameParameters(NamedTuple):
     # per monitored bus and generator, d(v^2)/dp over the bus's scale (modes/voltage.py);
     # (0, 0) without voltage limits (the default, for records built by hand in tests)
     voltage_sens: np.ndarray = NO_VOLTAGE_ROWS
-    # exact mode's price law, an int of PriceLaw (a plain int, so one compiled signature)
-    price_law: int = int(PriceLaw.PLAIN)
 
     @classmethod
     def of(cls, problem: DispatchProblem, fp: FitnessParameters) -> GameParameters:
-        """The parameters of ``problem`` with the constants ``fp`` (EUR/MW); the price law is
-        ``fp.price_law`` where the constants carry one (exact mode's, modes/exact.py
-        :func:`~popdispatch.modes.exact.game_constants`), else :attr:`PriceLaw.PLAIN`."""
+        """The parameters of ``problem`` with the constants ``fp`` (EUR/MW)."""
         return cls(
             problem.b, problem.c, problem.pmin, problem.pmax, float(fp.B), float(fp.m),
             float(fp.C), float(fp.gain), float(fp.price_rate), problem.limit,
             problem.generator_line, problem.line_up, problem.line_preorder,
             np.ascontiguousarray(problem.voltage_sens, dtype=float),
-            int(PriceLaw.parse(getattr(fp, "price_law", PriceLaw.PLAIN))),
         )  # fmt: skip
 
 

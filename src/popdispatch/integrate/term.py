@@ -23,11 +23,18 @@ from popdispatch.dynamics.pairwise import (
     graph_of,
     sort_for,
 )
-from popdispatch.modes import ModeCode
-from popdispatch.modes.exact import payoff as exact_payoff
-from popdispatch.modes.mechanism import ExactTag, ModeTag, PaperTag, VoltageTag, mode_tag
+from popdispatch.game.parameters import PriceLaw
+from popdispatch.modes import ModeCode, exact, voltage
+from popdispatch.modes.mechanism import (
+    ExactTag,
+    ExactTreeTag,
+    ModeTag,
+    PaperTag,
+    VoltageTag,
+    VoltageTreeTag,
+    mode_tag,
+)
 from popdispatch.modes.paper import payoff as paper_payoff
-from popdispatch.modes.voltage import payoff as voltage_payoff
 
 
 class Term(NamedTuple):
@@ -48,10 +55,12 @@ class Term(NamedTuple):
     graph: Graph
 
     @classmethod
-    def of(cls, field: Field, mode: ModeCode, complete: bool, indptr, indices) -> Term:
-        """The term of ``field`` and ``mode`` on the complete graph, else on the graph of CSR
-        adjacency ``indptr``, ``indices``."""
-        return cls(field_tag(field), mode_tag(mode), graph_of(complete, indptr, indices))
+    def of(cls, field: Field, mode: ModeCode, complete: bool, indptr, indices,
+           price_law: PriceLaw = PriceLaw.PLAIN) -> Term:  # fmt: skip
+        """The term of ``field`` and ``mode`` (with exact mode's ``price_law``) on the
+        complete graph, else on the graph of CSR adjacency ``indptr``, ``indices``."""
+        return cls(field_tag(field), mode_tag(mode, price_law),
+                   graph_of(complete, indptr, indices))  # fmt: skip
 
     @property
     def complete(self) -> bool:
@@ -59,7 +68,13 @@ class Term(NamedTuple):
         return isinstance(self.graph, CompleteGraph)
 
 
-_PAYOFFS = {PaperTag: paper_payoff, ExactTag: exact_payoff, VoltageTag: voltage_payoff}
+_PAYOFFS = {
+    PaperTag: paper_payoff,
+    ExactTag: exact.payoff,
+    VoltageTag: voltage.payoff,
+    ExactTreeTag: exact.tree_payoff,
+    VoltageTreeTag: voltage.tree_payoff,
+}
 
 
 def payoff(mode, p, z, params, minute, work, f, z_rate):

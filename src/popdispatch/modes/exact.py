@@ -26,8 +26,6 @@ from popdispatch.modes.mechanism import Mode, ModeCode
 #: Default dimensionless constants (:class:`ExactConstants`), measured on every case of
 #: benchmarks/bench_scale.py (docs/exact-mode.md, "Every scale").
 GAIN, WEIGHT, PRICE_RATE = 1000.0, 2.5, 1500.0
-#: :attr:`PriceLaw.TREE` as the plain int the compiled kernels compare with.
-TREE = int(PriceLaw.TREE)
 #: Generators a region of the active tree without any counts as (see :func:`region_weight`).
 EMPTY_REGION = 1e-4
 
@@ -61,14 +59,6 @@ class ExactConstants:
         object.__setattr__(self, "price_law", PriceLaw.parse(self.price_law))
 
 
-@dataclass(frozen=True)
-class ExactFitnessParameters(FitnessParameters):
-    """Exact mode's EUR/MW constants (:class:`FitnessParameters`) and its price law, which
-    :meth:`~popdispatch.game.parameters.GameParameters.of` passes to the kernels."""
-
-    price_law: PriceLaw = PriceLaw.PLAIN
-
-
 def scales(problem: DispatchProblem) -> tuple[float, float]:
     """``(S, P)``: the spread of marginal costs over the generators' ranges, ``max(b + 2 c
     Pmax) - min(b + 2 c Pmin)`` (EUR/MW; if zero, the largest marginal cost, at least 1), and
@@ -83,12 +73,13 @@ def scales(problem: DispatchProblem) -> tuple[float, float]:
 def game_constants(problem: DispatchProblem, constants: ExactConstants) -> FitnessParameters:
     """The EUR/MW constants of the game for ``problem``: ``gain = gain / S`` (fitness per unit
     of spread), ``C = C S / P``, ``price_rate = price_rate S / P`` (:func:`scales`), ``B = 0``
-    (a common shift of fitness, which no pairwise comparison sees) and no barrier; the price
-    law is the constants'."""
+    (a common shift of fitness, which no pairwise comparison sees) and no barrier. (The price
+    law is not a constant of the kernels but a choice of kernel: the mode's compile-time
+    record, :func:`popdispatch.modes.mechanism.mode_tag`.)"""
     spread, demand = scales(problem)
-    return ExactFitnessParameters(
+    return FitnessParameters(
         B=0.0, m=0.0, C=constants.C * spread / demand, gain=constants.gain / spread,
-        price_rate=constants.price_rate * spread / demand, price_law=constants.price_law,
+        price_rate=constants.price_rate * spread / demand,
     )  # fmt: skip
 
 
@@ -110,26 +101,40 @@ def line_price(z_up, z_down, excess_up, excess_down, C):
 
 @nb.njit(cache=True, inline="always")
 def line_signals(p, z, params, minute, work, signal, z_rate):
-    """The line prices: their signal per generator into ``signal`` (EUR/MW, overwritten) and
-    the controllers' rates into ``z_rate``; returns ``(congestion, residual)``.
+    """The line prices under the plain law: their signal per generator into ``signal``
+    (EUR/MW, overwritten) and the controllers' rates into ``z_rate``; returns ``(congestion,
+    residual)``.
 
     For limited line ``k`` the controllers keep prices ``z[k]`` (flow above ``+U``) and
-    ``z[L + k]`` (flow below ``-U``), which move by ``params.price_law``: :func:`plain_rates`
-    (each integrates its own excess at ``price_rate``) or :func:`tree_rates`. The broadcast
-    price is :func:`line_price`; the net price ``nu`` goes as ``+nu / 2`` to the generators
-    below the line and ``-nu / 2`` to those above (incentive to the receiving side, penalty to
-    the sending side). Returns the largest ``|nu|`` (EUR/MW) and the largest distance from
-    complementary slackness (MW).
+    ``z[L + k]`` (flow below ``-U``), each integrating its own excess at ``price_rate``
+    (:func:`plain_rates`; :func:`tree_line_signals` for the tree law); the broadcast is
+    :func:`broadcast_prices`.
     """
+    limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
+                       params.line_preorder, work.flow)  # fmt: skip
+    plain_rates(work.flow, params.limit, params.price_rate, z_rate)
+    return broadcast_prices(z, params, work, signal)
+
+
+@nb.njit(cache=True, inline="always")
+def tree_line_signals(p, z, params, minute, work, signal, z_rate):
+    """:func:`line_signals` with the prices moving by the tree law (:func:`tree_rates`)."""
+    limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
+                       params.line_preorder, work.flow)  # fmt: skip
+    tree_rates(z, params, minute, work, z_rate)
+    return broadcast_prices(z, params, work, signal)
+
+
+@nb.njit(cache=True, inline="always")
+def broadcast_prices(z, params, work, signal):
+    """Each line's broadcast price :func:`line_price` at the flows in ``work.flow``: the net
+    price ``nu`` goes as ``+nu / 2`` to the generators below the line and ``-nu / 2`` to those
+    above (incentive to the receiving side, penalty to the sending side), into ``signal``
+    (EUR/MW). Returns the largest ``|nu|`` (EUR/MW) and the largest distance from
+    complementary slackness (MW)."""
     flow, parent_side, child_side = work.flow, work.parent_side, work.child_side
     limit, C = params.limit, params.C
     n_lines = limit.shape[0]
-    limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
-                       params.line_preorder, flow)  # fmt: skip
-    if params.price_law == TREE:
-        tree_rates(z, params, minute, work, z_rate)
-    else:
-        plain_rates(flow, limit, params.price_rate, z_rate)
     congestion = 0.0
     residual = 0.0
     for k in range(n_lines):
@@ -243,13 +248,28 @@ def tradable_below(generator_line, line_up, preorder, lo, hi, below):
 
 @nb.njit(cache=True, inline="always")
 def payoff(p, z, params, minute, work, fitness, z_rate):
-    """Exact mode's payoff map: the line prices (:func:`line_signals`) and the marginal
-    costs, no barrier (``fitness``, EUR/MW, and ``z_rate`` overwritten); returns
+    """Exact mode's payoff map: the line prices (:func:`line_signals`, plain law) and the
+    marginal costs, no barrier (``fitness``, EUR/MW, and ``z_rate`` overwritten); returns
     ``(congestion, residual)`` (EUR/MW, MW)."""
     congestion, residual = line_signals(p, z, params, minute, work, fitness, z_rate)
+    marginal_costs_into(p, params, fitness)
+    return congestion, residual
+
+
+@nb.njit(cache=True, inline="always")
+def tree_payoff(p, z, params, minute, work, fitness, z_rate):
+    """:func:`payoff` with the tree price law (:func:`tree_line_signals`)."""
+    congestion, residual = tree_line_signals(p, z, params, minute, work, fitness, z_rate)
+    marginal_costs_into(p, params, fitness)
+    return congestion, residual
+
+
+@nb.njit(cache=True, inline="always")
+def marginal_costs_into(p, params, fitness):
+    """Exact mode's fitness from the signals already in ``fitness`` (EUR/MW): paper eqs. 5-6
+    without the barrier (``fitness_into`` with the barrier off)."""
     fitness_into(p, params.b, params.c, params.pmin, params.pmax, params.B, params.m,
                  params.gain, fitness, False, fitness)  # fmt: skip
-    return congestion, residual
 
 
 MODE = Mode(

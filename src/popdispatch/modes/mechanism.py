@@ -18,6 +18,7 @@ from enum import IntEnum
 from typing import TYPE_CHECKING, NamedTuple
 
 from popdispatch.game.fitness import FitnessParameters
+from popdispatch.game.parameters import PriceLaw
 from popdispatch.game.problem import DispatchProblem
 
 if TYPE_CHECKING:
@@ -68,12 +69,28 @@ class VoltageTag(ModeTag):
     __slots__ = ()
 
 
+class ExactTreeTag(ModeTag):
+    """Exact mode's payoff with the tree price law (:func:`popdispatch.modes.exact.tree_payoff`)."""
+
+    __slots__ = ()
+
+
+class VoltageTreeTag(ModeTag):
+    """Voltage mode's payoff with the tree price law
+    (:func:`popdispatch.modes.voltage.tree_payoff`)."""
+
+    __slots__ = ()
+
+
 _TAGS = {ModeCode.PAPER: PaperTag, ModeCode.EXACT: ExactTag, ModeCode.VOLTAGE: VoltageTag}
+_TREE_TAGS = {ModeCode.EXACT: ExactTreeTag, ModeCode.VOLTAGE: VoltageTreeTag}
 
 
-def mode_tag(code: ModeCode) -> ModeTag:
-    """The compile-time record of the mode ``code``."""
-    return _TAGS[ModeCode(code)](int(code))
+def mode_tag(code: ModeCode, price_law: PriceLaw = PriceLaw.PLAIN) -> ModeTag:
+    """The compile-time record of the mode ``code`` with exact mode's line-price law (a
+    choice of kernel, so a run compiles only its own law; paper mode has no line prices)."""
+    tags = _TREE_TAGS if PriceLaw(price_law) == PriceLaw.TREE else _TAGS
+    return tags.get(ModeCode(code), _TAGS[ModeCode(code)])(int(code))
 
 
 @dataclass(frozen=True)

@@ -28,10 +28,15 @@ from dataclasses import replace
 
 import numba as nb
 
-from popdispatch.game.fitness import fitness_into
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.modes import exact
-from popdispatch.modes.exact import dual_residual, line_price, line_signals
+from popdispatch.modes.exact import (
+    dual_residual,
+    line_price,
+    line_signals,
+    marginal_costs_into,
+    tree_line_signals,
+)
 from popdispatch.modes.mechanism import ModeCode
 
 #: Voltage mode's Heun error control, relative (exact mode: 1e-4). Measured (docs/voltage.md):
@@ -79,13 +84,27 @@ def voltage_signals(p, z, params, minute, signal, z_rate):
 
 @nb.njit(cache=True, inline="always")
 def payoff(p, z, params, minute, work, fitness, z_rate):
-    """Voltage mode's payoff map: exact mode's line prices (:func:`line_signals`), the
-    voltage prices (:func:`voltage_signals`) and the marginal costs, no barrier (``fitness``,
-    EUR/MW, and ``z_rate`` overwritten); returns ``(congestion, residual)`` (EUR/MW, MW)."""
+    """Voltage mode's payoff map: exact mode's line prices (:func:`line_signals`, plain law),
+    the voltage prices (:func:`voltage_signals`) and the marginal costs, no barrier
+    (``fitness``, EUR/MW, and ``z_rate`` overwritten); returns ``(congestion, residual)``
+    (EUR/MW, MW)."""
     congestion, residual = line_signals(p, z, params, minute, work, fitness, z_rate)
+    return with_voltage_prices(p, z, params, minute, fitness, z_rate, congestion, residual)
+
+
+@nb.njit(cache=True, inline="always")
+def tree_payoff(p, z, params, minute, work, fitness, z_rate):
+    """:func:`payoff` with the line prices moving by the tree law (:func:`tree_line_signals`)."""
+    congestion, residual = tree_line_signals(p, z, params, minute, work, fitness, z_rate)
+    return with_voltage_prices(p, z, params, minute, fitness, z_rate, congestion, residual)
+
+
+@nb.njit(cache=True, inline="always")
+def with_voltage_prices(p, z, params, minute, fitness, z_rate, congestion, residual):
+    """The voltage prices added to the line signals in ``fitness``, then the marginal costs;
+    the larger congestion and residual of lines and buses."""
     v_congestion, v_residual = voltage_signals(p, z, params, minute, fitness, z_rate)
-    fitness_into(p, params.b, params.c, params.pmin, params.pmax, params.B, params.m,
-                 params.gain, fitness, False, fitness)  # fmt: skip
+    marginal_costs_into(p, params, fitness)
     return max(congestion, v_congestion), max(residual, v_residual)
 
 

@@ -50,7 +50,7 @@ class Engine:
                 "imitative, so a generator at zero share stays at zero (extinction) and the "
                 "DC-OPF is out of reach whenever it uses one; use smith or distributed-smith"
             )
-        self.term = Term.of(field, self.mode.code, *self._graph())
+        self.term = Term.of(field, self.mode.code, *self._graph(), settings.exact.price_law)
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
         self.params = GameParameters.of(problem, self.constants)
