@@ -28,11 +28,12 @@ if TYPE_CHECKING:
 
 #: The kernels every engine run compiles (``module:function``): the day loop (a single minute
 #: runs as a day of one row) and the game and field it calls; their callees are compiled and
-#: cached with them.
+#: cached with them. (Not the problem's build, ``game.flows.limited_ancestors``: a run whose
+#: built problem comes from the problem cache, feeder/cached.py, never calls it, and the
+#: notice then showed on every run.)
 ENTRY_POINTS = (
     "popdispatch.integrate.steppers:evaluate_stage",
     "popdispatch.online.day:integrate_day",
-    "popdispatch.game.flows:limited_ancestors",
 )
 
 #: The day loop: compiled once per run configuration (see :func:`kernels_cached`).

@@ -53,9 +53,9 @@ def test_workers_load_the_kernels_from_the_disk_cache(failing_sweep):
     _, _, result = failing_sweep
     (info,) = result.warm_up.values()
     # the engine's entry points a day calls from Python (compile_notice.ENTRY_POINTS): the day
-    # loop and the tree of limited lines, each loaded from the disk cache, none compiled
-    # (the game and field are linked into the day loop's cached code)
-    assert info["cache_misses"] == 0 and info["cache_hits"] >= 2
+    # loop, loaded from the disk cache, nothing compiled (the game and field are linked into
+    # the day loop's cached code)
+    assert info["cache_misses"] == 0 and info["cache_hits"] >= 1
 
 
 def test_resume_runs_only_the_missing_scenarios(tmp_path):
