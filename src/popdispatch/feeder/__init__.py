@@ -5,7 +5,7 @@ them (``popdispatch.feeder.profiles``, say) does not import the built-in cases, 
 feeders and the reduction with it.
 """
 
-from importlib import import_module
+from popdispatch.lazy import lazy_namespace
 
 #: Where each public name lives (module under ``popdispatch.feeder``).
 _HOMES = {
@@ -31,18 +31,4 @@ _HOMES = {
     "subtree_sums": "tree",
 }
 
-__all__ = sorted(_HOMES)
-
-
-def __getattr__(name: str):
-    """The public name ``name`` from its submodule, imported on first use (PEP 562)."""
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(import_module(f"{__name__}.{home}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__, __all__ = lazy_namespace(__name__, _HOMES)

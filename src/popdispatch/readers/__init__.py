@@ -6,7 +6,7 @@ The readers are imported when first used (``popdispatch.readers.read_matpower`` 
 command's start-up, and most commands use one.
 """
 
-from importlib import import_module
+from popdispatch.lazy import lazy_namespace
 
 #: Where each public name lives (module under ``popdispatch.readers``).
 _HOMES = {
@@ -22,18 +22,4 @@ _HOMES = {
     "simbench_profiles": "series",
 }
 
-__all__ = sorted(_HOMES)
-
-
-def __getattr__(name: str):
-    """The public name ``name`` from its reader module, imported on first use (PEP 562)."""
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(import_module(f"{__name__}.{home}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__, __all__ = lazy_namespace(__name__, _HOMES)
