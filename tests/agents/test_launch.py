@@ -62,19 +62,21 @@ def test_launched_minute_with_loss_over_tcp(congestion_problem):
     assert _children() == 0
 
 
-def test_ctrl_c_leaves_no_process():
-    """SIGINT to the launcher during start-up: exit 130 (as the CLI reports interruptions)
-    or a KeyboardInterrupt, and every agent process gone."""
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
+def test_stopping_the_launcher_leaves_no_process(stop):
+    """SIGINT (Ctrl-C) or SIGTERM (a closed terminal, a CI timeout) to the launcher during
+    start-up: it exits non-zero (130 as the CLI reports interruptions, 143 for SIGTERM, or a
+    KeyboardInterrupt) and every agent process is gone."""
     code = (
         "from popdispatch.agents.launch import launch\n"
         "launch(566, [[505, 666, 28.0]], rounds=40, startup_s=60)\n"
     )
     launcher = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE)
-    deadline = time.time() + 60
+    deadline = time.time() + 120
     while _children() < 12 and time.time() < deadline:
         time.sleep(0.5)
     assert _children() == 12
-    os.kill(launcher.pid, signal.SIGINT)
+    os.kill(launcher.pid, stop)
     launcher.wait(timeout=60)
     assert launcher.returncode != 0
     assert _children() == 0

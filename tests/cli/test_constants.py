@@ -50,3 +50,10 @@ def test_bias_b_leaves_smith_dynamics_in_place():
 )
 def test_bad_constants_are_usage_errors(value, words):
     assert_one_line_error(run("snapshot", "--minute", "566", "--constants", value), 2, *words)
+
+
+def test_exact_mode_refuses_the_papers_constants():
+    """Exact mode's constants are dimensionless (ExactConstants): the paper's EUR/MW ones would
+    be silently ignored there, so the command refuses them before any work."""
+    result = run("snapshot", "--minute", "566", "--mode", "exact", "--constants", "gain=5")
+    assert_one_line_error(result, 2, "--constants", "exact mode")

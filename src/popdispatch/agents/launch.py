@@ -31,11 +31,15 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+
+from popdispatch.agents.schedule import TICKS_PER_ROUND
+from popdispatch.errors import PopdispatchError
 
 HOST = "127.0.0.1"
 
@@ -44,6 +48,13 @@ START_MARGIN_S = 2.0
 
 #: Rounds of the simulated warm-up run (:func:`warm_up`).
 WARM_UP_ROUNDS = 3
+
+#: Seconds past the agreed end of the run after which a process that has not exited is stopped.
+END_GRACE_S = 60.0
+
+
+class LaunchError(PopdispatchError):
+    """A launched run failed: an agent process was not ready in time, failed, or hung."""
 
 
 @dataclass(frozen=True)
@@ -126,7 +137,7 @@ def _wait_for_go(config: LaunchConfig, aid: str) -> float:
     go = folder / "go"
     while not go.exists():
         if time.monotonic() > deadline:
-            raise RuntimeError(f"agent {aid}: no start from the launcher")
+            raise LaunchError(f"agent {aid}: no start from the launcher")
         time.sleep(0.02)
     return float(go.read_text())
 
@@ -152,7 +163,7 @@ async def _serve(aid: str, config: LaunchConfig) -> None:
     async with activate(container):
         await asyncio.sleep(max(0.0, end - time.time()))
     if agent.error is not None:
-        raise RuntimeError(f"agent {aid} failed: {agent.error!r}")
+        raise LaunchError(f"agent {aid} failed: {agent.error!r}")
     if agent.missed_ticks:
         print(f"agent {aid} missed {agent.missed_ticks} ticks (started late or fell behind; "
               "a longer --startup-s or --tick-ms helps)", file=sys.stderr)  # fmt: skip
@@ -240,33 +251,48 @@ def _ports(n: int, base: int) -> list[int]:
 
 def _run_children(ids: list[str], config: LaunchConfig) -> dict[str, str]:
     """Start one process per agent in a new process group; when all are ready, write the
-    start time; wait for all; on Ctrl-C or an error terminate the group and wait, so no child
-    outlives the launcher."""
+    start time; wait for all (each until the run's agreed end plus :data:`END_GRACE_S`); on
+    Ctrl-C, SIGTERM or an error terminate the group and wait, so no child outlives the
+    launcher. The children write into files in the run's folder, not pipes (a pipe nobody reads
+    while the launcher waits would block a child that writes much)."""
     folder = Path(config.folder)
     path = folder / "config.json"
     path.write_text(json.dumps(asdict(config)))
     children, group = {}, None
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminated) if main_thread else None
     try:
         for aid in ids:
-            child = subprocess.Popen(
-                [sys.executable, "-m", "popdispatch.agents.launch", "--id", aid, str(path)],
-                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                process_group=group or 0,
-            )  # fmt: skip
+            with open(folder / f"{aid}.out", "w") as out, open(folder / f"{aid}.err", "w") as err:
+                child = subprocess.Popen(
+                    [sys.executable, "-m", "popdispatch.agents.launch", "--id", aid, str(path)],
+                    stdout=out, stderr=err, text=True, process_group=group or 0,
+                )  # fmt: skip
             group = group or child.pid
             children[aid] = child
         _wait_until_ready(children, config)
+        t0 = time.time() + START_MARGIN_S
         staged = folder / "go.tmp"
-        staged.write_text(repr(time.time() + START_MARGIN_S))
+        staged.write_text(repr(t0))
         os.replace(staged, folder / "go")
-        outputs = {}
+        finish = t0 + (config.rounds + 1) * TICKS_PER_ROUND * config.tick_s + END_GRACE_S
         for aid, child in children.items():
-            out, err = child.communicate()
-            _check_exit(aid, child, err)
-            outputs[aid] = out
-        return outputs
+            try:
+                child.wait(timeout=max(0.0, finish - time.time()))
+            except subprocess.TimeoutExpired:
+                raise LaunchError(f"agent process {aid} did not finish {END_GRACE_S:g} s "
+                                  "after the run's end") from None  # fmt: skip
+            _check_exit(aid, child, config)
+        return {aid: (folder / f"{aid}.out").read_text() for aid in children}
     finally:
         _stop(children, group)
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _terminated(signum, frame) -> None:
+    """SIGTERM to the launcher: unwind (its ``finally`` stops the children), exit 143."""
+    raise SystemExit(128 + signum)
 
 
 def _wait_until_ready(children: dict, config: LaunchConfig) -> None:
@@ -278,23 +304,25 @@ def _wait_until_ready(children: dict, config: LaunchConfig) -> None:
         waiting = {aid for aid in waiting if not (folder / f"ready-{aid}").exists()}
         for aid in waiting:
             if children[aid].poll() is not None:
-                _check_exit(aid, children[aid], children[aid].communicate()[1])
+                _check_exit(aid, children[aid], config)
         if waiting and time.monotonic() > deadline:
-            raise RuntimeError(f"agent process {sorted(waiting)[0]} not ready after "
-                               f"{config.startup_s:g} s (--startup-s)")  # fmt: skip
+            raise LaunchError(f"agent process {sorted(waiting)[0]} not ready after "
+                              f"{config.startup_s:g} s (--startup-s)")  # fmt: skip
         time.sleep(0.05)
 
 
-def _check_exit(aid: str, child: subprocess.Popen, err: str) -> None:
+def _check_exit(aid: str, child: subprocess.Popen, config: LaunchConfig) -> None:
     """Raise with the last line of a child's standard error if it failed."""
-    if child.returncode != 0:
+    if child.returncode not in (0, None):
+        err = (Path(config.folder) / f"{aid}.err").read_text()
         last = err.strip().splitlines()[-1] if err.strip() else "no message"
-        raise RuntimeError(f"agent process {aid} exited {child.returncode}: {last}")
+        raise LaunchError(f"agent process {aid} exited {child.returncode}: {last}")
 
 
 def _stop(children: dict, group: int | None) -> None:
     """Terminate what is still running in the group (SIGTERM, then SIGKILL after 5 s), then
-    wait for every child."""
+    wait for every child. Nothing is sent once every child has exited (the group's id may
+    then belong to someone else)."""
     if group is None or all(c.poll() is not None for c in children.values()):
         return
     with contextlib.suppress(ProcessLookupError):
@@ -302,8 +330,9 @@ def _stop(children: dict, group: int | None) -> None:
     deadline = time.monotonic() + 5.0
     while time.monotonic() < deadline and any(c.poll() is None for c in children.values()):
         time.sleep(0.05)
-    with contextlib.suppress(ProcessLookupError):
-        os.killpg(group, signal.SIGKILL)
+    if any(c.poll() is None for c in children.values()):
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(group, signal.SIGKILL)
     for child in children.values():
         child.wait()
 

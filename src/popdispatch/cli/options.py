@@ -327,8 +327,9 @@ def run_options(func):
         option(
             "--constants",
             type=ConstantsType(),
-            help="The game's constants, e.g. B=1000,m=400,C=1000 (paper, on MW: B EUR/MW, m and "
-            "C EUR/MW^2; exact mode also gain and price_rate); others keep their defaults.",
+            help="Paper mode's constants, e.g. B=1000,m=400,C=1000 (on MW: B EUR/MW, m and C "
+            "EUR/MW^2; also gain and price_rate); others keep their defaults. Exact mode's are "
+            "dimensionless (Python: RunSettings(exact=ExactConstants(...))).",
         ),
         option(
             "--price-law",
@@ -397,11 +398,18 @@ def settings_from(
     :class:`~popdispatch.game.fitness.FitnessParameters`) replace the default ones;
     ``price_law`` (``--price-law``) is exact mode's
     (:class:`~popdispatch.game.parameters.PriceLaw`)."""
+    from popdispatch.errors import OptionError
     from popdispatch.modes.exact import ExactConstants
     from popdispatch.online import RunSettings
 
     settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0, warm_start=warm_start,
                            exact=ExactConstants(price_law=price_law))  # fmt: skip
+    if constants is not None and mode != "paper":
+        raise OptionError(  # exact mode reads settings.exact: the constants would be ignored
+            f"--constants sets paper mode's constants (EUR/MW); {mode} mode's are dimensionless "
+            "(Python: RunSettings(exact=ExactConstants(gain=, C=, price_rate=)))",
+            "--constants",
+        )
     return settings if constants is None else replace(settings, fitness=constants)
 
 

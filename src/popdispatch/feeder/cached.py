@@ -14,8 +14,10 @@ everything the build depends on:
 - the path limits; the ieee-elv tables' key (pandapower and popdispatch versions, ...);
 - the source code of every module the build runs (a changed module is a miss).
 
-Pickles are read only from the user's own cache folder (as numba does for its compiled
-kernels), only for a key that matches exactly, and only if they hold a dispatch problem;
+Pickles are read from the cache folder (the user's own by default, as numba does for its
+compiled kernels; a folder others can write to, given by ``POPDISPATCH_CACHE_DIR``, is as
+trusted as code, since unpickling runs it) and used only for a key that matches exactly and
+only if they hold a dispatch problem;
 an unreadable, truncated, foreign or corrupt file is a miss and is rebuilt. Files are written
 under a temporary name and renamed into place (:func:`popdispatch.cache.write_atomic`); at
 most :data:`KEEP` problem entries are kept (the least recently written go first).
@@ -42,7 +44,7 @@ KEEP = 16
 BUILD_MODULES = (
     "feeder/cases.py", "feeder/cached.py", "feeder/generators.py", "feeder/model.py",
     "feeder/profiles.py", "feeder/reduction.py", "feeder/tree.py", "game/problem.py",
-    "game/flows.py", "scenarios.py", "runs.py", "constants.py",
+    "game/flows.py", "scenarios.py", "runs.py", "constants.py", "readers/pandapower.py",
 )  # fmt: skip
 
 
