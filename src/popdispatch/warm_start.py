@@ -31,6 +31,7 @@ from numba.extending import overload
 
 from popdispatch.dynamics.capacity import project_to_box
 from popdispatch.game.parameters import share_bounds
+from popdispatch.integrate.steppers import copy_into
 
 
 class WarmStart(IntEnum):
@@ -149,8 +150,7 @@ def merit_step(p, step, lo, hi, b, c, out):
             else:
                 over = middle
     placed = _merit_target(p, lo, hi, b, c, under, up, out)
-    for i in range(p.shape[0]):
-        p[i] = out[i]
+    copy_into(out, p)
     return step - placed
 
 
@@ -207,9 +207,7 @@ def project_shares(x, demand, pmin, pmax, active):
     lo = np.empty(x.shape[0])
     hi = np.empty(x.shape[0])
     share_bounds(pmin, pmax, active, demand, lo, hi)
-    projected = project_to_box(x, lo, hi)
-    for i in range(x.shape[0]):
-        x[i] = projected[i]
+    copy_into(project_to_box(x, lo, hi), x)
 
 
 class StartTag(NamedTuple):
