@@ -24,10 +24,15 @@ apart once per iteration and the per-substep kernels take their arrays: numba re
 every array of a record each time the record is handed to an inlined function, which made the
 paper-mode minute 1.5x slower when the records went down to the innermost loop.
 
-Compilation: the game and field (:func:`evaluate_stage`), the limiter's flows
-(:func:`limited_flows`) and :func:`euler_steps` are compiled once each and called; inlined,
-numba typed and LLVM optimised a copy at every call site (first run 72-80 s of CPU before,
-32 s after, issue 13), and the calls cost nothing measurable per step.
+Compilation: the game and field (:func:`evaluate_stage`) and the limiter's flows
+(:func:`limited_flows`) are compiled once each and called; inlined, numba typed and LLVM
+optimised a copy at every call site (first run 72-80 s of CPU before, 32 s after, issue 13),
+and the calls cost nothing measurable per step. The steppers themselves
+(:func:`advance_euler`, :func:`advance_heun`) are the implementations numba compiles for
+:func:`advance`, with :func:`euler_steps` inlined: numba inlines a function by copying its
+IR, at a cost that grows with the square of its size, and every compiled level below the
+day loop is optimised again by LLVM in each level above it, so the fewest levels with the
+fewest copies compile fastest (measured: ``benchmarks/bench_first_run.py``, docs/speed.md).
 """
 
 from __future__ import annotations
@@ -176,7 +181,7 @@ def limited_flows(f, w, v, graph, order, inflow, outflow):
     graph_flows_of(graph, f, w, v, order, inflow, outflow)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v, room, inflow,
                 outflow, z_rate, order, lim, work, evaluations, x_out, z_out):  # fmt: skip
     """``steps`` limited Euler steps of length ``h`` from ``(x, z)`` to ``(x_out, z_out)``
@@ -245,14 +250,16 @@ def error_norm(x_high, x_low, z_high, z_low, rtol, atol, price_atol):
     return err
 
 
-@nb.njit(cache=True, inline="always")
-def advance_euler(x, z, term, params, minute, ws, stepper):
-    """One iteration of ``substeps`` limited Euler steps; ``(congested, residual)``."""
+def advance_euler(method, x, z, term, params, minute, ws, stepper, h_try):
+    """One iteration of ``substeps`` limited Euler steps; ``(congested, residual, h_try)``
+    (``h_try`` unchanged). Compiled by numba as :func:`advance` for an :class:`EulerTag`."""
     one = ws.first
-    return euler_steps(stepper.substeps, True, stepper.dt / stepper.substeps, x, z, term, params,
-                       minute, one.p, one.f, one.w, one.v, one.room, one.inflow, one.outflow,
-                       one.z_rate, one.order, ws.first_limited, ws.game, ws.counters.evaluations,
-                       x, z)  # fmt: skip
+    congested, residual = euler_steps(stepper.substeps, True, stepper.dt / stepper.substeps, x,
+                                      z, term, params, minute, one.p, one.f, one.w, one.v,
+                                      one.room, one.inflow, one.outflow, one.z_rate, one.order,
+                                      ws.first_limited, ws.game, ws.counters.evaluations, x,
+                                      z)  # fmt: skip
+    return congested, residual, h_try
 
 
 @nb.njit(cache=True, inline="always")
@@ -341,9 +348,9 @@ def stiffness(h, x, z, v1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol, pr
     return np.sqrt(turned / moved) / h
 
 
-@nb.njit(cache=True, inline="always")
-def advance_heun(x, z, term, params, minute, ws, stepper, h_try):
-    """One iteration of adaptive Heun steps; ``(congested, largest residual, next h_try)``."""
+def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
+    """One iteration of adaptive Heun steps; ``(congested, largest residual, next h_try)``.
+    Compiled by numba as :func:`advance` for a :class:`HeunTag`."""
     rtol, atol, price_atol, dt = stepper.rtol, stepper.atol, stepper.price_atol, stepper.dt
     one, two, lim1, lim2 = ws.first, ws.second, ws.first_limited, ws.second_limited
     work, counters = ws.game, ws.counters
@@ -400,17 +407,6 @@ def advance(method, x, z, term, params, minute, ws, stepper, h_try):
 @overload(advance)
 def _advance(method, x, z, term, params, minute, ws, stepper, h_try):
     cls = getattr(method, "instance_class", None)
-    if cls is EulerTag:
-
-        def euler(method, x, z, term, params, minute, ws, stepper, h_try):
-            congested, residual = advance_euler(x, z, term, params, minute, ws, stepper)
-            return congested, residual, h_try
-
-        return euler
-    if cls is HeunTag:
-
-        def heun(method, x, z, term, params, minute, ws, stepper, h_try):
-            return advance_heun(x, z, term, params, minute, ws, stepper, h_try)
-
-        return heun
-    return None
+    # the steppers are the implementations themselves (not a closure that inlines them: an
+    # inlined function is copied IR, see the module docstring)
+    return {EulerTag: advance_euler, HeunTag: advance_heun}.get(cls)

@@ -246,7 +246,7 @@ def tradable_below(generator_line, line_up, preorder, lo, hi, below):
             below[line_up[k]] += below[k]
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def payoff(p, z, params, minute, work, fitness, z_rate):
     """Exact mode's payoff map: the line prices (:func:`line_signals`, plain law) and the
     marginal costs, no barrier (``fitness``, EUR/MW, and ``z_rate`` overwritten); returns
@@ -256,7 +256,7 @@ def payoff(p, z, params, minute, work, fitness, z_rate):
     return congestion, residual
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def tree_payoff(p, z, params, minute, work, fitness, z_rate):
     """:func:`payoff` with the tree price law (:func:`tree_line_signals`)."""
     congestion, residual = tree_line_signals(p, z, params, minute, work, fitness, z_rate)

@@ -82,7 +82,7 @@ def voltage_signals(p, z, params, minute, signal, z_rate):
     return congestion, residual
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def payoff(p, z, params, minute, work, fitness, z_rate):
     """Voltage mode's payoff map: exact mode's line prices (:func:`line_signals`, plain law),
     the voltage prices (:func:`voltage_signals`) and the marginal costs, no barrier
@@ -92,7 +92,7 @@ def payoff(p, z, params, minute, work, fitness, z_rate):
     return with_voltage_prices(p, z, params, minute, fitness, z_rate, congestion, residual)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def tree_payoff(p, z, params, minute, work, fitness, z_rate):
     """:func:`payoff` with the line prices moving by the tree law (:func:`tree_line_signals`)."""
     congestion, residual = tree_line_signals(p, z, params, minute, work, fitness, z_rate)
