@@ -89,3 +89,15 @@ def test_ac_correction_reaches_the_ac_opf(result):
     p_kw = corrected.summary()["setpoints_kw"]
     dgs = [g for g in anchor.p_kw.index if g != "source"]
     assert max(abs(p_kw[g] - anchor.p_kw[g]) for g in dgs) < 0.1
+
+
+def test_the_scenario_run_in_a_second_process_is_the_same(result):
+    """``reproduce`` runs the scenario in a spawned process beside the others (issue 13): what
+    comes back through the pipe summarises exactly as the scenario run here."""
+    from popdispatch.online import RunSettings
+    from popdispatch.report.output import json_text
+    from popdispatch.report.reproduce import voltage_in_background
+
+    with voltage_in_background(RunSettings(), parallel=True) as pending:
+        remote = pending.get(timeout=600)
+    assert json_text(voltage_summary(remote)) == json_text(voltage_summary(result))

@@ -7,15 +7,22 @@
    exact dispatch, the voltage-aware dispatch and pandapower's AC OPF, checked in AC.
 
 Minute 566 always uses the official loads (pandapower's snapshot); the day uses the profiles it
-is given. Outputs: ``figures/*.png|pdf``, ``base_day.csv``, ``congestion.csv``,
-``extinction.csv``, ``voltage.csv`` (bus voltages of the voltage scenario), ``summary.json``
-and ``report.md``.
+is given. On a machine with more than one core the voltage scenario runs in a second process
+while the others run (issue 13: on the first run after installing, both processes compile
+their own kernels at once; ``benchmarks/bench_first_run.py --commands reproduce``).
+Outputs: ``figures/*.png|pdf``, ``base_day.csv``, ``congestion.csv``, ``extinction.csv``,
+``voltage.csv`` (bus voltages of the voltage scenario), ``summary.json`` and ``report.md``.
 """
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from importlib.util import find_spec
+from multiprocessing.pool import AsyncResult
 
 import numpy as np
 import pandas as pd
@@ -66,25 +73,46 @@ class Reproduction:
     voltage: VoltageResult | None = None  # None without power-grid-model
 
 
+@contextmanager
+def voltage_in_background(settings: RunSettings, parallel: bool) -> Iterator[AsyncResult | None]:
+    """The voltage scenario started in a second process (spawned: a fresh interpreter, no
+    inherited threads or compiler state) when ``parallel``, as a pending result; else None
+    (run it in this process). The process is terminated when the block ends, so an error or
+    Ctrl-C here does not wait for it."""
+    if not parallel:
+        yield None
+        return
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
+        yield pool.apply_async(voltage, (settings,))
+
+
 def run_reproduction(
-    profiles: LoadProfiles, settings: RunSettings, minutes, progress: Progress
-) -> Reproduction:
-    """Run the three experiments (``minutes``: the base day's minutes, None = whole day)."""
-    with progress.step("loading the ieee-elv feeder"):
-        peak_problem = elv_problem(peak_profiles())
-        congestion_problem = elv_problem(peak_profiles(), [CONGESTION_PATH])
-        day_problem = elv_problem(profiles)
-    with progress.step("minute 566, congestion and extinction"):
-        peak = snapshot_vs_opf(peak_problem, PEAK_MINUTE, settings)
-        congested = congestion(settings=settings)
-        extinct = extinction(settings=settings)  # sets its own x0
-    day = day_vs_opf(day_problem, settings, minutes, progress)
-    limited = None
-    if find_spec("power_grid_model") is not None:
-        with progress.step("voltage scenario (case33bw, AC checks and pandapower's AC OPF)"):
-            limited = voltage(replace(settings, dynamics="smith", graph="complete"))
-    else:
+    profiles: LoadProfiles, settings: RunSettings, minutes, progress: Progress,
+    parallel: bool | None = None,
+) -> Reproduction:  # fmt: skip
+    """Run the three experiments (``minutes``: the base day's minutes, None = whole day) and
+    the voltage scenario (with power-grid-model installed), the latter in a second process
+    when ``parallel`` (default: when the machine has more than one core)."""
+    with_voltage = find_spec("power_grid_model") is not None
+    if not with_voltage:
         progress.note('voltage scenario skipped: it needs pip install "popdispatch[ac]"')
+    if parallel is None:
+        parallel = (os.cpu_count() or 1) > 1
+    voltage_settings = replace(settings, dynamics="smith", graph="complete")
+    with voltage_in_background(voltage_settings, parallel and with_voltage) as pending:
+        with progress.step("loading the ieee-elv feeder"):
+            peak_problem = elv_problem(peak_profiles())
+            congestion_problem = elv_problem(peak_profiles(), [CONGESTION_PATH])
+            day_problem = elv_problem(profiles)
+        with progress.step("minute 566, congestion and extinction"):
+            peak = snapshot_vs_opf(peak_problem, PEAK_MINUTE, settings)
+            congested = congestion(settings=settings)
+            extinct = extinction(settings=settings)  # sets its own x0
+        day = day_vs_opf(day_problem, settings, minutes, progress)
+        limited = None
+        if with_voltage:
+            with progress.step("voltage scenario (case33bw, AC checks and pandapower's AC OPF)"):
+                limited = voltage(voltage_settings) if pending is None else pending.get()
     return Reproduction(
         settings, peak_problem, peak, congestion_problem, congested, extinct, day_problem, day,
         limited,
