@@ -87,3 +87,14 @@ def test_bad_agent_faults_are_usage_errors(args, option, capsys):
 
     assert main(["agents", *CONGESTION, *args]) == 2
     assert option in capsys.readouterr().err
+
+
+def test_options_before_a_subcommand_are_refused_not_ignored(capsys):
+    """``agents --mode exact launch ...`` ran ``launch`` with its own defaults (the group's
+    options never reach it): now a usage error naming the options, before any work."""
+    from popdispatch.cli import main
+
+    assert main(["agents", "--mode", "exact", "-q", "launch", "--minute", "566"]) == 2
+    err = capsys.readouterr().err
+    assert "--mode, -q given before 'launch'" in err
+    assert len(err.strip().splitlines()) == 1

@@ -79,6 +79,7 @@ def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, dupl
     with the DC-OPF. ``agents launch`` runs them as separate processes over TCP instead.
     """
     if ctx.invoked_subcommand is not None:
+        _refuse_group_options(ctx)
         return 0
     if minute is None:
         raise click.MissingParameter(param_hint="'--minute'", param_type="option")
@@ -97,6 +98,18 @@ def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, dupl
     if summary["status"] == "infeasible":
         raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given limits")
     return 0
+
+
+def _refuse_group_options(ctx: click.Context) -> None:
+    """Usage error (exit 2) for options given to the group before its subcommand, which the
+    subcommand would not see (``agents --mode exact launch ...``)."""
+    typed = click.core.ParameterSource.COMMANDLINE
+    given = [p.opts[0] for p in ctx.command.params if ctx.get_parameter_source(p.name) == typed]
+    if given:
+        raise click.UsageError(
+            f"{', '.join(given)} given before '{ctx.invoked_subcommand}' would be ignored: "
+            f"put the options after it (popdispatch agents {ctx.invoked_subcommand} ...)"
+        )
 
 
 def _faults(loss, delay_max, duplicate, noise_kw, seed, events=None):
