@@ -5,6 +5,7 @@ corrupt entry or a disabled cache falls back to reading the files."""
 from __future__ import annotations
 
 import os
+import time
 from importlib import resources
 from pathlib import Path
 
@@ -14,6 +15,7 @@ import pytest
 
 from popdispatch import cache
 from popdispatch.errors import ProfileError
+from popdispatch.readers import manifest
 from popdispatch.readers import profiles as reader
 from popdispatch.readers.profiles import (
     DEFAULT_PROFILES_FILE,
@@ -38,13 +40,22 @@ def _write_folder(root: Path, seed: int = 0) -> Path:
     (root / "Loads.txt").write_text("\n".join(lines) + "\n")
     for n in (1, 2):
         _write_profile(root, n, rng.uniform(0.0, 3.0, 1440).round(3))
-    return root
+    return _settle(root)
 
 
 def _write_profile(root: Path, n: int, values: np.ndarray) -> Path:
     path = root / "Daily_1min_100profiles" / f"load_profile_{n}.txt"
     path.write_text("\n".join(f"{v:.3f}" for v in values) + "\n")
     return path
+
+
+def _settle(root: Path, age_s: float = 60.0) -> Path:
+    """Date every file and folder under ``root`` (and it) ``age_s`` seconds back, as a folder
+    written a while ago (the cache stores only inputs older than ``SETTLE_NS``)."""
+    then = time.time_ns() - int(age_s * 1e9)
+    for path in [root, *root.rglob("*")]:
+        os.utime(path, ns=(then, then))
+    return root
 
 
 def _expected(root: Path) -> np.ndarray:
@@ -187,3 +198,16 @@ def test_shipped_default_cached_equals_the_file(cache_dir, monkeypatch):
     assert warm.source == first.source and warm.source.startswith("synthetic default")
     np.testing.assert_array_equal(warm.kw.index.to_numpy(), expected[:, 0])
     np.testing.assert_array_equal(warm.kw.to_numpy(), expected[:, 1:])
+
+
+def test_a_folder_written_a_moment_ago_is_read_but_not_cached(tmp_path, cache_dir):
+    """A file rewritten with the same size within one tick of the filesystem's clock keeps
+    its modification time: inputs modified less than SETTLE_NS ago are read, not stored."""
+    root = _write_folder(tmp_path / "elv")
+    _settle(root, age_s=0.0)  # modified now
+    fresh = read_profiles(root)
+    np.testing.assert_array_equal(fresh.kw.to_numpy(), _expected(root))
+    assert not _entry(root).exists()
+    _settle(root, age_s=manifest.SETTLE_NS / 1e9 + 1.0)
+    read_profiles(root)
+    assert _entry(root).is_file()

@@ -9,17 +9,27 @@ A cached entry is used only when every input still has the same size and modific
 miss, and the caller reads the files afresh and replaces the entry. Folders are in the manifest
 because a file added next to the ones read (e.g. a second ``loads.txt`` that makes a name
 ambiguous) changes the folder's modification time.
+
+An entry is stored only when every input was last modified at least :data:`SETTLE_NS` before
+(:meth:`Inputs.settled`): a file rewritten with the same size within one tick of the
+filesystem's clock keeps its modification time, so an input modified just before it was read
+could change again unseen (git's "racily clean" files). A folder written a moment ago is read
+afresh until it has settled.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import time
 from pathlib import Path
 
 import numpy as np
 
 _PATHS, _SIZES, _MTIMES = "__manifest_paths__", "__manifest_sizes__", "__manifest_mtimes_ns__"
+#: How long before the store every input must have been last modified, ns (2 s: coarser than
+#: any common filesystem's timestamps, FAT's 2 s included).
+SETTLE_NS = 2_000_000_000
 
 
 def code_hash(*modules: str) -> str | None:
@@ -57,6 +67,12 @@ class Inputs:
                 stat = os.stat(item)
                 self._stats[key] = (stat.st_size, stat.st_mtime_ns)
         return path
+
+    def settled(self, now_ns: int | None = None) -> bool:
+        """Was every input last modified at least :data:`SETTLE_NS` before ``now_ns`` (ns since
+        the epoch; default: now)? Only then may the manifest vouch for the contents."""
+        now_ns = time.time_ns() if now_ns is None else now_ns
+        return all(mtime <= now_ns - SETTLE_NS for _, mtime in self._stats.values())
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The manifest arrays to store beside a cached entry."""

@@ -121,7 +121,10 @@ def _from_cache(key: dict, with_source: bool = False) -> tuple[pd.DataFrame, str
 
 def _save(key: dict, profiles: LoadProfiles, inputs: Inputs) -> None:
     """Store ``profiles`` under ``key`` with the manifest of ``inputs`` (the source too when
-    the key is not a folder's, whose source is derived from the folder)."""
+    the key is not a folder's, whose source is derived from the folder); nothing while an
+    input was modified too recently to be vouched for (:meth:`Inputs.settled`)."""
+    if not inputs.settled():
+        return
     kw = profiles.kw
     arrays = {"kw": kw.to_numpy(float), "loads": np.array([str(c) for c in kw.columns])}
     if not profiles.source.startswith("official profiles: "):
