@@ -46,7 +46,7 @@ SHARES, SETPOINTS, MERIT = WarmStart
 WARM_STARTS = {policy.name.lower(): policy for policy in WarmStart}
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def redistribute_offline(x, active):
     """Hand the shares of offline generators to online ones, in proportion to their shares."""
     total = 0.0
@@ -94,7 +94,7 @@ def _share_step(p, step, weight, pmin, pmax):
     return step
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _merit_target(p, lo, hi, b, c, price, up, out):
     """Set points (MW) into ``out`` when the marginal price rises (``up``) or falls to
     ``price`` (EUR/MWh): a generator moves only once the price passes its marginal cost
@@ -201,7 +201,7 @@ def warm_start(policy, bounded, x, old_demand, demand, pmin, pmax, active, weigh
     project_shares(x, demand, pmin, pmax, active)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def project_shares(x, demand, pmin, pmax, active):
     """Project the shares ``x`` (in place) onto the limits of a minute with ``demand`` (MW)."""
     lo = np.empty(x.shape[0])
