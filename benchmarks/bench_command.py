@@ -11,6 +11,8 @@ runs once unmeasured first (warming numba's cache and popdispatch's on-disk cach
 in a fresh temporary ``POPDISPATCH_CACHE_DIR`` shared by the runs). Reported per tree and
 command: the median wall time of ``--repeat`` runs (s) and the median CPU time of the child
 process (user + system, s), which the other processes on a shared machine disturb less.
+Last, the floor under any of them that runs a kernel: a process importing numba and calling
+one five-line function from numba's disk cache (:data:`NUMBA_FLOOR`).
 """
 
 from __future__ import annotations
@@ -36,21 +38,50 @@ COMMANDS = {
 }
 
 
+#: The floor under any command that runs a compiled kernel: a process that imports numba and
+#: calls one five-line function from numba's disk cache (numba's import and its one-time set-up
+#: at the first call; the second run of the same script, as for the commands).
+NUMBA_FLOOR = """
+import numba, numpy
+@numba.njit(cache=True)
+def total(a):
+    s = 0.0
+    for i in range(a.shape[0]):
+        s += a[i]
+    return s
+total(numpy.ones(3))
+"""
+
+
+def run_argv(argv: list[str], env: dict[str, str]) -> tuple[float, float]:
+    """``(wall s, child CPU s)`` of one process ``argv``; raises if it fails."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    done = subprocess.run(argv, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(argv)} failed: {done.stderr.strip()[-500:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu
+
+
 def run_once(src: Path, args: list[str], env: dict[str, str]) -> tuple[float, float]:
     """``(wall s, child CPU s)`` of one ``python -m popdispatch.cli ARGS`` with ``src`` first
     on the path; raises if the command fails."""
     env = {**env, "PYTHONPATH": str(src)}
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    start = time.perf_counter()
-    done = subprocess.run(
-        [sys.executable, "-m", "popdispatch.cli", *args], env=env, capture_output=True, text=True
-    )
-    wall = time.perf_counter() - start
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if done.returncode != 0:
-        raise RuntimeError(f"{' '.join(args)} with {src} failed: {done.stderr.strip()[-500:]}")
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return wall, cpu
+    return run_argv([sys.executable, "-m", "popdispatch.cli", *args], env)
+
+
+def numba_floor(repeat: int, folder: str) -> dict:
+    """Median wall and CPU seconds of :data:`NUMBA_FLOOR` (its kernel cached in ``folder``)."""
+    script = Path(folder) / "numba_floor.py"
+    script.write_text(NUMBA_FLOOR)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(folder) / "numba")}
+    run_argv([sys.executable, str(script)], env)  # warm-up: compiles and caches it
+    runs = [run_argv([sys.executable, str(script)], env) for _ in range(repeat)]
+    return {"wall_s": statistics.median(w for w, _ in runs),
+            "cpu_s": statistics.median(c for _, c in runs), "runs": repeat}  # fmt: skip
 
 
 def measure(trees: dict[str, Path], commands: dict[str, list[str]], repeat: int, env) -> dict:
@@ -93,6 +124,7 @@ def main() -> None:
         if args.profiles:
             env["POPDISPATCH_PROFILES"] = args.profiles
         result = measure(trees, COMMANDS, args.repeat, env)
+        floor = numba_floor(args.repeat, folder)
     report = {
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}",
@@ -102,6 +134,7 @@ def main() -> None:
         "repeat": args.repeat,
         "trees": {label: str(path) for label, path in trees.items()},
         "medians": result,
+        "numba_floor": floor,
     }
     if args.json:
         print(json.dumps(report, indent=2))
@@ -118,6 +151,8 @@ def main() -> None:
             line += f" | {labels[0]}/{labels[1]} wall {a['wall_s'] / b['wall_s']:.2f}x"
             line += f", cpu {a['cpu_s'] / b['cpu_s']:.2f}x"
         print(line)
+    print(f"numba floor (import numba, one cached 5-line kernel) {floor['wall_s']:.3f} s wall "
+          f"({floor['cpu_s']:.3f} s cpu)")  # fmt: skip
 
 
 if __name__ == "__main__":
