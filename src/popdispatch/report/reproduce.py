@@ -79,10 +79,16 @@ def voltage_in_background(settings: RunSettings, parallel: bool) -> Iterator[Asy
     inherited threads or compiler state) when ``parallel``, as a pending result; else None
     (run it in this process). The process is terminated when the block ends, so an error or
     Ctrl-C here does not wait for it."""
-    if not parallel:
+    pool = None
+    if parallel:
+        try:
+            pool = multiprocessing.get_context("spawn").Pool(1)
+        except (OSError, ImportError):  # no process pool here (e.g. no POSIX semaphores)
+            pool = None
+    if pool is None:
         yield None
         return
-    with multiprocessing.get_context("spawn").Pool(1) as pool:
+    with pool:
         yield pool.apply_async(voltage, (settings,))
 
 
