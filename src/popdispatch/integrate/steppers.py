@@ -32,7 +32,7 @@ and the calls cost nothing measurable per step. The steppers themselves
 :func:`advance`, with :func:`euler_steps` inlined: numba inlines a function by copying its
 IR, at a cost that grows with the square of its size, and every compiled level below the
 day loop is optimised again by LLVM in each level above it, so the fewest levels with the
-fewest copies compile fastest (measured: ``benchmarks/bench_first_run.py``, docs/speed.md).
+fewest copies compile fastest (measured: ``benchmarks/bench_first_run.py``, README "First run").
 """
 
 from __future__ import annotations
