@@ -30,6 +30,7 @@ class PriceLaw(IntEnum):
 
     PLAIN = 0
     TREE = 1
+    SCALED = 2
 
     @classmethod
     def parse(cls, value: str | int) -> PriceLaw:

@@ -246,6 +246,81 @@ def tradable_below(generator_line, line_up, preorder, lo, hi, below):
             below[line_up[k]] += below[k]
 
 
+#: Which per-line response the scaled law divides by (measurement knob, see docs).
+SCALE_RULE = 0
+
+
+@nb.njit(cache=True, inline="always")
+def response_below(params, minute, below):
+    """Per limited line, the price response of the online tradable generators (``hi > lo``)
+    below it, ``R_k = sum 1 / (2 c_i)`` (MW per EUR/MW), into ``below``; returns the fleet's
+    ``R`` (the same sum over every tradable generator)."""
+    generator_line, line_up, preorder = params.generator_line, params.line_up, params.line_preorder
+    c, lo, hi = params.c, minute.lo, minute.hi
+    below[:] = 0.0
+    total = 0.0
+    for i in range(generator_line.shape[0]):
+        if hi[i] > lo[i]:
+            r = 1.0 if SCALE_RULE == 2 else 0.5 / c[i]
+            total += r
+            k = generator_line[i]
+            if k >= 0:
+                below[k] += r
+    for j in range(preorder.shape[0] - 1, -1, -1):
+        k = preorder[j]
+        if line_up[k] >= 0:
+            below[line_up[k]] += below[k]
+    return total
+
+
+@nb.njit(cache=True, inline="always")
+def line_scale(r_below, total):
+    """The scaled law's factor of one line, ``R / R_k`` (1 for a line whose price moves no
+    generator: none tradable below it, or none above it)."""
+    r = min(r_below, total - r_below) if SCALE_RULE == 1 else r_below
+    if r <= 1e-12 * total:
+        return 1.0
+    return total / r
+
+
+@nb.njit(cache=True, inline="always")
+def scaled_line_signals(p, z, params, minute, work, signal, z_rate):
+    """:func:`line_signals` with each line's price rate and augmented-Lagrangian weight
+    multiplied by its :func:`line_scale`."""
+    limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
+                       params.line_preorder, work.flow)  # fmt: skip
+    flow, parent_side, child_side = work.flow, work.parent_side, work.child_side
+    limit, C, price_rate = params.limit, params.C, params.price_rate
+    n_lines = limit.shape[0]
+    below = z_rate[n_lines:]
+    total = response_below(params, minute, below)
+    congestion = 0.0
+    residual = 0.0
+    for k in range(n_lines):
+        scale = line_scale(below[k], total)
+        excess_up = flow[k] - limit[k]
+        excess_down = -flow[k] - limit[k]
+        z_rate[k] = price_rate * scale * excess_up
+        z_rate[n_lines + k] = price_rate * scale * excess_down
+        residual = max(residual, dual_residual(excess_up, z[k]))
+        residual = max(residual, dual_residual(excess_down, z[n_lines + k]))
+        nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C * scale)
+        congestion = max(congestion, abs(nu))
+        child_side[k] = 0.5 * nu
+        parent_side[k] = -0.5 * nu
+    broadcast(parent_side, child_side, params.generator_line, params.line_up,
+              params.line_preorder, work.path, signal)  # fmt: skip
+    return congestion, residual
+
+
+@nb.njit(cache=True)
+def scaled_payoff(p, z, params, minute, work, fitness, z_rate):
+    """:func:`payoff` with the scaled price law (:func:`scaled_line_signals`)."""
+    congestion, residual = scaled_line_signals(p, z, params, minute, work, fitness, z_rate)
+    marginal_costs_into(p, params, fitness)
+    return congestion, residual
+
+
 @nb.njit(cache=True)
 def payoff(p, z, params, minute, work, fitness, z_rate):
     """Exact mode's payoff map: the line prices (:func:`line_signals`, plain law) and the
