@@ -79,3 +79,14 @@ def test_the_engine_compiles_the_scaled_kernel_by_its_name(problem):
     assert ExactConstants(price_law="SCALED").price_law is PriceLaw.SCALED
     engine = Engine(problem, RunSettings(mode="exact", exact=ExactConstants(price_law="scaled")))
     assert type(engine.term.mode) is ExactScaledTag
+
+
+def test_voltage_mode_refuses_the_scaled_law():
+    """Voltage mode has no scaled kernel: asking for one is an option error, not a silent
+    plain law."""
+    from popdispatch.errors import OptionError
+    from popdispatch.modes import ModeCode
+    from popdispatch.modes.mechanism import mode_tag
+
+    with pytest.raises(OptionError, match="exact mode only"):
+        mode_tag(ModeCode.VOLTAGE, PriceLaw.SCALED)

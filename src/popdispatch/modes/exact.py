@@ -248,6 +248,8 @@ def tradable_below(generator_line, line_up, preorder, lo, hi, below):
 
 #: Which per-line response the scaled law divides by (measurement knob, see docs).
 SCALE_RULE = 0
+SCALE_C = True
+SCALE_CAP = np.inf
 
 
 @nb.njit(cache=True, inline="always")
@@ -280,7 +282,7 @@ def line_scale(r_below, total):
     r = min(r_below, total - r_below) if SCALE_RULE == 1 else r_below
     if r <= 1e-12 * total:
         return 1.0
-    return total / r
+    return min(total / r, SCALE_CAP)
 
 
 @nb.njit(cache=True, inline="always")
@@ -304,7 +306,7 @@ def scaled_line_signals(p, z, params, minute, work, signal, z_rate):
         z_rate[n_lines + k] = price_rate * scale * excess_down
         residual = max(residual, dual_residual(excess_up, z[k]))
         residual = max(residual, dual_residual(excess_down, z[n_lines + k]))
-        nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C * scale)
+        nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C * scale if SCALE_C else C)
         congestion = max(congestion, abs(nu))
         child_side[k] = 0.5 * nu
         parent_side[k] = -0.5 * nu

@@ -97,8 +97,16 @@ _LAW_TAGS = {PriceLaw.TREE: _TREE_TAGS, PriceLaw.SCALED: _SCALED_TAGS}
 
 def mode_tag(code: ModeCode, price_law: PriceLaw = PriceLaw.PLAIN) -> ModeTag:
     """The compile-time record of the mode ``code`` with exact mode's line-price law (a
-    choice of kernel, so a run compiles only its own law; paper mode has no line prices)."""
-    tags = _LAW_TAGS.get(PriceLaw(price_law), _TAGS)
+    choice of kernel, so a run compiles only its own law; paper mode has no line prices).
+    The scaled law exists for exact mode only: voltage mode with it raises
+    :class:`~popdispatch.errors.OptionError`."""
+    law = PriceLaw(price_law)
+    if law == PriceLaw.SCALED and ModeCode(code) == ModeCode.VOLTAGE:
+        from popdispatch.errors import OptionError
+
+        raise OptionError("the scaled price law is for exact mode only (voltage mode: plain or "
+                          "tree)", "--price-law")  # fmt: skip
+    tags = _LAW_TAGS.get(law, _TAGS)
     return tags.get(ModeCode(code), _TAGS[ModeCode(code)])(int(code))
 
 
