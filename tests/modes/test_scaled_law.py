@@ -1,6 +1,6 @@
 """Exact mode's scaled price law (modes/exact.py, docs/exact-mode.md "Per-line scaling"): the
 compiled rates and broadcast equal a plain-numpy construction of the per-line diagonal
-preconditioner ``R / R_k`` from the problem's dense below-matrix, and the law is chosen by
+preconditioner ``N / N_k`` from the problem's dense below-matrix, and the law is chosen by
 name."""
 
 from __future__ import annotations
@@ -12,7 +12,12 @@ import numpy as np
 import pytest
 
 from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs, PriceLaw
-from popdispatch.modes.exact import ExactConstants, game_constants, scaled_payoff
+from popdispatch.modes.exact import (
+    ExactConstants,
+    game_constants,
+    scaled_payoff,
+    scaled_weights,
+)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import scale_cases  # noqa: E402  (the benchmark's synthetic feeders)
@@ -34,13 +39,13 @@ def _scaled(problem, p, z, minute):
 
 def dense_scaled(problem, p, z, fp, minute) -> tuple[np.ndarray, np.ndarray]:
     """The scaled law from its definition with the dense (lines x generators) matrix
-    ``problem.down``: ``R_k`` the sum of ``1 / (2 c_i)`` (MW per EUR/MW) over the tradable
-    (online, ``hi > lo``) generators below line ``k``, ``R`` over all tradable ones, the
-    line's factor ``s_k = R / R_k`` (1 where ``R_k = 0``); rates ``price_rate * s_k * excess``;
-    price ``nu_k = max(0, z+ + s_k C e+) - max(0, z- + s_k C e-)``; fitness ``gain * (sum_k
-    nu_k (D_ki - 1/2) - (b_i + 2 c_i p_i))`` (EUR/MW). Returns ``(fitness, z_rate)``."""
+    ``problem.down``: ``N_k`` the tradable (online, ``hi > lo``) generators below line ``k``,
+    ``N`` all tradable ones, the line's factor ``s_k = N / N_k`` (1 where ``N_k = 0``);
+    rates ``price_rate * s_k * excess``; price ``nu_k = max(0, z+ + s_k C e+) - max(0, z- +
+    s_k C e-)``; fitness ``gain * (sum_k nu_k (D_ki - 1/2) - (b_i + 2 c_i p_i))`` (EUR/MW).
+    Returns ``(fitness, z_rate)``."""
     n = len(problem.limit)
-    response = np.where(minute.hi > minute.lo, 0.5 / problem.c, 0.0)
+    response = (minute.hi > minute.lo).astype(float)
     r_k = problem.down @ response
     s = np.where(r_k > 0, response.sum() / np.where(r_k > 0, r_k, 1.0), 1.0)
     flow = problem.load_flow[0] - problem.down @ p
@@ -67,8 +72,12 @@ def test_scaled_rates_equal_the_dense_preconditioner(problem, seed):
     expected_fitness, expected_rate = dense_scaled(problem, p, z, fp, minute)
     np.testing.assert_allclose(rate, expected_rate, rtol=1e-9, atol=1e-9 * fp.price_rate)
     np.testing.assert_allclose(fitness, expected_fitness, rtol=1e-9, atol=1e-9 * fp.gain)
+    if seed != 2:  # the weights the KKT check reads are the kernel's (minute 1 as it is)
+        r_k = problem.down @ (minute.hi > minute.lo)
+        s = np.where(r_k > 0, problem.n_generators / np.maximum(r_k, 1), 1.0)
+        np.testing.assert_allclose(scaled_weights(problem, np.array([0]), fp.C)[0], s * fp.C)
     # the preconditioner is not the identity here: lines with few generators below move faster
-    response = np.where(minute.hi > minute.lo, 0.5 / problem.c, 0.0)
+    response = (minute.hi > minute.lo).astype(float)
     assert (problem.down @ response < 0.5 * response.sum()).any()
 
 

@@ -83,6 +83,19 @@ def game_constants(problem: DispatchProblem, constants: ExactConstants) -> Fitne
     )  # fmt: skip
 
 
+def scaled_weights(problem: DispatchProblem, rows: np.ndarray, C: float) -> np.ndarray:
+    """The scaled law's augmented-Lagrangian weight of every limited line, ``s_k C`` (EUR/MW
+    per MW; minutes ``rows``, 0-based, x limited lines), for the KKT check of its end states
+    (:func:`popdispatch.online.kkt_violations` takes ``C`` per minute and line): ``s_k = N /
+    N_k`` from the online generators with ``Pmax > Pmin`` (:func:`line_scale`)."""
+    tradable = problem.online[np.asarray(rows)] & (problem.pmax > problem.pmin)[None, :]
+    tradable = tradable.astype(float)
+    below = tradable @ problem.down.T
+    total = tradable.sum(axis=1, keepdims=True)
+    scale = np.where(below > 0, total / np.where(below > 0, below, 1.0), 1.0)
+    return C * scale
+
+
 @nb.njit(cache=True, inline="always")
 def dual_residual(excess, price):
     """How far a line-direction is from complementary slackness, MW: any overflow, and any
@@ -246,56 +259,32 @@ def tradable_below(generator_line, line_up, preorder, lo, hi, below):
             below[line_up[k]] += below[k]
 
 
-#: Which per-line response the scaled law divides by (measurement knob, see docs).
-SCALE_RULE = 0
-SCALE_C = True
-SCALE_CAP = np.inf
-
-
 @nb.njit(cache=True, inline="always")
-def response_below(params, minute, below):
-    """Per limited line, the price response of the online tradable generators (``hi > lo``)
-    below it, ``R_k = sum 1 / (2 c_i)`` (MW per EUR/MW), into ``below``; returns the fleet's
-    ``R`` (the same sum over every tradable generator)."""
-    generator_line, line_up, preorder = params.generator_line, params.line_up, params.line_preorder
-    c, lo, hi = params.c, minute.lo, minute.hi
-    below[:] = 0.0
-    total = 0.0
-    for i in range(generator_line.shape[0]):
-        if hi[i] > lo[i]:
-            r = 1.0 if SCALE_RULE == 2 else 0.5 / c[i]
-            total += r
-            k = generator_line[i]
-            if k >= 0:
-                below[k] += r
-    for j in range(preorder.shape[0] - 1, -1, -1):
-        k = preorder[j]
-        if line_up[k] >= 0:
-            below[line_up[k]] += below[k]
-    return total
-
-
-@nb.njit(cache=True, inline="always")
-def line_scale(r_below, total):
-    """The scaled law's factor of one line, ``R / R_k`` (1 for a line whose price moves no
-    generator: none tradable below it, or none above it)."""
-    r = min(r_below, total - r_below) if SCALE_RULE == 1 else r_below
-    if r <= 1e-12 * total:
-        return 1.0
-    return min(total / r, SCALE_CAP)
+def line_scale(below, total):
+    """The scaled law's factor of one line, ``N / N_k``: the online tradable generators of the
+    fleet over those below the line (1 for a line with none below, whose price moves nothing).
+    """
+    return total / below if below > 0.0 else 1.0
 
 
 @nb.njit(cache=True, inline="always")
 def scaled_line_signals(p, z, params, minute, work, signal, z_rate):
     """:func:`line_signals` with each line's price rate and augmented-Lagrangian weight
-    multiplied by its :func:`line_scale`."""
+    multiplied by its :func:`line_scale` (the scaled law, docs/exact-mode.md "Per-line
+    scaling"): ``z' = s_k price_rate excess`` and ``nu = max(0, z+ + s_k C e+) - max(0, z- +
+    s_k C e-)``. Scratch: the second half of ``z_rate`` holds the tradable generators below
+    each line until the line's own rates overwrite it."""
     limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
                        params.line_preorder, work.flow)  # fmt: skip
     flow, parent_side, child_side = work.flow, work.parent_side, work.child_side
     limit, C, price_rate = params.limit, params.C, params.price_rate
     n_lines = limit.shape[0]
     below = z_rate[n_lines:]
-    total = response_below(params, minute, below)
+    tradable_below(params.generator_line, params.line_up, params.line_preorder, minute.lo,
+                   minute.hi, below)  # fmt: skip
+    total = 0.0
+    for i in range(minute.lo.shape[0]):
+        total += 1.0 if minute.hi[i] > minute.lo[i] else 0.0
     congestion = 0.0
     residual = 0.0
     for k in range(n_lines):
@@ -306,7 +295,7 @@ def scaled_line_signals(p, z, params, minute, work, signal, z_rate):
         z_rate[n_lines + k] = price_rate * scale * excess_down
         residual = max(residual, dual_residual(excess_up, z[k]))
         residual = max(residual, dual_residual(excess_down, z[n_lines + k]))
-        nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C * scale if SCALE_C else C)
+        nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C * scale)
         congestion = max(congestion, abs(nu))
         child_side[k] = 0.5 * nu
         parent_side[k] = -0.5 * nu
