@@ -41,8 +41,8 @@ def dense_scaled(problem, p, z, fp, minute) -> tuple[np.ndarray, np.ndarray]:
     """The scaled law from its definition with the dense (lines x generators) matrix
     ``problem.down``: ``N_k`` the tradable (online, ``hi > lo``) generators below line ``k``,
     ``N`` all tradable ones, the line's factor ``s_k = N / N_k`` (1 where ``N_k = 0``);
-    rates ``price_rate * s_k * excess``; price ``nu_k = max(0, z+ + s_k C e+) - max(0, z- +
-    s_k C e-)``; fitness ``gain * (sum_k nu_k (D_ki - 1/2) - (b_i + 2 c_i p_i))`` (EUR/MW).
+    rates ``price_rate * s_k * excess``; price ``nu_k = max(0, z+ + sqrt(s_k) C e+) - max(0, z- +
+    sqrt(s_k) C e-)``; fitness ``gain * (sum_k nu_k (D_ki - 1/2) - (b_i + 2 c_i p_i))`` (EUR/MW).
     Returns ``(fitness, z_rate)``."""
     n = len(problem.limit)
     response = (minute.hi > minute.lo).astype(float)
@@ -51,7 +51,8 @@ def dense_scaled(problem, p, z, fp, minute) -> tuple[np.ndarray, np.ndarray]:
     flow = problem.load_flow[0] - problem.down @ p
     up, down = flow - problem.limit, -flow - problem.limit
     rate = fp.price_rate * np.concatenate([s * up, s * down])
-    nu = np.maximum(0, z[:n] + s * fp.C * up) - np.maximum(0, z[n:] + s * fp.C * down)
+    weight = np.sqrt(s) * fp.C
+    nu = np.maximum(0, z[:n] + weight * up) - np.maximum(0, z[n:] + weight * down)
     signal = (problem.down - 0.5).T @ nu
     fitness = fp.gain * (signal - (problem.b + 2 * problem.c * p))
     return fitness, rate
@@ -75,7 +76,8 @@ def test_scaled_rates_equal_the_dense_preconditioner(problem, seed):
     if seed != 2:  # the weights the KKT check reads are the kernel's (minute 1 as it is)
         r_k = problem.down @ (minute.hi > minute.lo)
         s = np.where(r_k > 0, problem.n_generators / np.maximum(r_k, 1), 1.0)
-        np.testing.assert_allclose(scaled_weights(problem, np.array([0]), fp.C)[0], s * fp.C)
+        weights = scaled_weights(problem, np.array([0]), fp.C)[0]
+        np.testing.assert_allclose(weights, np.sqrt(s) * fp.C)
     # the preconditioner is not the identity here: lines with few generators below move faster
     response = (minute.hi > minute.lo).astype(float)
     assert (problem.down @ response < 0.5 * response.sum()).any()

@@ -84,8 +84,8 @@ def game_constants(problem: DispatchProblem, constants: ExactConstants) -> Fitne
 
 
 def scaled_weights(problem: DispatchProblem, rows: np.ndarray, C: float) -> np.ndarray:
-    """The scaled law's augmented-Lagrangian weight of every limited line, ``s_k C`` (EUR/MW
-    per MW; minutes ``rows``, 0-based, x limited lines), for the KKT check of its end states
+    """The scaled law's augmented-Lagrangian weight of every limited line, ``sqrt(s_k) C``
+    (EUR/MW per MW; minutes ``rows``, 0-based, x limited lines), for the KKT check of its end states
     (:func:`popdispatch.online.kkt_violations` takes ``C`` per minute and line): ``s_k = N /
     N_k`` from the online generators with ``Pmax > Pmin`` (:func:`line_scale`)."""
     tradable = problem.online[np.asarray(rows)] & (problem.pmax > problem.pmin)[None, :]
@@ -93,7 +93,7 @@ def scaled_weights(problem: DispatchProblem, rows: np.ndarray, C: float) -> np.n
     below = tradable @ problem.down.T
     total = tradable.sum(axis=1, keepdims=True)
     scale = np.where(below > 0, total / np.where(below > 0, below, 1.0), 1.0)
-    return C * scale
+    return C * np.sqrt(scale)
 
 
 @nb.njit(cache=True, inline="always")
@@ -270,10 +270,10 @@ def line_scale(below, total):
 @nb.njit(cache=True, inline="always")
 def scaled_line_signals(p, z, params, minute, work, signal, z_rate):
     """:func:`line_signals` with each line's price rate and augmented-Lagrangian weight
-    multiplied by its :func:`line_scale` (the scaled law, docs/exact-mode.md "Per-line
-    scaling"): ``z' = s_k price_rate excess`` and ``nu = max(0, z+ + s_k C e+) - max(0, z- +
-    s_k C e-)``. Scratch: the second half of ``z_rate`` holds the tradable generators below
-    each line until the line's own rates overwrite it."""
+    multiplied by its :func:`line_scale` ``s_k`` and its square root (the scaled law,
+    docs/exact-mode.md "Per-line scaling"): ``z' = s_k price_rate excess`` and ``nu = max(0, z+
+    + sqrt(s_k) C e+) - max(0, z- + sqrt(s_k) C e-)``. Scratch: the second half of ``z_rate``
+    holds the tradable generators below each line until the line's own rates overwrite it."""
     limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
                        params.line_preorder, work.flow)  # fmt: skip
     flow, parent_side, child_side = work.flow, work.parent_side, work.child_side
@@ -295,7 +295,7 @@ def scaled_line_signals(p, z, params, minute, work, signal, z_rate):
         z_rate[n_lines + k] = price_rate * scale * excess_down
         residual = max(residual, dual_residual(excess_up, z[k]))
         residual = max(residual, dual_residual(excess_down, z[n_lines + k]))
-        nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C * scale)
+        nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C * np.sqrt(scale))
         congestion = max(congestion, abs(nu))
         child_side[k] = 0.5 * nu
         parent_side[k] = -0.5 * nu
