@@ -42,8 +42,9 @@ class ExactConstants:
     C : augmented-Lagrangian weight, ``S`` per unit of overflow.
     price_rate : how fast a price (units of ``S``) integrates its overflow (units of ``P``), 1/s.
     price_law : how the line prices move (:class:`~popdispatch.game.parameters.PriceLaw`, or
-        its name): ``PLAIN`` (each line its own overflow) or ``TREE`` (preconditioned by the
-        tree of active lines; docs/exact-mode.md, "Nested limits").
+        its name): ``PLAIN`` (each line its own overflow), ``TREE`` (preconditioned by the
+        tree of active lines; docs/exact-mode.md, "Nested limits") or ``SCALED`` (each line's
+        rate and weight scaled by its share of the tradable generators, "Per-line scaling").
     """
 
     gain: float = GAIN
