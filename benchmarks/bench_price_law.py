@@ -1,5 +1,6 @@
-"""Exact mode's price laws on the ieee-elv days: the plain and the tree law (docs/exact-mode.md,
-"Nested limits") in one run, alternating, medians of engine seconds.
+"""Exact mode's price laws on the ieee-elv days: the plain, tree and scaled laws
+(docs/exact-mode.md, "Nested limits", "Per-line scaling") in one run, alternating, medians of
+engine seconds.
 
 Usage: python benchmarks/bench_price_law.py [--profiles DIR] [--repeat N]
 
@@ -34,7 +35,7 @@ def settings_of(law: PriceLaw) -> RunSettings:
 
 
 def alternate(problem, repeat: int) -> None:
-    """Time the day with both laws, alternating rounds, and print one row per law."""
+    """Time the day with every law, alternating rounds, and print one row per law."""
     laws = list(PriceLaw)
     times: dict[PriceLaw, list[float]] = {law: [] for law in laws}
     for law in laws:

@@ -1,7 +1,7 @@
 """Exact mode on every scale (issue 12): iterations, evaluations and distance to the DC-OPF.
 
 Usage: python benchmarks/bench_scale.py [--cases SUBSTRING,...] [--sizes 1000,10000,100000]
-    [--horizon 3000] [--rtol 1e-5] [--laws plain,tree]
+    [--horizon 3000] [--rtol 1e-5] [--laws plain,tree,scaled]
 
 For every case of ``benchmarks/scale_cases.py`` (the built-in cases and MATPOWER radial cases
 without and with a binding limit, synthetic 1k/10k/100k feeders with every candidate line
@@ -11,7 +11,7 @@ settings (tolerance 1e-6 of demand) up to ``--horizon`` iterations, against the 
 iterations, game/field evaluations per iteration, the largest ``|p - p_opf|`` (kW) and its
 bound ``max(1e-6 * demand, 0.001 kW)``, the status and the engine's time (kernels compiled
 beforehand; one run, not a median: the iteration counts are the point). ``--laws``: the price
-laws to run on every case, one row each (``modes.exact.PriceLaw``; default: both).
+laws to run on every case, one row each (``modes.exact.PriceLaw``; default: all three).
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def main() -> None:
     parser.add_argument("--horizon", type=int, default=3000)
     parser.add_argument("--rtol", type=float, default=None,
                         help="Heun error control (default: exact mode's, 1e-5)")  # fmt: skip
-    parser.add_argument("--laws", default="plain,tree", help="price laws, comma-separated")
+    parser.add_argument("--laws", default="plain,tree,scaled", help="price laws, comma-separated")
     args = parser.parse_args()
     wanted = [w for w in args.cases.split(",") if w]
     sizes = tuple(int(s) for s in args.sizes.split(",") if s)

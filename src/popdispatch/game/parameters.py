@@ -25,16 +25,20 @@ class PriceLaw(IntEnum):
     line, its own measurement only). ``TREE``: the prices of the active (priced or overflowing)
     lines integrate their overflows preconditioned by the tree of active lines, ``nu' =
     price_rate * L^-T W^-1 L^-1 eps`` ("Nested limits"); each controller also reads the
-    excesses of its nearest active neighbours on the tree. Same rest points (the DC-OPF).
+    excesses of its nearest active neighbours on the tree. ``SCALED``: each line's price rate
+    times ``s_k = N / N_k`` (tradable generators in the fleet over those below the line) and
+    its augmented-Lagrangian weight times ``sqrt(s_k)`` ("Per-line scaling"); each controller
+    needs only those two counts. Same rest points (the DC-OPF).
     """
 
     PLAIN = 0
     TREE = 1
+    SCALED = 2
 
     @classmethod
     def parse(cls, value: str | int) -> PriceLaw:
-        """A law from its name (``"plain"``, ``"tree"``, any case) or number; an unknown one
-        raises :class:`~popdispatch.errors.OptionError` naming ``--price-law``."""
+        """A law from its name (``"plain"``, ``"tree"``, ``"scaled"``, any case) or number; an
+        unknown one raises :class:`~popdispatch.errors.OptionError` naming ``--price-law``."""
         if isinstance(value, str) and value.strip().upper() in cls.__members__:
             return cls[value.strip().upper()]
         if not isinstance(value, str | bool) and value in set(cls):

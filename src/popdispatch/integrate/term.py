@@ -26,6 +26,7 @@ from popdispatch.dynamics.pairwise import (
 from popdispatch.game.parameters import PriceLaw
 from popdispatch.modes import ModeCode, exact, voltage
 from popdispatch.modes.mechanism import (
+    ExactScaledTag,
     ExactTag,
     ExactTreeTag,
     ModeTag,
@@ -74,6 +75,7 @@ _PAYOFFS = {
     VoltageTag: voltage.payoff,
     ExactTreeTag: exact.tree_payoff,
     VoltageTreeTag: voltage.tree_payoff,
+    ExactScaledTag: exact.scaled_payoff,
 }
 
 

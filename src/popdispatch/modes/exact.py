@@ -42,8 +42,9 @@ class ExactConstants:
     C : augmented-Lagrangian weight, ``S`` per unit of overflow.
     price_rate : how fast a price (units of ``S``) integrates its overflow (units of ``P``), 1/s.
     price_law : how the line prices move (:class:`~popdispatch.game.parameters.PriceLaw`, or
-        its name): ``PLAIN`` (each line its own overflow) or ``TREE`` (preconditioned by the
-        tree of active lines; docs/exact-mode.md, "Nested limits").
+        its name): ``PLAIN`` (each line its own overflow), ``TREE`` (preconditioned by the
+        tree of active lines; docs/exact-mode.md, "Nested limits") or ``SCALED`` (each line's
+        rate and weight scaled by its share of the tradable generators, "Per-line scaling").
     """
 
     gain: float = GAIN
@@ -81,6 +82,19 @@ def game_constants(problem: DispatchProblem, constants: ExactConstants) -> Fitne
         B=0.0, m=0.0, C=constants.C * spread / demand, gain=constants.gain / spread,
         price_rate=constants.price_rate * spread / demand,
     )  # fmt: skip
+
+
+def scaled_weights(problem: DispatchProblem, rows: np.ndarray, C: float) -> np.ndarray:
+    """The scaled law's augmented-Lagrangian weight of every limited line, ``sqrt(s_k) C``
+    (EUR/MW per MW; minutes ``rows``, 0-based, x limited lines), for the KKT check of its end states
+    (:func:`popdispatch.online.kkt_violations` takes ``C`` per minute and line): ``s_k = N /
+    N_k`` from the online generators with ``Pmax > Pmin`` (:func:`line_scale`)."""
+    tradable = problem.online[np.asarray(rows)] & (problem.pmax > problem.pmin)[None, :]
+    tradable = tradable.astype(float)
+    below = tradable @ problem.down.T
+    total = tradable.sum(axis=1, keepdims=True)
+    scale = np.where(below > 0, total / np.where(below > 0, below, 1.0), 1.0)
+    return C * np.sqrt(scale)
 
 
 @nb.njit(cache=True, inline="always")
@@ -244,6 +258,59 @@ def tradable_below(generator_line, line_up, preorder, lo, hi, below):
         k = preorder[r]
         if line_up[k] >= 0:
             below[line_up[k]] += below[k]
+
+
+@nb.njit(cache=True, inline="always")
+def line_scale(below, total):
+    """The scaled law's factor of one line, ``N / N_k``: the online tradable generators of the
+    fleet over those below the line (1 for a line with none below, whose price moves nothing).
+    """
+    return total / below if below > 0.0 else 1.0
+
+
+@nb.njit(cache=True, inline="always")
+def scaled_line_signals(p, z, params, minute, work, signal, z_rate):
+    """:func:`line_signals` with each line's price rate and augmented-Lagrangian weight
+    multiplied by its :func:`line_scale` ``s_k`` and its square root (the scaled law,
+    docs/exact-mode.md "Per-line scaling"): ``z' = s_k price_rate excess`` and ``nu = max(0, z+
+    + sqrt(s_k) C e+) - max(0, z- + sqrt(s_k) C e-)``. Scratch: the second half of ``z_rate``
+    holds the tradable generators below each line until the line's own rates overwrite it."""
+    limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
+                       params.line_preorder, work.flow)  # fmt: skip
+    flow, parent_side, child_side = work.flow, work.parent_side, work.child_side
+    limit, C, price_rate = params.limit, params.C, params.price_rate
+    n_lines = limit.shape[0]
+    below = z_rate[n_lines:]
+    tradable_below(params.generator_line, params.line_up, params.line_preorder, minute.lo,
+                   minute.hi, below)  # fmt: skip
+    total = 0.0
+    for i in range(minute.lo.shape[0]):
+        total += 1.0 if minute.hi[i] > minute.lo[i] else 0.0
+    congestion = 0.0
+    residual = 0.0
+    for k in range(n_lines):
+        scale = line_scale(below[k], total)
+        excess_up = flow[k] - limit[k]
+        excess_down = -flow[k] - limit[k]
+        z_rate[k] = price_rate * scale * excess_up
+        z_rate[n_lines + k] = price_rate * scale * excess_down
+        residual = max(residual, dual_residual(excess_up, z[k]))
+        residual = max(residual, dual_residual(excess_down, z[n_lines + k]))
+        nu = line_price(z[k], z[n_lines + k], excess_up, excess_down, C * np.sqrt(scale))
+        congestion = max(congestion, abs(nu))
+        child_side[k] = 0.5 * nu
+        parent_side[k] = -0.5 * nu
+    broadcast(parent_side, child_side, params.generator_line, params.line_up,
+              params.line_preorder, work.path, signal)  # fmt: skip
+    return congestion, residual
+
+
+@nb.njit(cache=True)
+def scaled_payoff(p, z, params, minute, work, fitness, z_rate):
+    """:func:`payoff` with the scaled price law (:func:`scaled_line_signals`)."""
+    congestion, residual = scaled_line_signals(p, z, params, minute, work, fitness, z_rate)
+    marginal_costs_into(p, params, fitness)
+    return congestion, residual
 
 
 @nb.njit(cache=True)

@@ -82,14 +82,31 @@ class VoltageTreeTag(ModeTag):
     __slots__ = ()
 
 
+class ExactScaledTag(ModeTag):
+    """Exact mode's payoff with the scaled price law
+    (:func:`popdispatch.modes.exact.scaled_payoff`)."""
+
+    __slots__ = ()
+
+
 _TAGS = {ModeCode.PAPER: PaperTag, ModeCode.EXACT: ExactTag, ModeCode.VOLTAGE: VoltageTag}
 _TREE_TAGS = {ModeCode.EXACT: ExactTreeTag, ModeCode.VOLTAGE: VoltageTreeTag}
+_SCALED_TAGS = {ModeCode.EXACT: ExactScaledTag}
+_LAW_TAGS = {PriceLaw.TREE: _TREE_TAGS, PriceLaw.SCALED: _SCALED_TAGS}
 
 
 def mode_tag(code: ModeCode, price_law: PriceLaw = PriceLaw.PLAIN) -> ModeTag:
     """The compile-time record of the mode ``code`` with exact mode's line-price law (a
-    choice of kernel, so a run compiles only its own law; paper mode has no line prices)."""
-    tags = _TREE_TAGS if PriceLaw(price_law) == PriceLaw.TREE else _TAGS
+    choice of kernel, so a run compiles only its own law; paper mode has no line prices).
+    The scaled law exists for exact mode only: voltage mode with it raises
+    :class:`~popdispatch.errors.OptionError`."""
+    law = PriceLaw(price_law)
+    if law == PriceLaw.SCALED and ModeCode(code) == ModeCode.VOLTAGE:
+        from popdispatch.errors import OptionError
+
+        raise OptionError("the scaled price law is for exact mode only (voltage mode: plain or "
+                          "tree)", "--price-law")  # fmt: skip
+    tags = _LAW_TAGS.get(law, _TAGS)
     return tags.get(ModeCode(code), _TAGS[ModeCode(code)])(int(code))
 
 

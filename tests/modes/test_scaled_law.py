@@ -1,0 +1,103 @@
+"""Exact mode's scaled price law (modes/exact.py, docs/exact-mode.md "Per-line scaling"): the
+compiled rates and broadcast equal a plain-numpy construction of the per-line diagonal
+preconditioner ``N / N_k`` from the problem's dense below-matrix, and the law is chosen by
+name."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs, PriceLaw
+from popdispatch.modes.exact import (
+    ExactConstants,
+    game_constants,
+    scaled_payoff,
+    scaled_weights,
+)
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+import scale_cases  # noqa: E402  (the benchmark's synthetic feeders)
+
+
+@pytest.fixture(scope="module")
+def problem():
+    """The synthetic 1k feeder, every candidate line limited (68 limited lines, nested)."""
+    return scale_cases.synthetic(1000, 10, 1.0)
+
+
+def _scaled(problem, p, z, minute):
+    fp = game_constants(problem, ExactConstants(price_law="scaled"))
+    params = GameParameters.of(problem, fp)
+    fitness, z_rate = np.empty(len(p)), np.empty(len(z))
+    scaled_payoff(p, z, params, minute, GameWork.empty(len(problem.limit)), fitness, z_rate)
+    return fitness, z_rate, fp
+
+
+def dense_scaled(problem, p, z, fp, minute) -> tuple[np.ndarray, np.ndarray]:
+    """The scaled law from its definition with the dense (lines x generators) matrix
+    ``problem.down``: ``N_k`` the tradable (online, ``hi > lo``) generators below line ``k``,
+    ``N`` all tradable ones, the line's factor ``s_k = N / N_k`` (1 where ``N_k = 0``);
+    rates ``price_rate * s_k * excess``; price ``nu_k = max(0, z+ + sqrt(s_k) C e+) - max(0, z- +
+    sqrt(s_k) C e-)``; fitness ``gain * (sum_k nu_k (D_ki - 1/2) - (b_i + 2 c_i p_i))`` (EUR/MW).
+    Returns ``(fitness, z_rate)``."""
+    n = len(problem.limit)
+    response = (minute.hi > minute.lo).astype(float)
+    r_k = problem.down @ response
+    s = np.where(r_k > 0, response.sum() / np.where(r_k > 0, r_k, 1.0), 1.0)
+    flow = problem.load_flow[0] - problem.down @ p
+    up, down = flow - problem.limit, -flow - problem.limit
+    rate = fp.price_rate * np.concatenate([s * up, s * down])
+    weight = np.sqrt(s) * fp.C
+    nu = np.maximum(0, z[:n] + weight * up) - np.maximum(0, z[n:] + weight * down)
+    signal = (problem.down - 0.5).T @ nu
+    fitness = fp.gain * (signal - (problem.b + 2 * problem.c * p))
+    return fitness, rate
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_scaled_rates_equal_the_dense_preconditioner(problem, seed):
+    rng = np.random.default_rng(seed)
+    n = len(problem.limit)
+    p = problem.pmin + (problem.pmax - problem.pmin) * rng.uniform(0, 1, problem.n_generators)
+    p *= problem.demand[0] / p.sum()
+    z = np.where(rng.uniform(0, 1, 2 * n) < 0.3, rng.uniform(0, 50, 2 * n), 0.0)
+    minute = MinuteInputs.of(problem, 1)
+    if seed == 2:  # a generator that cannot trade (Pmin = Pmax) leaves every R_k it was in
+        minute = minute._replace(hi=minute.hi.copy())
+        minute.hi[3] = minute.lo[3]
+    fitness, rate, fp = _scaled(problem, p, z, minute)
+    expected_fitness, expected_rate = dense_scaled(problem, p, z, fp, minute)
+    np.testing.assert_allclose(rate, expected_rate, rtol=1e-9, atol=1e-9 * fp.price_rate)
+    np.testing.assert_allclose(fitness, expected_fitness, rtol=1e-9, atol=1e-9 * fp.gain)
+    if seed != 2:  # the weights the KKT check reads are the kernel's (minute 1 as it is)
+        r_k = problem.down @ (minute.hi > minute.lo)
+        s = np.where(r_k > 0, problem.n_generators / np.maximum(r_k, 1), 1.0)
+        weights = scaled_weights(problem, np.array([0]), fp.C)[0]
+        np.testing.assert_allclose(weights, np.sqrt(s) * fp.C)
+    # the preconditioner is not the identity here: lines with few generators below move faster
+    response = (minute.hi > minute.lo).astype(float)
+    assert (problem.down @ response < 0.5 * response.sum()).any()
+
+
+def test_the_engine_compiles_the_scaled_kernel_by_its_name(problem):
+    from popdispatch.modes.mechanism import ExactScaledTag
+    from popdispatch.online import Engine, RunSettings
+
+    assert ExactConstants(price_law="SCALED").price_law is PriceLaw.SCALED
+    engine = Engine(problem, RunSettings(mode="exact", exact=ExactConstants(price_law="scaled")))
+    assert type(engine.term.mode) is ExactScaledTag
+
+
+def test_voltage_mode_refuses_the_scaled_law():
+    """Voltage mode has no scaled kernel: asking for one is an option error, not a silent
+    plain law."""
+    from popdispatch.errors import OptionError
+    from popdispatch.modes import ModeCode
+    from popdispatch.modes.mechanism import mode_tag
+
+    with pytest.raises(OptionError, match="exact mode only"):
+        mode_tag(ModeCode.VOLTAGE, PriceLaw.SCALED)
