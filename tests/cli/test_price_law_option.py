@@ -1,7 +1,7 @@
-"""``--price-law`` (issue 12): the tree law reaches the engine from the command line and lands
-on the DC-OPF (Clarabel's solution, independent of the dynamics); it is refused where nothing
-would use it (paper mode: no line prices; the agents: their controllers hear only their own
-lines), with a one-line usage error before any work."""
+"""``--price-law`` (issues 12, 13): the tree and scaled laws reach the engine from the
+command line and land on the DC-OPF (Clarabel's solution, independent of the dynamics); they
+are refused where nothing would use them (paper mode: no line prices; the agents: their
+controllers hear only their own lines), with a one-line usage error before any work."""
 
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ from test_commands import assert_one_line_error, run
 KW = 1e-3
 
 
-@pytest.mark.parametrize("law", ["plain", "tree"])
-def test_both_laws_land_on_the_dc_opf(law):
+@pytest.mark.parametrize("law", ["plain", "tree", "scaled"])
+def test_every_law_lands_on_the_dc_opf(law):
     args = ["snapshot", "--minute", "566", "--mode", "exact", "--limit", "505:666=28"]
     result = run(*args, "--price-law", law, "--json", "-q")
     assert result.returncode == 0, result.stderr
@@ -25,6 +25,16 @@ def test_both_laws_land_on_the_dc_opf(law):
     assert s["status"] == "converged"
     for g in s["generators"]:
         assert g["setpoint_kw"] == pytest.approx(g["opf_kw"], abs=KW), g["name"]
+
+
+def test_the_option_offers_every_law_of_the_engine():
+    """The CLI spells the choices out (importing the engine would slow ``--help``): they must
+    be the enum's."""
+    from popdispatch.cli.commands import cli
+    from popdispatch.game.parameters import PriceLaw
+
+    option = next(p for p in cli.commands["snapshot"].params if p.name == "price_law")
+    assert set(option.type.choices) == {law.name.lower() for law in PriceLaw}
 
 
 def test_tree_law_in_paper_mode_is_a_usage_error():
@@ -37,7 +47,8 @@ def test_unknown_law_is_a_usage_error():
     assert_one_line_error(result, 2, "--price-law")
 
 
-def test_agents_refuse_the_tree_law():
+@pytest.mark.parametrize("law", ["tree", "scaled"])
+def test_agents_refuse_the_laws_their_controllers_cannot_run(law):
     pytest.importorskip("mango", reason='the agents need mango-agents: pip install ".[agents]"')
-    result = run("agents", "--minute", "566", "--mode", "exact", "--price-law", "tree", "-q")
+    result = run("agents", "--minute", "566", "--mode", "exact", "--price-law", law, "-q")
     assert_one_line_error(result, 2, "--price-law", "plain price law")

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from popdispatch.modes.exact import ExactConstants
 from popdispatch.online import RunSettings
 from popdispatch.online.engine import Engine
 from popdispatch.report.summaries import day_summary, day_table, snapshot_summary
@@ -44,6 +45,24 @@ def test_exact_line_prices_are_the_dc_opf_duals(congested):
     assert np.max(np.abs(opf.line_price)) > 100 * tol  # a line binds: the test can fail
     np.testing.assert_allclose(run.line_price_eur_per_mwh, opf.line_price, rtol=0, atol=tol)
     assert run.voltage_price_eur_per_mwh.shape == (0,)
+
+
+@pytest.mark.parametrize("law", ["tree", "scaled"])
+def test_every_price_law_reports_the_dc_opf_duals(law):
+    """The tree and scaled laws broadcast the same prices at rest; the scaled law reads them
+    with its per-line weight ``sqrt(N/N_k) C`` (``Engine.price_weight``), which also bounds
+    how far the proportional part may move them within the stopping tolerance."""
+    problem = elv_problem(None, [CONGESTION_PATH])
+    settings = RunSettings(mode="exact", exact=ExactConstants(price_law=law))
+    result = run_snapshot_vs_opf(problem, PEAK_MINUTE, settings)
+    run, opf = result.run, result.opf
+    assert run.status == "converged", run.stall_reason
+    engine = Engine(problem, settings)
+    tol = engine.kkt_tolerances(float(problem.demand[PEAK_MINUTE - 1]))
+    weight = float(np.max(engine.price_weight(np.array([PEAK_MINUTE]))))
+    atol = tol.price + weight * tol.power_mw
+    assert np.max(np.abs(opf.line_price)) > 100 * atol
+    np.testing.assert_allclose(run.line_price_eur_per_mwh, opf.line_price, rtol=0, atol=atol)
 
 
 def test_snapshot_json_carries_the_engine_prices(congested):

@@ -367,11 +367,13 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
 
 def check_settings(settings: RunSettings) -> None:
     """Refuse run settings the agents cannot honour: a price law other than plain (their node
-    controllers hear only their own lines; the tree law needs its neighbours' excesses)."""
+    controllers hear only their own lines; the tree law needs its neighbours' excesses, the
+    scaled law the count of tradable generators below each line)."""
     if settings.exact.price_law != PriceLaw.PLAIN:
         raise OptionError(
             "the agents' node controllers run the plain price law (each hears only its own "
-            "lines; the tree law needs its neighbours' excesses)",
+            "lines; the tree law needs its neighbours' excesses, the scaled law the count of "
+            "tradable generators below each line)",
             "--price-law",
         )
 

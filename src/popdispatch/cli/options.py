@@ -333,12 +333,14 @@ def run_options(func):
         ),
         option(
             "--price-law",
-            type=click.Choice(["plain", "tree"], case_sensitive=False),
+            type=click.Choice(["plain", "tree", "scaled"], case_sensitive=False),
             default="plain",
             show_default=True,
             help="Exact mode's line-price law: plain (each controller integrates its own "
-            "line's overflow) or tree (preconditioned by the tree of active limited lines: the "
-            "same optimum, far fewer iterations where limits nest; docs/exact-mode.md).",
+            "line's overflow), tree (preconditioned by the tree of active limited lines: far "
+            "fewer iterations where limits nest) or scaled (each line's price rate times N/N_k, "
+            "the fleet's tradable generators over those below it: feeders with many generators "
+            "and limited lines); the same optimum, docs/exact-mode.md.",
         ),
     ]
     for decorate in reversed(decorators):

@@ -97,6 +97,18 @@ def scaled_weights(problem: DispatchProblem, rows: np.ndarray, C: float) -> np.n
     return C * np.sqrt(scale)
 
 
+def price_weights(
+    problem: DispatchProblem, price_law: PriceLaw, C: float, rows: np.ndarray
+) -> float | np.ndarray:
+    """The augmented-Lagrangian weight the controllers broadcast their prices with, EUR/MW per
+    MW: ``C`` under the plain and tree laws, one per minute (``rows``, 0-based) and limited
+    line under the scaled law (:func:`scaled_weights`). For reading a run's prices back (its
+    KKT check, the reported prices)."""
+    if PriceLaw(price_law) == PriceLaw.SCALED:
+        return scaled_weights(problem, rows, C)
+    return C
+
+
 @nb.njit(cache=True, inline="always")
 def dual_residual(excess, price):
     """How far a line-direction is from complementary slackness, MW: any overflow, and any

@@ -138,7 +138,7 @@ def _prices(
     without price controllers (paper mode)."""
     if z.shape[1] == 0:
         return None, None
-    return net_prices(engine.problem, minutes, p_mw, z, engine.constants.C)
+    return net_prices(engine.problem, minutes, p_mw, z, engine.price_weight(minutes))
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from popdispatch.game.parameters import GameParameters
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.integrate import Status, Term, workspace
 from popdispatch.modes import get_mode
+from popdispatch.modes.exact import price_weights
 from popdispatch.online.day import DayArrays, DayInputs, integrate_day
 from popdispatch.online.kkt import KktTolerances, kkt_violations
 from popdispatch.online.settings import RunSettings
@@ -90,10 +91,17 @@ class Engine:
         demand = self.problem.demand[np.asarray(minutes)[rows] - 1]
         tolerances = [self.kkt_tolerances(float(d)) for d in demand]
         checked = kkt_violations(self.problem, minutes[rows], p_mw[rows], z[rows], tolerances,
-                                 self.constants.C)  # fmt: skip
+                                 self.price_weight(minutes[rows]))  # fmt: skip
         for r, reason in zip(rows, checked, strict=True):
             reasons[r] = reason
         return reasons
+
+    def price_weight(self, minutes: np.ndarray) -> float | np.ndarray:
+        """The augmented-Lagrangian weight the controllers broadcast with at the 1-based
+        ``minutes`` (EUR/MW per MW: one value, or one per minute and line under the scaled
+        price law; :func:`popdispatch.modes.exact.price_weights`)."""
+        rows = np.asarray(minutes, dtype=np.int64) - 1
+        return price_weights(self.problem, self.settings.exact.price_law, self.constants.C, rows)
 
     def _graph(self) -> tuple[bool, np.ndarray, np.ndarray]:
         """``(complete?, indptr, indices)`` of the communication graph (CSR)."""
