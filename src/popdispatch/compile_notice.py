@@ -41,7 +41,8 @@ DAY_LOOP = "popdispatch.online.day:integrate_day"
 
 COMPILE_NOTICE = (
     "compiling the engine's kernels (first run after installing or updating popdispatch, or "
-    "an empty numba cache, or a mode, dynamic or graph not run before): about 20-40 s, once; "
+    "an empty numba cache, or a mode, dynamic or graph not run before): about 15-20 s per "
+    "configuration on a 2-core machine, once; "
     "later runs load them from numba's disk cache"
 )
 
