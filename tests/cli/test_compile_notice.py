@@ -33,6 +33,6 @@ def test_compile_notice_only_when_numbas_cache_is_cold(tmp_path):
         assert result.returncode == 0, result.stderr
     cold, warm = runs
     assert cold.stderr.count(NOTICE) == 1, cold.stderr
-    assert re.search(r"about \d+-\d+ s, once", cold.stderr), cold.stderr
+    assert re.search(r"about \d+-\d+ s per configuration .*, once", cold.stderr), cold.stderr
     assert NOTICE not in warm.stderr, warm.stderr
     assert any(tmp_path.rglob("*.nbi"))  # the kernels went where we looked
