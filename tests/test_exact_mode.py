@@ -148,8 +148,8 @@ def test_random_feeders_tree_law_equilibrium_is_the_qp_solution(seed, n_buses, n
     n_limits=st.integers(1, 3),
 )
 def test_random_feeders_scaled_law_equilibrium_is_the_qp_solution(seed, n_buses, n_gens, n_limits):
-    """The scaled price law (each line's rate and weight times ``R / R_k``) has the same rest
-    points (docs/exact-mode.md, "Per-line scaling")."""
+    """The scaled price law (each line's rate times ``N / N_k``, its weight times the square
+    root) has the same rest points (docs/exact-mode.md, "Per-line scaling")."""
     check_random_feeder(seed, n_buses, n_gens, n_limits, PriceLaw.SCALED)
 
 

@@ -4,40 +4,21 @@ its broadcast prices equal the plain law's, and the law is chosen by name."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
+from price_laws import law_payoff
 
 from popdispatch.errors import OptionError
-from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs, PriceLaw
+from popdispatch.game.parameters import MinuteInputs, PriceLaw
 from popdispatch.modes.exact import (
     EMPTY_REGION,
     ExactConstants,
-    game_constants,
-    payoff,
-    tree_payoff,
 )
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-import scale_cases  # noqa: E402  (the benchmark's synthetic feeders)
-
-
-@pytest.fixture(scope="module")
-def problem():
-    """The synthetic 1k feeder, every candidate line limited (68 limited lines, nested)."""
-    return scale_cases.synthetic(1000, 10, 1.0)
 
 
 def _payoff(problem, law, p, z):
-    fp = game_constants(problem, ExactConstants(price_law=law))
-    params = GameParameters.of(problem, fp)
     minute = MinuteInputs.of(problem, 1)
-    fitness, z_rate = np.empty(len(p)), np.empty(len(z))
-    kernel = tree_payoff if law == PriceLaw.TREE else payoff
-    kernel(p, z, params, minute, GameWork.empty(len(problem.limit)), fitness, z_rate)
-    return fitness, z_rate, fp, minute
+    return (*law_payoff(problem, law, p, z, minute), minute)
 
 
 def _ancestors(line_up: np.ndarray) -> np.ndarray:

@@ -5,36 +5,15 @@ name."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
+from price_laws import law_payoff
 
-from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs, PriceLaw
+from popdispatch.game.parameters import MinuteInputs, PriceLaw
 from popdispatch.modes.exact import (
     ExactConstants,
-    game_constants,
-    scaled_payoff,
     scaled_weights,
 )
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-import scale_cases  # noqa: E402  (the benchmark's synthetic feeders)
-
-
-@pytest.fixture(scope="module")
-def problem():
-    """The synthetic 1k feeder, every candidate line limited (68 limited lines, nested)."""
-    return scale_cases.synthetic(1000, 10, 1.0)
-
-
-def _scaled(problem, p, z, minute):
-    fp = game_constants(problem, ExactConstants(price_law="scaled"))
-    params = GameParameters.of(problem, fp)
-    fitness, z_rate = np.empty(len(p)), np.empty(len(z))
-    scaled_payoff(p, z, params, minute, GameWork.empty(len(problem.limit)), fitness, z_rate)
-    return fitness, z_rate, fp
 
 
 def dense_scaled(problem, p, z, fp, minute) -> tuple[np.ndarray, np.ndarray]:
@@ -69,7 +48,7 @@ def test_scaled_rates_equal_the_dense_preconditioner(problem, seed):
     if seed == 2:  # a generator that cannot trade (Pmin = Pmax) leaves every R_k it was in
         minute = minute._replace(hi=minute.hi.copy())
         minute.hi[3] = minute.lo[3]
-    fitness, rate, fp = _scaled(problem, p, z, minute)
+    fitness, rate, fp = law_payoff(problem, PriceLaw.SCALED, p, z, minute)
     expected_fitness, expected_rate = dense_scaled(problem, p, z, fp, minute)
     np.testing.assert_allclose(rate, expected_rate, rtol=1e-9, atol=1e-9 * fp.price_rate)
     np.testing.assert_allclose(fitness, expected_fitness, rtol=1e-9, atol=1e-9 * fp.gain)
