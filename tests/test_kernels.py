@@ -144,8 +144,10 @@ def test_compiled_trajectories_equal_the_numpy_reference(congested, mode, dynami
     iterations = 120 if mode == "paper" else 35
     # the ring's relay (dynamics/pairwise.py relay_flows) sums its flows group by group, the
     # reference as a dense matrix: on this degenerate congestion the difference of summation
-    # order grows about tenfold per iteration, to 1.9e-7 MW by iteration 35 (measured)
-    atol = 1e-6 if graph == "ring" and mode == "exact" else 1e-9
+    # order grows about tenfold per iteration, to 1.9e-7 MW by iteration 35 (measured); exact
+    # mode's curvature-scaled rates (up to 50 times Smith's) amplify the round-off of the
+    # adaptive steps' error estimates too: 1.2e-9 MW by iteration 2 (measured)
+    atol = {("exact", "ring"): 1e-6, ("exact", "complete"): 1e-8}.get((mode, graph), 1e-9)
     trajectory = compare(congested, settings, PEAK_MINUTE, iterations, atol=atol)
     assert np.ptp(trajectory, axis=0).max() > 1e-4  # things moved: the comparison is not vacuous
 
@@ -174,7 +176,7 @@ def test_reference_agrees_on_random_limited_feeders(seed):
     problem = limited_random_problem(seed + 10, n_gens=12)
     # 12 generators and many prices: the adaptive steps see round-off of different summation
     # orders (prefix sums vs all pairs); 1e-6 MW is 1 W.
-    compare(problem, RunSettings(mode="exact"), 1, 200, atol=1e-6)
+    compare(problem, RunSettings(mode="exact"), 1, 200, atol=1e-6, min_rows=5)
 
 
 @pytest.mark.parametrize("method", ["euler", "heun"])

@@ -85,7 +85,7 @@ def run_classes(settings: RunSettings) -> set[type] | None:
 
     mode = get_mode(settings.mode)
     dynamics = get_dynamics(settings.dynamics)
-    field = dynamics.bounded_field if mode.bounded else dynamics.field
+    field = settings.field
     if field is None:
         return None
     complete = not dynamics.uses_graph or settings.graph == "complete"

@@ -103,19 +103,27 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
     return fitness(problem, p, signal, fp, fp.gain, False), z_rate, congestion, residual
 
 
-def weights(field: Field, x, lo, hi, active):
-    """Receiver weight, movable mass and room of a field (see :mod:`popdispatch.dynamics`)."""
+def weights(field: Field, x, lo, hi, active, rate=None):
+    """Receiver weight, sender weight, room and movable mass of a field (see
+    :mod:`popdispatch.dynamics`; ``rate``: the revision rates of the curvature-scaled field)."""
     if field == Field.SMITH:
-        return active * 1.0, np.where(active, np.maximum(x, 0.0), 0.0), np.full(len(x), np.inf)
-    if field == Field.CAPACITY_SMITH:
+        v = np.where(active, np.maximum(x, 0.0), 0.0)
+        return active * 1.0, v, np.full(len(x), np.inf), v
+    if field in (Field.CAPACITY_SMITH, Field.CAPACITY_NEWTON):
         width = hi - lo
         part = active & (width > 0.0)
+        near = ROOM_ULPS * np.spacing(hi)
         room = np.where(part, np.maximum(hi - x, 0.0), 0.0)
-        room = np.where(room <= ROOM_ULPS * np.spacing(hi), 0.0, room)  # at its limit
-        w = np.where(room > 0.0, 1.0, 0.0)
-        return w, np.where(part, np.maximum(x - lo, 0.0), 0.0), room
+        room = np.where(room <= near, 0.0, room)  # at its limit
+        mass = np.where(part, np.maximum(x - lo, 0.0), 0.0)
+        if field == Field.CAPACITY_SMITH:
+            return np.where(room > 0.0, 1.0, 0.0), mass, room, mass
+        mass = np.where(mass <= near, 0.0, mass)
+        inside = ((room > 0.0) & (mass > 0.0)).any()
+        total = rate[(room > 0.0) & (mass > 0.0)].sum() if inside else rate[room > 0.0].sum()
+        return np.where(room > 0.0, rate / total, 0.0), np.where(mass > 0.0, rate, 0.0), room, mass
     share = np.where(active, np.maximum(x, 0.0), 0.0)
-    return share, share, np.full(len(x), np.inf)
+    return share, share, np.full(len(x), np.inf), share
 
 
 def pair_flows(f, w, v, graph):
@@ -158,7 +166,7 @@ class ReferenceMinute:
         self.price_scale = settings.price_scale(problem)
         self.mode = get_mode(settings.mode)
         dynamics = get_dynamics(settings.dynamics)
-        self.field = dynamics.bounded_field if self.mode.bounded else dynamics.field
+        self.field = settings.field
         kind = settings.graph if dynamics.uses_graph else "complete"
         self.graph = communication_graph(kind, list(problem.generators))
         inputs = MinuteInputs.of(problem, minute)
@@ -169,20 +177,21 @@ class ReferenceMinute:
             inputs.hi,
         )
         self.integrator = settings.stepping
+        self.rate = settings.revision_rates(problem)
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
 
     def evaluate(self, x, z):
         f, z_rate, congestion, residual = game(
             self.mode.code, x * self.demand, z, self.problem, self.minute, self.fp
         )
-        w, v, room = weights(self.field, x, self.lo, self.hi, self.active)
+        w, v, room, mass = weights(self.field, x, self.lo, self.hi, self.active, self.rate)
         inflow, outflow = pair_flows(f, w, v, self.graph)
-        return (f, w, v, room, inflow, outflow, z_rate), congestion, residual
+        return (f, w, v, room, mass, inflow, outflow, z_rate), congestion, residual
 
     def limited_stage(self, h, x, z, point):
-        f, w, v, room, inflow, outflow, z_rate = point
+        f, w, v, room, mass, inflow, outflow, z_rate = point
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            alpha = np.where(h * outflow > v, v / (h * outflow), 1.0)
+            alpha = np.where(h * outflow > mass, mass / (h * outflow), 1.0)
             # the receivers from the flows of the limited senders
             into = pair_flows(f, w, alpha * v, self.graph)[0] if (alpha < 1.0).any() else inflow
             beta = np.where(h * into > room, room / (h * into), 1.0)
@@ -191,11 +200,11 @@ class ReferenceMinute:
         return x + h * (inflow - outflow), np.maximum(z + h * z_rate, 0.0)
 
     def heun_combination(self, h, x, z, one, two):
-        (f1, w1, v1, room1, in1, out1, zr1), (f2, w2, v2, _, in2, out2, zr2) = one, two
+        (f1, w1, v1, room1, mass1, in1, out1, zr1), (f2, w2, v2, _, _, in2, out2, zr2) = one, two
         half = 0.5 * h
         out, into = half * (out1 + out2), half * (in1 + in2)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            alpha = np.where(out > v1, v1 / out, 1.0)
+            alpha = np.where(out > mass1, mass1 / out, 1.0)
             if (alpha < 1.0).any():  # the receivers from the flows of the limited senders
                 into = half * (
                     pair_flows(f1, w1, alpha * v1, self.graph)[0]
@@ -244,8 +253,8 @@ class ReferenceMinute:
     def stiffness(self, h, x, z, one, two) -> float:
         """``||k2 - k1|| / ||x1 - x||`` over components the limiter left alone (1/s)."""
         it = self.integrator
-        (_, _, v1, room1, in1, out1, zr1), (_, _, _, _, in2, out2, zr2) = one, two
-        free = ~((h * out1 > v1) | (h * in1 > room1))
+        (_, _, _, room1, mass1, in1, out1, zr1), (_, _, _, _, _, in2, out2, zr2) = one, two
+        free = ~((h * out1 > mass1) | (h * in1 > room1))
         scale = it.atol + it.rtol * np.abs(x)
         k1, k2 = (in1 - out1)[free] / scale[free], (in2 - out2)[free] / scale[free]
         open_ = z + h * zr1 >= 0.0

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from popdispatch.dynamics import DYNAMICS, Dynamics, Field, field_rate
-from popdispatch.dynamics.fields import field_weights
+from popdispatch.dynamics.fields import rated_field_weights
 from popdispatch.reference import pair_flows, weights
 
 
@@ -17,7 +17,8 @@ def test_every_dynamic_names_fields_and_nothing_unread():
     names = {f.name for f in dataclasses.fields(Dynamics)}
     assert names == {"name", "field", "uses_graph", "bounded_field"}
     used = {d.field for d in DYNAMICS.values()} | {d.bounded_field for d in DYNAMICS.values()}
-    assert used - {None} == set(Field)
+    # exact mode's curvature-scaled revision replaces the bounded fields (RunSettings.field)
+    assert used - {None} | {Field.CAPACITY_NEWTON} == set(Field)
 
 
 @pytest.mark.parametrize("field", list(Field))
@@ -28,15 +29,17 @@ def test_compiled_weights_equal_the_reference(field):
     lo, hi = x * rng.uniform(0, 1, n), x + rng.uniform(0, 1, n)
     lo[0] = hi[0] = x[0]  # no width: takes no part in the capacity field
     active = rng.random(n) < 0.8
-    w, v, room = (np.empty(n) for _ in range(3))
-    field_weights(field, x, lo, hi, active, w, v, room)
-    for compiled, expected in zip((w, v, room), weights(field, x, lo, hi, active), strict=True):
-        np.testing.assert_array_equal(compiled, expected)
+    rates = 10.0 ** rng.uniform(-3, 2, n)  # revision rates (read by the curvature-scaled field)
+    w, v, room, mass = (np.empty(n) for _ in range(4))
+    rated_field_weights(int(field), x, lo, hi, active, rates, w, v, room, mass)
+    expected = weights(field, x, lo, hi, active, rates)
+    for compiled, value in zip((w, v, room, mass), expected, strict=True):
+        np.testing.assert_allclose(compiled, value, rtol=1e-15, atol=0)
     f = rng.normal(0, 1, n)
     complete = np.ones((n, n)) - np.eye(n)
-    inflow, outflow = pair_flows(f, *weights(field, x, lo, hi, active)[:2], complete)
-    rate = field_rate(field, x, f, complete, lo, hi, active)
-    np.testing.assert_allclose(rate, inflow - outflow, rtol=0, atol=1e-14)
+    inflow, outflow = pair_flows(f, *expected[:2], complete)
+    rate = field_rate(field, x, f, complete, lo, hi, active, rates)
+    np.testing.assert_allclose(rate, inflow - outflow, rtol=0, atol=1e-13)
 
 
 def test_a_strategy_a_few_ulp_below_its_upper_limit_is_at_it():

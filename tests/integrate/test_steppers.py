@@ -62,8 +62,9 @@ def _limited(ws, h, x, z, x_out, z_out):
 def _fill(ws, point, f, w, v, room):
     stage = ws.first if point == 0 else ws.second
     inflow, outflow = _numpy_flows(f, w, v)
-    for name, row in zip(("f", "w", "v", "room", "inflow", "outflow"),
-                         (f, w, v, room, inflow, outflow), strict=True):  # fmt: skip
+    # the sender weight is the movable mass here, as for (capacity) Smith
+    for name, row in zip(("f", "w", "v", "room", "mass", "inflow", "outflow"),
+                         (f, w, v, room, v, inflow, outflow), strict=True):  # fmt: skip
         getattr(stage, name)[:] = row
     stage.order[:] = np.argsort(f, kind="mergesort")
     return inflow, outflow

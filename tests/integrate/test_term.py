@@ -33,14 +33,15 @@ def test_one_evaluation_equals_the_reference(problem, mode, dynamics, graph):
     z = rng.uniform(0.0, 20.0, len(engine.z))
     stage = Stage.empty(len(x), len(z))
     work = GameWork.empty(len(problem.limit))
-    evaluate(x, z, stage.p, stage.f, stage.w, stage.v, stage.room, stage.inflow, stage.outflow,
-             stage.z_rate, stage.order, engine.term, engine.params, minute, work)  # fmt: skip
+    evaluate(x, z, stage.p, stage.f, stage.w, stage.v, stage.room, stage.mass, stage.inflow,
+             stage.outflow, stage.z_rate, stage.order, engine.term, engine.params, minute,
+             work)  # fmt: skip
     reference = ReferenceMinute(problem, settings, PEAK_MINUTE)
-    (f, w, v, room, inflow, outflow, z_rate), _, _ = reference.evaluate(x, z)
+    (f, w, v, room, mass, inflow, outflow, z_rate), _, _ = reference.evaluate(x, z)
     np.testing.assert_array_equal(stage.p, x * minute.demand)
     np.testing.assert_allclose(stage.f, f, rtol=1e-12)
-    for got, expected in ((stage.w, w), (stage.v, v), (stage.room, room)):
-        np.testing.assert_array_equal(got, expected)
+    for got, expected in ((stage.w, w), (stage.v, v), (stage.room, room), (stage.mass, mass)):
+        np.testing.assert_allclose(got, expected, rtol=1e-15, atol=0)
     np.testing.assert_allclose(stage.inflow, inflow, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(stage.outflow, outflow, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(stage.z_rate, z_rate, rtol=1e-12)

@@ -14,7 +14,7 @@ import numpy as np
 from scipy import sparse
 
 from popdispatch.dynamics.capacity import project_to_box
-from popdispatch.dynamics.fields import Field, field_weights
+from popdispatch.dynamics.fields import Field, rated_field_weights
 from popdispatch.dynamics.graph import GRAPHS, communication_graph
 from popdispatch.dynamics.pairwise import pairwise_flows, sort_by_fitness
 
@@ -57,14 +57,18 @@ def field_rate(
     lo: np.ndarray,
     hi: np.ndarray,
     active: np.ndarray | None = None,
+    rate: np.ndarray | None = None,
 ) -> np.ndarray:
     """``x'`` of the field ``field`` at shares ``x`` and fitness ``f``, on a dense 0/1
-    ``adjacency``, with the compiled kernels."""
+    ``adjacency``, with the compiled kernels (``rate``: the per-generator revision rates of
+    the curvature-scaled field)."""
     n = len(x)
     x, f = np.asarray(x, dtype=float), np.asarray(f, dtype=float)
     active = np.ones(n, dtype=bool) if active is None else np.asarray(active, dtype=bool)
-    w, v, room, inflow, outflow = (np.empty(n) for _ in range(5))
-    field_weights(field, x, np.asarray(lo, float), np.asarray(hi, float), active, w, v, room)
+    rate = np.ones(n) if rate is None else np.asarray(rate, dtype=float)
+    w, v, room, mass, inflow, outflow = (np.empty(n) for _ in range(6))
+    rated_field_weights(int(field), x, np.asarray(lo, float), np.asarray(hi, float), active, rate,
+                        w, v, room, mass)  # fmt: skip
     complete = bool((adjacency + np.eye(n) > 0).all())
     csr = sparse.csr_matrix(adjacency)
     order = np.arange(n, dtype=np.int64)

@@ -24,6 +24,7 @@ import numba as nb
 from numba.extending import overload
 
 from popdispatch.dynamics.capacity import capacity_smith_weights
+from popdispatch.dynamics.newton import newton_weights
 from popdispatch.dynamics.replicator import replicator_weights
 from popdispatch.dynamics.smith import smith_weights
 
@@ -35,9 +36,10 @@ class Field(IntEnum):
     REPLICATOR = 1
     LOCAL_REPLICATOR = 2
     CAPACITY_SMITH = 3
+    CAPACITY_NEWTON = 4
 
 
-SMITH, REPLICATOR, LOCAL_REPLICATOR, CAPACITY_SMITH = Field
+SMITH, REPLICATOR, LOCAL_REPLICATOR, CAPACITY_SMITH, CAPACITY_NEWTON = Field
 
 
 @nb.njit(cache=True, inline="always")
@@ -49,6 +51,18 @@ def field_weights(code, x, lo, hi, active, w, v, room):
         replicator_weights(x, lo, hi, active, w, v, room)
     else:
         capacity_smith_weights(x, lo, hi, active, w, v, room)
+
+
+@nb.njit(cache=True)
+def rated_field_weights(code, x, lo, hi, active, rate, w, v, room, mass):
+    """:func:`field_weights` for every field, those that read per-generator revision rates
+    ``rate`` included, with the movable mass into ``mass``."""
+    if code == Field.CAPACITY_NEWTON:
+        newton_weights(x, lo, hi, active, rate, w, v, room, mass)
+        return
+    field_weights(code, x, lo, hi, active, w, v, room)
+    for i in range(x.shape[0]):
+        mass[i] = v[i]
 
 
 class FieldTag(NamedTuple):
@@ -78,17 +92,30 @@ class CapacitySmithTag(FieldTag):
     __slots__ = ()
 
 
+class CapacityNewtonTag(FieldTag):
+    """Curvature-scaled capacity-constrained Smith weights
+    (:func:`~popdispatch.dynamics.newton.newton_weights`), which read the game's per-generator
+    revision rates."""
+
+    __slots__ = ()
+
+
 _TAGS = {
     Field.SMITH: SmithTag,
     Field.REPLICATOR: ReplicatorTag,
     Field.LOCAL_REPLICATOR: ReplicatorTag,
     Field.CAPACITY_SMITH: CapacitySmithTag,
+    Field.CAPACITY_NEWTON: CapacityNewtonTag,
 }
+#: Weight kernels whose sender weight is the movable mass, ``(x, lo, hi, active, w, v, room)``.
 _KERNELS = {
     SmithTag: smith_weights,
     ReplicatorTag: replicator_weights,
     CapacitySmithTag: capacity_smith_weights,
 }
+#: Weight kernels that take the revision rates and give the movable mass apart,
+#: ``(x, lo, hi, active, rate, w, v, room, mass)``.
+_RATE_KERNELS = {CapacityNewtonTag: newton_weights}
 
 
 def field_tag(field: Field) -> FieldTag:
@@ -96,20 +123,31 @@ def field_tag(field: Field) -> FieldTag:
     return _TAGS[Field(field)](int(field))
 
 
-def weights(tag, x, lo, hi, active, w, v, room):
-    """Fill ``w``, ``v``, ``room`` at ``x`` with the weights of the field ``tag`` (a
-    :class:`FieldTag`); compiled code only (the kernel is chosen by the tag's class when numba
+def weights(tag, x, lo, hi, active, rate, w, v, room, mass):
+    """Fill ``w``, ``v``, ``room`` and ``mass`` at ``x`` with the weights of the field ``tag``
+    (a :class:`FieldTag`; ``rate``: the game's per-generator revision rates, read by the fields
+    that take them); compiled code only (the kernel is chosen by the tag's class when numba
     types the call)."""
     raise TypeError("weights() runs in compiled code only; use field_weights")
 
 
 @overload(weights, inline="always")
-def _weights(tag, x, lo, hi, active, w, v, room):
-    kernel = _KERNELS.get(getattr(tag, "instance_class", None))
+def _weights(tag, x, lo, hi, active, rate, w, v, room, mass):
+    cls = getattr(tag, "instance_class", None)
+    rated = _RATE_KERNELS.get(cls)
+    if rated is not None:
+
+        def rated_impl(tag, x, lo, hi, active, rate, w, v, room, mass):
+            rated(x, lo, hi, active, rate, w, v, room, mass)
+
+        return rated_impl
+    kernel = _KERNELS.get(cls)
     if kernel is None:
         return None
 
-    def impl(tag, x, lo, hi, active, w, v, room):
+    def impl(tag, x, lo, hi, active, rate, w, v, room, mass):
         kernel(x, lo, hi, active, w, v, room)
+        for i in range(x.shape[0]):  # the sender weight is the movable mass
+            mass[i] = v[i]
 
     return impl

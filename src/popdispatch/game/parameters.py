@@ -16,6 +16,7 @@ from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.problem import DispatchProblem
 
 NO_VOLTAGE_ROWS = np.zeros((0, 0))  # empty: nothing in it to change
+NO_RATES = np.zeros(0)  # empty: the dynamics that take no per-generator revision rate
 
 
 class PriceLaw(IntEnum):
@@ -69,15 +70,22 @@ class GameParameters(NamedTuple):
     # per monitored bus and generator, d(v^2)/dp over the bus's scale (modes/voltage.py);
     # (0, 0) without voltage limits (the default, for records built by hand in tests)
     voltage_sens: np.ndarray = NO_VOLTAGE_ROWS
+    # per generator, the revision rate of the dynamics that scale each generator's revision by
+    # its own cost curve (dynamics/newton.py), dimensionless; empty for the others
+    revision_rate: np.ndarray = NO_RATES
 
     @classmethod
-    def of(cls, problem: DispatchProblem, fp: FitnessParameters) -> GameParameters:
-        """The parameters of ``problem`` with the constants ``fp`` (EUR/MW)."""
+    def of(
+        cls, problem: DispatchProblem, fp: FitnessParameters, revision_rate: np.ndarray = NO_RATES
+    ) -> GameParameters:
+        """The parameters of ``problem`` with the constants ``fp`` (EUR/MW) and the dynamic's
+        per-generator ``revision_rate`` (dimensionless; empty when it takes none)."""
         return cls(
             problem.b, problem.c, problem.pmin, problem.pmax, float(fp.B), float(fp.m),
             float(fp.C), float(fp.gain), float(fp.price_rate), problem.limit,
             problem.generator_line, problem.line_up, problem.line_preorder,
             np.ascontiguousarray(problem.voltage_sens, dtype=float),
+            np.ascontiguousarray(revision_rate, dtype=float),
         )  # fmt: skip
 
 

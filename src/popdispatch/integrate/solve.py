@@ -37,8 +37,8 @@ def final_residual(x, z, term, params, minute, ws):
     stage of the workspace ``ws`` (which the next step evaluates afresh anyway)."""
     one = ws.first
     ws.counters.evaluations[0] += 1
-    _, residual = evaluate_stage(x, z, one.p, one.f, one.w, one.v, one.room, one.inflow,
-                                 one.outflow, one.z_rate, one.order, term, params, minute,
+    _, residual = evaluate_stage(x, z, one.p, one.f, one.w, one.v, one.room, one.mass,
+                                 one.inflow, one.outflow, one.z_rate, one.order, term, params, minute,
                                  ws.game)  # fmt: skip
     return residual
 

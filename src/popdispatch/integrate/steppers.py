@@ -159,8 +159,8 @@ def copy_into(source, target):
 
 
 @nb.njit(cache=True)
-def evaluate_stage(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, params, minute,
-                   work):  # fmt: skip
+def evaluate_stage(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term, params,
+                   minute, work):  # fmt: skip
     """:func:`~popdispatch.integrate.term.evaluate` as one compiled function, called (not
     inlined) by every stage of the steppers and by the stopping rule's end-state check.
 
@@ -169,8 +169,8 @@ def evaluate_stage(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term,
     each function that links them: 60-90 s of compilation on the first run. Called, they are
     compiled once; the call costs a few reference counts per evaluation.
     """
-    return evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, params, minute,
-                    work)  # fmt: skip
+    return evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term, params,
+                    minute, work)  # fmt: skip
 
 
 @nb.njit(cache=True)
@@ -182,8 +182,8 @@ def limited_flows(f, w, v, graph, order, inflow, outflow):
 
 
 @nb.njit(cache=True, inline="always")
-def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v, room, inflow,
-                outflow, z_rate, order, lim, work, evaluations, x_out, z_out):  # fmt: skip
+def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v, room, mass,
+                inflow, outflow, z_rate, order, lim, work, evaluations, x_out, z_out):  # fmt: skip
     """``steps`` limited Euler steps of length ``h`` from ``(x, z)`` to ``(x_out, z_out)``
     (which may be ``x``, ``z``), each evaluating the field into the arrays ``p`` .. ``order``
     of one :class:`Stage` first (the first one only with ``evaluate_first``: else they hold
@@ -204,8 +204,9 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
     for step in range(steps):
         if step > 0 or evaluate_first:
             evaluations[0] += 1
-            congestion, residual = evaluate_stage(x, z, p, f, w, v, room, inflow, outflow, z_rate,
-                                                  order, term, params, minute, work)  # fmt: skip
+            congestion, residual = evaluate_stage(x, z, p, f, w, v, room, mass, inflow, outflow,
+                                                  z_rate, order, term, params, minute,
+                                                  work)  # fmt: skip
             congested = max(congested, congestion)
         # senders first; the receivers' factors from the flows of the limited senders, so a
         # pair limited at both ends is scaled once (from the unlimited flows it was scaled
@@ -213,8 +214,8 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
         senders = False
         for i in range(x.shape[0]):
             lim_v[i] = v[i]
-            if h * outflow[i] > v[i]:
-                lim_v[i] = v[i] * (v[i] / (h * outflow[i]))
+            if h * outflow[i] > mass[i]:
+                lim_v[i] = v[i] * (mass[i] / (h * outflow[i]))
                 senders = True
         into = inflow
         if senders:
@@ -256,15 +257,15 @@ def advance_euler(method, x, z, term, params, minute, ws, stepper, h_try):
     one = ws.first
     congested, residual = euler_steps(stepper.substeps, True, stepper.dt / stepper.substeps, x,
                                       z, term, params, minute, one.p, one.f, one.w, one.v,
-                                      one.room, one.inflow, one.outflow, one.z_rate, one.order,
+                                      one.room, one.mass, one.inflow, one.outflow, one.z_rate, one.order,
                                       ws.first_limited, ws.game, ws.counters.evaluations, x,
                                       z)  # fmt: skip
     return congested, residual, h_try
 
 
 @nb.njit(cache=True, inline="always")
-def heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2, v2, in2, out2,
-                     zr2, order2, lim1, lim2, graph, x_out, z_out):  # fmt: skip
+def heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, f2, w2, v2, in2,
+                     out2, zr2, order2, lim1, lim2, graph, x_out, z_out):  # fmt: skip
     """``x_out = x + h/2 (k1 + k2)`` from the raw flows at both points, flux-limited as one step.
 
     Where the combined step would carry a strategy past its movable mass or its room, the
@@ -286,8 +287,8 @@ def heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2,
     for i in range(x.shape[0]):
         alpha = 1.0
         out = half * (out1[i] + out2[i])
-        if out > v1[i]:
-            alpha = v1[i] / out
+        if out > mass1[i]:
+            alpha = mass1[i] / out
             senders = True
         sv1[i], sv2[i] = alpha * v1[i], alpha * v2[i]
     if senders:
@@ -314,7 +315,7 @@ def heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2,
 
 
 @nb.njit(cache=True, inline="always")
-def stiffness(h, x, z, v1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol, price_atol):
+def stiffness(h, x, z, mass1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol, price_atol):
     """Largest rate the last step saw, ``||k2 - k1|| / ||x1 - x||`` (1/s), in the error norm's
     scaling, over the components the limiter left alone.
 
@@ -328,7 +329,7 @@ def stiffness(h, x, z, v1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol, pr
     moved = 0.0
     turned = 0.0
     for i in range(x.shape[0]):
-        if h * out1[i] > v1[i] or h * in1[i] > room1[i]:
+        if h * out1[i] > mass1[i] or h * in1[i] > room1[i]:
             continue
         scale = atol + rtol * abs(x[i])
         k1 = (in1[i] - out1[i]) / scale
@@ -356,8 +357,8 @@ def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
     work, counters = ws.game, ws.counters
     x1, x2, z1, z2 = ws.x_euler, ws.x_heun, ws.z_euler, ws.z_heun
     p1, f1, w1, v1, room1, in1, out1 = one.p, one.f, one.w, one.v, one.room, one.inflow, one.outflow
-    zr1, order1 = one.z_rate, one.order
-    p2, f2, w2, v2, room2 = two.p, two.f, two.w, two.v, two.room
+    mass1, zr1, order1 = one.mass, one.z_rate, one.order
+    p2, f2, w2, v2, room2, mass2 = two.p, two.f, two.w, two.v, two.room, two.mass
     in2, out2, zr2, order2 = two.inflow, two.outflow, two.z_rate, two.order
     graph = term.graph
     remaining = dt
@@ -370,19 +371,20 @@ def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
         # included (the last step's alone missed a period-3 price oscillation); a rejected
         # step's first evaluation is reused
         congestion, step_residual = euler_steps(1, not fresh, h, x, z, term, params, minute,
-                                                p1, f1, w1, v1, room1, in1, out1, zr1, order1,
+                                                p1, f1, w1, v1, room1, mass1, in1, out1, zr1,
+                                                order1,
                                                 lim1, work, counters.evaluations, x1,
                                                 z1)  # fmt: skip
         congested = max(congested, congestion)
         residual = max(residual, step_residual)
         fresh = True
         counters.evaluations[0] += 1
-        evaluate_stage(x1, z1, p2, f2, w2, v2, room2, in2, out2, zr2, order2, term, params,
+        evaluate_stage(x1, z1, p2, f2, w2, v2, room2, mass2, in2, out2, zr2, order2, term, params,
                        minute, work)  # fmt: skip
-        heun_combination(h, x, z, f1, w1, v1, room1, in1, out1, zr1, order1, f2, w2, v2, in2,
-                         out2, zr2, order2, lim1, lim2, graph, x2, z2)  # fmt: skip
+        heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, f2, w2, v2,
+                         in2, out2, zr2, order2, lim1, lim2, graph, x2, z2)  # fmt: skip
         err = error_norm(x2, x1, z2, z1, rtol, atol, price_atol)
-        rate = stiffness(h, x, z, v1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,
+        rate = stiffness(h, x, z, mass1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,
                          price_atol)  # fmt: skip
         if err <= 1.0:
             copy_into(x2, x)

@@ -103,13 +103,16 @@ class Stage(NamedTuple):
     """The field evaluated at one point: set points ``p`` (MW), fitness ``f`` (EUR/MW), the
     receiver weights ``w``, movable masses ``v`` and ``room`` (shares), the raw pairwise
     ``inflow``/``outflow`` (shares/s), the controllers' ``z_rate`` and the strategies'
-    ``order`` by fitness (kept between evaluations: a nearly sorted order sorts in O(n))."""
+    ``order`` by fitness (kept between evaluations: a nearly sorted order sorts in O(n)).
+    ``v`` is the sender weight and ``mass`` the movable mass the flux limiter empties (the
+    same array values for the dynamics whose sender weight is their movable mass)."""
 
     p: np.ndarray
     f: np.ndarray
     w: np.ndarray
     v: np.ndarray
     room: np.ndarray
+    mass: np.ndarray
     inflow: np.ndarray
     outflow: np.ndarray
     z_rate: np.ndarray
@@ -117,12 +120,13 @@ class Stage(NamedTuple):
 
     @classmethod
     def empty(cls, n: int, n_states: int) -> Stage:
-        vectors = (np.zeros(n) for _ in range(7))
+        vectors = (np.zeros(n) for _ in range(8))
         return cls(*vectors, np.zeros(n_states), np.arange(n, dtype=np.int64))
 
 
 @nb.njit(cache=True, inline="always")
-def evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, params, minute, work):
+def evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term, params, minute,
+             work):  # fmt: skip
     """Fitness, weights and raw pairwise flows at ``(x, z)`` into the arrays of one
     :class:`Stage` (``p`` .. ``order``, its fields by name; the steppers take them out of the
     record once per iteration, since numba reference-counts every array of a record each time
@@ -141,7 +145,8 @@ def evaluate(x, z, p, f, w, v, room, inflow, outflow, z_rate, order, term, param
     # inlined (overload inline="always"; called, each call reference-counted the records'
     # arrays: the paper minute took 2.5 ms instead of 1.5 ms)
     congestion, residual = payoff(term.mode, p, z, params, minute, work, f, z_rate)
-    weights(term.field, x, minute.lo, minute.hi, minute.active, w, v, room)
+    weights(term.field, x, minute.lo, minute.hi, minute.active, params.revision_rate, w, v, room,
+            mass)  # fmt: skip
     graph = term.graph
     sort_for(graph, f, order)
     graph_flows_of(graph, f, w, v, order, inflow, outflow)

@@ -26,6 +26,12 @@ from popdispatch.modes.mechanism import Mode, ModeCode
 #: Default dimensionless constants (:class:`ExactConstants`), measured on every case of
 #: benchmarks/bench_scale.py (docs/exact-mode.md, "Every scale").
 GAIN, WEIGHT, PRICE_RATE = 1000.0, 2.5, 1500.0
+#: The revision gain of the curvature-scaled revision (dynamics/newton.py), 1/s: each marginal
+#: cost relaxes at this rate.
+NEWTON_GAIN = 300.0
+#: Exact mode's revision protocols: each generator's revision scaled by its own curvature
+#: (dynamics/newton.py), or capacity-constrained Smith (dynamics/capacity.py).
+REVISIONS = ("newton", "capacity")
 #: Generators a region of the active tree without any counts as (see :func:`region_weight`).
 EMPTY_REGION = 1e-4
 
@@ -47,13 +53,19 @@ class ExactConstants:
         rate and weight scaled by its share of the tradable generators, "Per-line scaling").
     """
 
-    gain: float = GAIN
+    gain: float | None = None
     C: float = WEIGHT
     price_rate: float = PRICE_RATE
     price_law: PriceLaw = PriceLaw.PLAIN
+    revision: str = "newton"
+    rate_cap: float = 50.0
 
     def __post_init__(self) -> None:
-        for name in ("gain", "C", "price_rate"):
+        if self.revision not in REVISIONS:
+            raise ValueError(f"unknown revision {self.revision!r} (known: {', '.join(REVISIONS)})")
+        if self.gain is None:
+            object.__setattr__(self, "gain", NEWTON_GAIN if self.revision == "newton" else GAIN)
+        for name in ("gain", "C", "price_rate", "rate_cap"):
             value = getattr(self, name)
             if not (value > 0 and value < float("inf")):
                 raise ValueError(f"exact-mode constant {name} must be finite and > 0, got {value}")

@@ -44,7 +44,7 @@ class Engine:
         self.settings = settings
         self.dynamics = get_dynamics(settings.dynamics)
         self.mode = get_mode(settings.mode)
-        field = self.dynamics.bounded_field if self.mode.bounded else self.dynamics.field
+        field = settings.field
         if field is None:
             raise ValueError(
                 f"{self.mode.name} mode cannot run {self.dynamics.name} dynamics: they are "
@@ -54,7 +54,7 @@ class Engine:
         self.term = Term.of(field, self.mode.code, *self._graph(), settings.exact.price_law)
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
-        self.params = GameParameters.of(problem, self.constants)
+        self.params = GameParameters.of(problem, self.constants, settings.revision_rates(problem))
         self.z = np.zeros(self.mode.controller_states(problem))
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         integrator = settings.stepping

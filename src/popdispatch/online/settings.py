@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from popdispatch.dynamics import DYNAMICS, GRAPHS, get_dynamics
+from popdispatch.dynamics import DYNAMICS, GRAPHS, Field, get_dynamics
 from popdispatch.errors import OptionError
 from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.parameters import PriceLaw
@@ -153,6 +153,29 @@ class RunSettings:
                 f"revision rule (exact); {mode.name} mode continues the shares",
                 "--warm-start",
             )
+
+    @property
+    def field(self) -> Field | None:
+        """The vector field a run integrates: the dynamic's own; in a mode with generator
+        limits its capacity-constrained variant, scaled by each generator's curvature under
+        exact mode's ``newton`` revision (dynamics/newton.py); ``None`` where the dynamic has
+        no such variant (imitative dynamics)."""
+        dynamics = get_dynamics(self.dynamics)
+        if not get_mode(self.mode).bounded:
+            return dynamics.field
+        if dynamics.bounded_field is None:
+            return None
+        return Field.CAPACITY_NEWTON if self.exact.revision == "newton" else dynamics.bounded_field
+
+    def revision_rates(self, problem: DispatchProblem) -> np.ndarray:
+        """The per-generator revision rates of the field in force (dimensionless; empty for a
+        field that takes none): ``(S / P) / (2 c_i)`` capped (dynamics/newton.py)."""
+        if self.field != Field.CAPACITY_NEWTON:
+            return np.zeros(0)
+        from popdispatch.dynamics.newton import revision_rates
+        from popdispatch.modes.exact import scales
+
+        return revision_rates(problem.c, *scales(problem), self.exact.rate_cap)
 
     @property
     def stepping(self) -> Integrator:

@@ -1,0 +1,85 @@
+"""Curvature-scaled capacity-constrained Smith dynamics: each generator revises at a rate set
+by its own cost curve (exact mode's revision protocol; docs/exact-mode.md, "Revision rates").
+
+Mass moves from generator ``j`` to a fitter generator ``i`` at the rate
+
+    r_i r_j / R * [f_i - f_j]_+ * 1[x_i < hi_i] * 1[x_j > lo_j],    R = sum_k r_k,
+
+with ``r_i`` generator ``i``'s revision rate, the inverse of its cost curve's curvature
+``1 / (2 c_i)`` made dimensionless (:func:`revision_rates`). Near an interior rest point the
+fitness is ``-kappa (b_i + 2 c_i p_i)`` (plus the line prices) and the set points move as
+
+    p_i' = kappa P_d r_i (fbar - f_i) / kappa,   fbar = sum_j r_j f_j / R,
+
+so each marginal cost ``b_i + 2 c_i p_i`` relaxes towards the rate-weighted mean at the same
+speed whatever its curvature: a Newton step per generator (the economic dispatch's
+participation factors ``1 / (2 c)``), where plain Smith moves a flat generator ``c`` times
+slower than a steep one. Both weights are indicators times the rate (nothing flows into a
+generator at ``hi`` or out of one at ``lo``), so a generator optimal exactly at a limit with
+zero reduced cost reaches it at a rate linear in its distance, like
+:mod:`~popdispatch.dynamics.capacity`'s receiver; the flux limiter lands senders and
+receivers on their limits. The rest points are those of every capacity-constrained pairwise
+protocol on the complete graph: interior generators with equal fitness, a generator at ``hi``
+fitter and one at ``lo`` less fit than them (the KKT conditions, docs/exact-mode.md).
+
+A linear generator (``c = 0``) has no curvature to scale by: its rate is capped at
+:data:`RATE_CAP` (:func:`revision_rates`).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from popdispatch.dynamics.capacity import ROOM_ULPS
+
+#: Largest revision rate, as a fraction of ``1 / (2 c)`` at the curvature ``S / P`` (a
+#: generator whose marginal cost climbs the whole spread of marginal costs over the reference
+#: demand has rate 0.5): a linear generator takes this one.
+RATE_CAP = 50.0
+
+
+def revision_rates(c: np.ndarray, spread: float, demand: float, cap: float = RATE_CAP) -> np.ndarray:
+    """Each generator's revision rate ``r_i = (S / P) / (2 c_i)``, at most ``cap``
+    (dimensionless): ``c`` EUR/MW^2h, ``spread`` ``S`` EUR/MWh and ``demand`` ``P`` MW (the
+    scales of :func:`popdispatch.modes.exact.scales`)."""
+    unit = spread / demand  # EUR/MW^2h
+    with np.errstate(divide="ignore"):
+        rate = unit / (2.0 * np.asarray(c, dtype=float))
+    return np.minimum(rate, cap)
+
+
+@nb.njit(cache=True, inline="always")
+def newton_weights(x, lo, hi, active, rate, w, v, room, mass):
+    """Receiver weight ``r_i / R`` below ``hi``, sender weight ``r_j`` above ``lo``, room
+    ``hi - x`` and movable mass ``x - lo`` (shares); ``R`` sums the rates of the generators
+    taking part (online, with ``hi > lo``). Room or mass of at most
+    :data:`~popdispatch.dynamics.capacity.ROOM_ULPS` units in the last place of ``hi`` is none
+    (the limiter lands on a limit up to round-off)."""
+    for i in range(x.shape[0]):
+        if hi[i] <= lo[i] or not active[i]:
+            w[i] = 0.0
+            v[i] = 0.0
+            room[i] = 0.0
+            mass[i] = 0.0
+            continue
+        near = ROOM_ULPS * np.spacing(hi[i])
+        room[i] = max(hi[i] - x[i], 0.0)
+        if room[i] <= near:
+            room[i] = 0.0
+        mass[i] = max(x[i] - lo[i], 0.0)
+        if mass[i] <= near:
+            mass[i] = 0.0
+    # R: the rates of the generators strictly inside their limits (those at a limit trade one
+    # way only and take no part in the Newton step), else of the receivers
+    inside = 0.0
+    receivers = 0.0
+    for i in range(x.shape[0]):
+        if room[i] > 0.0:
+            receivers += rate[i]
+            if mass[i] > 0.0:
+                inside += rate[i]
+    total = inside if inside > 0.0 else receivers
+    for i in range(x.shape[0]):
+        w[i] = rate[i] / total if room[i] > 0.0 else 0.0
+        v[i] = rate[i] if mass[i] > 0.0 else 0.0
