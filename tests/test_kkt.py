@@ -3,6 +3,8 @@ settings are validated before any data is loaded (item 7, library half)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -82,23 +84,26 @@ def test_a_day_on_a_ring_lands_on_the_dc_opf_minute_by_minute(congested):
         assert np.abs(day.setpoints_kw[row] - opf.p_kw).max() <= 1e-3 + tol_kw
 
 
-def test_a_rest_point_failing_the_kkt_check_is_stalled_not_converged(congested, monkeypatch):
-    """The day's bookkeeping of the KKT check (the check itself: the tests above): a minute
-    whose end state the check rejects is ``stalled`` with its reason, never converged."""
+def test_a_rest_point_without_a_proof_is_stalled_not_converged(congested, monkeypatch):
+    """The day's bookkeeping of the distance certificate (the certificate itself:
+    tests/test_certificate.py): a minute at rest whose end state the certificate does not
+    prove within the accuracy is ``stalled`` with its reason, never converged."""
     import popdispatch.online.engine as engine_module
 
-    real = engine_module.kkt_violations
+    real = engine_module.certify_minutes
 
-    def reject_566(problem, minutes, *args, **kwargs):
-        reasons = real(problem, minutes, *args, **kwargs)
-        return ["rejected here" if m == 566 else r for m, r in zip(minutes, reasons, strict=True)]
+    def unproved_566(problem, minutes, *args, **kwargs):
+        found = real(problem, minutes, *args, **kwargs)
+        return [replace(c, bound_mw=np.full_like(c.bound_mw, np.inf), reason="no proof here")
+                if m == 566 else c for m, c in zip(minutes, found, strict=True)]  # fmt: skip
 
-    monkeypatch.setattr(engine_module, "kkt_violations", reject_566)
+    monkeypatch.setattr(engine_module, "certify_minutes", unproved_566)
     day = run_day(congested, RunSettings(mode="exact"), minutes=np.array([565, 566, 567]))
     assert day.status == "stalled"
     assert day.stalled.tolist() == [False, True, False]
     assert day.converged.tolist() == [True, False, True]
-    assert day.stall_reasons == {566: "rejected here"}
+    assert list(day.stall_reasons) == [566] and "no proof here" in day.stall_reasons[566]
+    assert day.distance_bound_kw[1] == np.inf and (day.distance_bound_kw[[0, 2]] <= 1e-3).all()
 
 
 def test_paper_mode_claims_only_a_rest_point(congested):

@@ -46,13 +46,16 @@ class SnapshotResult:
     ``mu_lo - mu_hi`` per MW equivalent); at a converged minute they are the DC-OPF's
     (LinDistFlow OPF's) duals. ``None`` in a mode without price controllers (paper mode).
 
-    Status semantics: ``converged`` means the dynamics came to rest (the stopping rule of
-    :mod:`popdispatch.integrate`) and, in a mode that claims the DC-OPF (exact), that the end
-    state passes the DC-OPF's KKT check (:func:`kkt_violations`). A run of such a mode that
-    came to rest at a state failing the check is ``stalled``: ``converged_at`` is then None,
-    ``rest_at`` the iteration it came to rest and ``stall_reason`` says which condition failed.
-    Paper mode claims only a rest point of the paper's dynamics (its rules do not land on the
-    DC-OPF, docs/paper-mode.md), so its ``converged`` is never checked against the KKT system.
+    Status semantics: in a mode that claims the DC-OPF (exact, voltage), ``converged`` means
+    the end state is *proved* within the accuracy of the DC-OPF: ``distance_bound_kw``, the
+    largest distance of any set point from the DC-OPF's that the distance certificate allows
+    (:mod:`popdispatch.online.certificate`), is at most ``accuracy_kw`` (the settings'
+    ``max(accuracy_kw, accuracy_rel * demand)``). A run that came to rest (the stopping rule of
+    :mod:`popdispatch.integrate`) without that proof is ``stalled``: ``converged_at`` is then
+    None, ``rest_at`` the iteration it came to rest and ``stall_reason`` says why (a KKT
+    condition that fails, :func:`kkt_violations`, else the bound). Paper mode claims only a
+    rest point of the paper's dynamics (its rules do not land on the DC-OPF,
+    docs/paper-mode.md): its ``converged`` is that rest, and it has no bound (``None``).
     """
 
     minute: int
@@ -71,6 +74,8 @@ class SnapshotResult:
     rest_at: int | None = None
     line_price_eur_per_mwh: np.ndarray | None = None
     voltage_price_eur_per_mwh: np.ndarray | None = None
+    distance_bound_kw: float | None = None
+    accuracy_kw: float | None = None
 
     @property
     def setpoints_kw(self) -> np.ndarray:
@@ -107,8 +112,9 @@ def run_snapshot(
     final = setpoints[-1]
     flows = limited_flows_mw(problem, final, minute)
     rested = run.status == Status.CONVERGED
-    reason = engine.stall_reasons(np.array([minute]), final[None], engine.z[None],
-                                  np.array([rested]))[0]  # fmt: skip
+    verdict = _verdicts(engine, np.array([minute]), final[None], engine.z[None],
+                        np.array([rested]), np.array([run.status == Status.INFEASIBLE]))  # fmt: skip
+    certified, reason = bool(verdict.certified[0]), verdict.reasons[0]
     line_price, voltage_price = _prices(engine, np.array([minute]), final[None], engine.z[None])
     return SnapshotResult(
         minute=minute,
@@ -116,7 +122,7 @@ def run_snapshot(
         settings=settings,
         generators=problem.generators,
         trajectory_kw=setpoints * KW_PER_MW,
-        converged_at=int(converged_at) if rested and reason is None else None,
+        converged_at=(int(converged_at) if rested else run.iterations) if certified else None,
         first_congestion=None if first_congestion < 0 else int(first_congestion),
         overflow_kw=overflow_kw(problem, final, minute),
         flows_kw=flows * KW_PER_MW,
@@ -127,7 +133,47 @@ def run_snapshot(
         rest_at=int(converged_at) if rested else None,
         line_price_eur_per_mwh=None if line_price is None else line_price[0],
         voltage_price_eur_per_mwh=None if voltage_price is None else voltage_price[0],
+        distance_bound_kw=None if verdict.bound_kw is None else float(verdict.bound_kw[0]),
+        accuracy_kw=None if verdict.bound_kw is None else float(verdict.accuracy_kw[0]),
     )
+
+
+@dataclass(frozen=True)
+class _Verdict:
+    """Per minute: proved within the accuracy (``certified``), why a minute at rest is not
+    (``reasons``), the bound and the accuracy (kW; ``None`` in paper mode)."""
+
+    certified: np.ndarray
+    reasons: list[str | None]
+    bound_kw: np.ndarray | None
+    accuracy_kw: np.ndarray | None
+
+
+def _verdicts(
+    engine: Engine, minutes: np.ndarray, p_mw: np.ndarray, z: np.ndarray, rested: np.ndarray,
+    infeasible: np.ndarray,
+) -> _Verdict:
+    """Each minute's verdict: in a mode that claims the DC-OPF, certified when the distance
+    certificate proves the accuracy (and the run was not infeasible); a minute at rest that
+    is not certified gets the reason (a failing KKT condition, else the bound). Paper mode:
+    certified means at rest."""
+    certificates = engine.certificates(minutes, p_mw, z)
+    if certificates is None:
+        return _Verdict(rested & ~infeasible, [None] * len(minutes), None, None)
+    bound = np.array([c.distance_mw for c in certificates]) * KW_PER_MW
+    demand = engine.problem.demand[np.asarray(minutes) - 1]
+    accuracy = np.atleast_1d(engine.settings.accuracy_mw(demand)) * KW_PER_MW
+    certified = (bound <= accuracy) & ~infeasible
+    pending = rested & ~certified & ~infeasible
+    reasons = engine.stall_reasons(minutes, p_mw, z, pending)
+    for r in np.flatnonzero(pending):
+        if reasons[r] is None:
+            why = certificates[r].reason
+            reasons[r] = (
+                f"the distance to the DC-OPF is bounded only by {bound[r]:.3g} kW, above the "
+                f"accuracy {accuracy[r]:.3g} kW" + (f" ({why})" if why else "")
+            )
+    return _Verdict(certified, reasons, bound, accuracy)
 
 
 def _prices(
@@ -156,7 +202,9 @@ class DayResult:
 
     ``line_price_eur_per_mwh`` (minutes, limited lines) and ``voltage_price_eur_per_mwh``
     (minutes, monitored buses): the engine's broadcast prices at each minute's end, EUR/MWh,
-    as for a snapshot (``None`` in paper mode).
+    as for a snapshot (``None`` in paper mode). ``distance_bound_kw`` and ``accuracy_kw``
+    (minutes): each minute's proved distance to the DC-OPF and the accuracy it had to prove
+    (``None`` in paper mode).
     """
 
     minutes: np.ndarray
@@ -176,6 +224,8 @@ class DayResult:
     stall_reasons: dict[int, str] = field(default_factory=dict)
     line_price_eur_per_mwh: np.ndarray | None = None
     voltage_price_eur_per_mwh: np.ndarray | None = None
+    distance_bound_kw: np.ndarray | None = None
+    accuracy_kw: np.ndarray | None = None
 
     @property
     def status(self) -> str:
@@ -231,7 +281,9 @@ def run_day(
     overflow = np.stack([overflow_kw(problem, setpoints[r], m) for r, m in enumerate(minutes)])
     online = problem.online[minutes - 1]
     rested = out.status == Status.CONVERGED
-    reasons = engine.stall_reasons(minutes, setpoints, out.states, rested)
+    infeasible = out.status == Status.INFEASIBLE
+    verdict = _verdicts(engine, minutes, setpoints, out.states, rested, infeasible)
+    reasons = verdict.reasons
     stalled = np.array([r is not None for r in reasons], dtype=bool)
     line_price, voltage_price = _prices(engine, minutes, setpoints, out.states)
     return DayResult(
@@ -241,17 +293,19 @@ def run_day(
         demand_kw=problem.demand[minutes - 1] * KW_PER_MW,
         setpoints_kw=setpoints * KW_PER_MW,
         iterations=out.iterations,
-        converged=rested & ~stalled,
+        converged=verdict.certified,
         overflow_kw=overflow,
         cost=generation_cost(problem, setpoints, online),
         online=online,
         wall_seconds=wall,
         profile_source=problem.profile_source,
-        infeasible=out.status == Status.INFEASIBLE,
+        infeasible=infeasible,
         stalled=stalled,
         stall_reasons={int(m): r for m, r in zip(minutes, reasons, strict=True) if r},
         line_price_eur_per_mwh=line_price,
         voltage_price_eur_per_mwh=voltage_price,
+        distance_bound_kw=verdict.bound_kw,
+        accuracy_kw=verdict.accuracy_kw,
     )
 
 

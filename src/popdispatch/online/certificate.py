@@ -7,32 +7,36 @@ The DC-OPF (paper eq. 1, with the LinDistFlow voltage rows when given) is
     s.t. lo_i <= p_i <= hi_i,   sum_i p_i = P_d,   e_r(p) = e0_r + sum_i A_ri p_i <= 0,
 
 with one row ``r`` per limited line and direction (``flow - U``, ``-flow - U``) and per
-monitored bus and bound. For any prices ``mu >= 0`` (the controllers') and any balance price
-``lambda``, the Lagrangian bounds the optimum ``p*`` from below, and a feasible end state ``p``
-bounds it from above. Writing ``pi_i = lambda - (A^T mu)_i`` (generator ``i``'s locational
-price), ``h_i(y) = C_i(y) - pi_i y`` and ``q_i`` its minimiser over ``[lo_i, hi_i]`` (the
-generator's best response to its price):
+monitored bus and bound. For any prices ``mu >= 0`` and balance price ``lambda`` the
+Lagrangian bounds the optimum ``p*`` from below and a feasible end state ``y`` bounds it from
+above. With ``pi_i = lambda - (A^T mu)_i`` (generator ``i``'s locational price), ``h_i(x) =
+C_i(x) - pi_i x`` and ``q_i`` its minimiser over ``[lo_i, hi_i]`` (the best response):
 
-    sum_i [h_i(p*_i) - h_i(q_i)] + sum_r mu_r (-e_r(p*)) = C(p*) - g(lambda, mu)
-                                                         <= C(p) - g(lambda, mu) = G,
+    sum_i [h_i(p*_i) - h_i(q_i)] + sum_r mu_r (-e_r(p*))  <=  G
+    G = sum_i [h_i(y_i) - h_i(q_i)] + sum_r mu_r (-e_r(y)) + |lambda (P_d - sum_i y_i)|,
 
-    G = sum_i [h_i(p_i) - h_i(q_i)] + sum_r mu_r (-e_r(p)) + lambda (P_d - sum_i p_i),
+every term on the left non-negative. So ``p*_i`` lies where ``g_i (x - q_i) + c_i (x - q_i)^2
+<= G`` (``g_i = h_i'(q_i)``: 0 inside the limits, the reduced cost at one), an interval of
+half-width ``2 G / (|g_i| + sqrt(g_i^2 + 4 c_i G))`` around ``q_i`` (the whole range for a
+linear generator at its margin); each priced row is within ``G / mu_r`` of its bound at the
+optimum, and interval propagation over the balance and the rows narrows the generators the
+first step leaves wide. ``lambda`` minimises ``G`` (``sum_i q_i(lambda) = sum_i y_i``).
 
-every term on the left being non-negative (``p*`` is feasible, ``q_i`` minimises ``h_i``).
-So each generator's optimum lies where ``h_i(y) - h_i(q_i) <= G``: with ``g_i = h_i'(q_i)``
-(zero inside the limits, the reduced cost at a limit), ``h_i(y) - h_i(q_i) = g_i (y - q_i)
-+ c_i (y - q_i)^2``, an interval around ``q_i`` of half-width ``2 G / (|g_i| + sqrt(g_i^2 +
-4 c_i G))`` (on the side the limits allow). A linear generator at its margin (``c_i = 0``,
-``g_i = 0``) gets its whole range. Each priced row is within ``G / mu_r`` of its bound at the
-optimum. Interval propagation over the balance and the rows (each sum of generators must reach
-its bounds with the others inside theirs) then narrows the generators the first step leaves
-wide: the margin generator is what the balance leaves of the others. The bound on
-``|p_i - p*_i|`` is the farthest end of ``p*_i``'s interval from ``p_i``.
+An end state is seldom exactly feasible (a line a few nanowatts over) and a slack priced row
+or a flat generator makes ``G`` large against the accuracy. So the certificate first
+*polishes*: it solves the KKT system on the end state's active set (generators at their
+limits held there, priced rows held on their bounds; least squares nearest the end state
+where the active set leaves it singular) and keeps the solution ``y`` only if it is a KKT point
+within round-off (inside the limits, the other rows within their bounds, ``mu >= 0``, reduced
+costs of the right sign); certified with its own prices its ``G`` is round-off and its
+intervals tight. The end state's own gap bound narrows them further where it holds. Every
+interval is a proof that ``p*`` lies in it; the bound on ``|p_i - p*_i|`` is the farthest end
+of their intersection from ``p_i``. Powers MW, costs EUR/h, prices EUR/MWh.
 
-``G`` is summed from non-negative terms computed without cancellation; ``lambda`` minimises it
-(bisection on ``sum_i q_i(lambda) = sum_i p_i``, the envelope theorem). An end state outside a
-row's bound is not feasible and proves nothing: its certificate is infinite. Everything in MW
-and EUR/h (prices EUR/MWh).
+The minutes of a day are certified together: the active sets repeat from minute to minute, so
+each distinct one's KKT matrix is solved once for all its minutes.
+:mod:`popdispatch.online.certificate_reference` is the same one minute at a time, written for
+clarity (the tests' yardstick).
 """
 
 from __future__ import annotations
@@ -41,34 +45,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: Bisection steps on the balance price (the bracket shrinks to round-off well before).
-BISECTIONS = 200
 #: Passes of interval propagation over the balance and the rows.
 PROPAGATION_PASSES = 8
-
-
-@dataclass(frozen=True)
-class Rows:
-    """The inequality rows of a minute's DC-OPF, ``e(p) = e0 + A p <= 0`` (MW or MW
-    equivalents): ``A`` (rows x generators, dimensionless) and ``e0`` (rows, MW)."""
-
-    A: np.ndarray
-    e0: np.ndarray
+#: Relative round-off allowed in an exact KKT point's checks (of the largest power or price).
+KKT_ROUND_OFF = 1e-9
+#: Relative round-off of the powers (of the demand) within which a row counts as on its bound.
+FEASIBLE_ROUND_OFF = 1e-12
+#: Bisection steps on the balance price (the bracket reaches round-off well before).
+BISECTIONS = 80
 
 
 @dataclass(frozen=True)
 class Certificate:
-    """What the end state proves. ``bound_mw``: per generator, the largest possible
-    ``|p_i - p*_i|`` (MW; ``inf`` when nothing is proved); ``gap``: the duality gap ``G``
-    (EUR/h); ``balance_price``: the ``lambda`` that minimises it (EUR/MWh); ``low_mw``,
-    ``high_mw``: the interval proved to hold each ``p*_i`` (MW); ``reason``: why nothing is
-    proved (an infeasible end state), else ``None``."""
+    """What an end state proves. ``bound_mw``: per generator, the largest possible ``|p_i -
+    p*_i|`` (MW; ``inf`` when nothing is proved); ``gap``: the duality gap of the proof that
+    counted, EUR/h; ``reason``: why nothing is proved, else ``None``."""
 
     bound_mw: np.ndarray
     gap: float
-    balance_price: float
-    low_mw: np.ndarray
-    high_mw: np.ndarray
     reason: str | None = None
 
     @property
@@ -77,251 +71,275 @@ class Certificate:
         return float(self.bound_mw.max()) if len(self.bound_mw) else 0.0
 
 
-def certify(
-    b: np.ndarray,
-    c: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    p: np.ndarray,
-    demand: float,
-    rows: Rows,
-    mu: np.ndarray,
-    feasibility_mw: float = 0.0,
-) -> Certificate:
-    """The distance certificate of set points ``p`` (MW) against the DC-OPF with costs ``b``
-    (EUR/MWh), ``c`` (EUR/MW^2h), limits ``lo``/``hi`` (MW, the minute's: 0 and 0 offline),
-    demand ``demand`` (MW), rows ``rows`` and row prices ``mu >= 0`` (EUR/MWh per MW).
+@dataclass(frozen=True)
+class Batch:
+    """Minutes to certify: costs ``b`` (EUR/MWh), ``c`` (EUR/MW^2h) per generator; per minute
+    the limits ``lo``/``hi`` (MW, 0 offline), ``demand`` (MW), row offsets ``e0`` (MW); the
+    rows' matrix ``A`` (rows x generators, dimensionless)."""
 
-    ``feasibility_mw``: how far beyond a row's bound the end state may be and still count as
-    on it (round-off of the flows, MW); beyond that the certificate is infinite.
-    """
-    p = np.clip(np.asarray(p, dtype=float), lo, hi)
-    mu = np.maximum(np.asarray(mu, dtype=float), 0.0)
-    excess = rows.e0 + rows.A @ p if len(mu) else np.zeros(0)
-    n = len(p)
-    if len(excess) and excess.max() > feasibility_mw:
-        r = int(np.argmax(excess))
-        return _nothing(n, f"row {r} is {excess[r]:.3g} MW beyond its bound")
-    signal = -(rows.A.T @ mu) if len(mu) else np.zeros(n)
-    imbalance = demand - float(p.sum())
-    lam = balance_price(b, c, lo, hi, float(p.sum()), signal)
-    q, slope = best_response(b, c, lo, hi, lam + signal)
-    terms = slope * (p - q) + c * (p - q) ** 2
-    gap = float(np.maximum(terms, 0.0).sum() + np.maximum(-mu * excess, 0.0).sum())
-    gap += abs(lam * imbalance)
-    low, high = own_intervals(c, lo, hi, q, slope, gap)
-    low, high = propagate(low, high, demand, abs(imbalance), rows, mu, gap)
-    if (low > high).any():
-        i = int(np.argmax(low - high))
-        return _nothing(n, f"generator {i}: no set point is consistent with the prices")
+    b: np.ndarray
+    c: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    demand: np.ndarray
+    A: np.ndarray
+    e0: np.ndarray
+
+    @classmethod
+    def of(cls, problem, minutes: np.ndarray) -> Batch:
+        """The rows of ``problem``'s DC-OPF at the 1-based ``minutes``: each limited line's
+        ``flow - U`` then ``-flow - U`` (``flow = load_flow - D p``), then each monitored
+        bus's low-bound then high-bound excess (MW equivalents, modes/voltage.py)."""
+        rows = np.asarray(minutes, dtype=np.int64) - 1
+        online = problem.online[rows]
+        flow = problem.line_load_flow[rows]
+        blocks, e0 = [-problem.down, problem.down], [flow - problem.limit, -flow - problem.limit]
+        if problem.n_voltage:
+            n_lines, n_v = len(problem.limit), problem.n_voltage
+            load = problem.load_flow[rows]
+            blocks += [-problem.voltage_sens, problem.voltage_sens]
+            e0 += [load[:, n_lines : n_lines + n_v], load[:, n_lines + n_v :]]
+        return cls(
+            problem.b, problem.c, np.where(online, problem.pmin, 0.0),
+            np.where(online, problem.pmax, 0.0), problem.demand[rows],
+            np.vstack(blocks).reshape(-1, problem.n_generators), np.concatenate(e0, axis=1),
+        )  # fmt: skip
+
+
+def certify_minutes(
+    problem, minutes: np.ndarray, p_mw: np.ndarray, mu: np.ndarray, accuracy_mw: np.ndarray
+) -> list[Certificate]:
+    """The certificate of each minute's end state: set points ``p_mw`` (minutes x generators,
+    MW) and broadcast row prices ``mu`` (minutes x rows of :meth:`Batch.of`, EUR/MWh per
+    MW), against each minute's accuracy ``accuracy_mw`` (MW)."""
+    batch = Batch.of(problem, minutes)
+    bound, gap, reasons = certify(batch, np.atleast_2d(p_mw), np.atleast_2d(mu),
+                                  np.broadcast_to(accuracy_mw, (len(batch.demand),)))  # fmt: skip
+    return [Certificate(bound[m], float(gap[m]), reasons[m]) for m in range(len(gap))]
+
+
+def certify(batch: Batch, p, mu, target) -> tuple[np.ndarray, np.ndarray, list[str | None]]:
+    """``(bound, gap, reasons)`` of set points ``p`` (minutes x generators, MW) with prices
+    ``mu`` (minutes x rows): per generator the bound on ``|p - p*|`` (MW), per minute the gap
+    of the proof that counted (EUR/h) and why nothing is proved (else ``None``). ``target``:
+    per minute the accuracy that suffices (MW)."""
+    p = np.clip(p, batch.lo, batch.hi)
+    low, high = batch.lo.copy(), batch.hi.copy()
+    gap = np.full(len(p), np.inf)
+    round_off = FEASIBLE_ROUND_OFF * np.maximum(batch.demand, 1e-300)
+    for margin in (round_off, target):
+        done = _farthest(p, low, high) <= target
+        y, prices, ok = polish(batch, p, mu, margin, ~done)
+        if ok.any():
+            exact = prove(batch, y, prices, round_off, 0.5 * target, ok)
+            low, high, gap = _narrow(low, high, gap, exact, ok)
+    todo = _farthest(p, low, high) > target
+    if todo.any():
+        low, high, gap = _narrow(low, high, gap, prove(batch, p, mu, round_off, target, todo),
+                                 todo)  # fmt: skip
     bound = np.maximum(np.abs(p - low), np.abs(high - p))
-    return Certificate(bound, gap, lam, low, high)
+    reasons: list[str | None] = [None] * len(p)
+    for m in np.flatnonzero(~np.isfinite(gap)):
+        reasons[m] = "the end state is beyond a limit and no set point near it is a KKT point"
+        bound[m] = np.inf
+    for m in np.flatnonzero(np.isfinite(gap) & (low > high).any(axis=1)):
+        reasons[m] = "the proofs of the end state disagree (round-off beyond what was allowed)"
+        bound[m] = np.inf
+    return bound, gap, reasons
 
 
-def _nothing(n: int, reason: str) -> Certificate:
-    inf = np.full(n, np.inf)
-    return Certificate(inf, np.inf, np.nan, -inf, inf, reason)
+def _narrow(low, high, gap, proof, where):
+    """Intersect the intervals of the minutes ``where`` with a proof's ``(gap, low, high)``
+    (an infinite gap proves nothing); keep the smaller gap."""
+    proof_gap, proof_low, proof_high = proof
+    use = where & np.isfinite(proof_gap)
+    low = np.where(use[:, None], np.maximum(low, proof_low), low)
+    high = np.where(use[:, None], np.minimum(high, proof_high), high)
+    return low, high, np.where(use, np.minimum(gap, proof_gap), gap)
+
+
+def _farthest(p, low, high) -> np.ndarray:
+    """Per minute, the largest distance from a set point to an end of its interval (MW)."""
+    return np.maximum(np.abs(p - low), np.abs(high - p)).max(axis=1, initial=0.0)
+
+
+def prove(batch: Batch, y, mu, feasibility, target, where) -> tuple[np.ndarray, ...]:
+    """The gap bound (module docstring) of set points ``y`` with prices ``mu`` at the minutes
+    ``where``: ``(gap, low, high)``, the intervals proved to hold ``p*`` (MW; ``G`` infinite
+    where ``y`` is beyond a row's bound by more than ``feasibility``, MW). Propagation runs
+    only at the minutes whose intervals leave a generator farther than ``target`` (MW)."""
+    b, c, lo, hi = batch.b, batch.c, batch.lo, batch.hi
+    excess = batch.e0 + y @ batch.A.T
+    feasible = where & (excess <= np.broadcast_to(feasibility, (len(y),))[:, None]).all(axis=1)
+    signal = -(np.maximum(mu, 0.0) @ batch.A)
+    total = y.sum(axis=1)
+    lam = balance_prices(b, c, lo, hi, total, signal)
+    q, g = best_response(b, c, lo, hi, lam[:, None] + signal)
+    d = y - q
+    gap = (np.maximum(g * d + c * d * d, 0.0).sum(axis=1)
+           + np.maximum(-mu * excess, 0.0).sum(axis=1) + np.abs(lam * (batch.demand - total)))
+    low, high = own_intervals(c, lo, hi, q, g, gap[:, None])
+    wide = feasible & (_farthest(y, low, high) > target)
+    for m in np.flatnonzero(wide):
+        low[m], high[m] = propagate(low[m], high[m], batch.demand[m],
+                                    abs(batch.demand[m] - total[m]), batch.A, batch.e0[m], mu[m],
+                                    gap[m])  # fmt: skip
+    return np.where(feasible, gap, np.inf), low, high
 
 
 def best_response(b, c, lo, hi, price) -> tuple[np.ndarray, np.ndarray]:
-    """``(q, g)``: each generator's minimiser ``q_i`` of ``C_i(y) - price_i y`` over ``[lo_i,
-    hi_i]`` (MW) and the derivative ``g_i = b_i + 2 c_i q_i - price_i`` there (EUR/MWh: 0
-    inside, the reduced cost at a limit). A linear generator priced exactly at its cost takes
-    ``lo`` (any point is a minimiser; its ``g`` is 0)."""
+    """``(q, g)``: each generator's minimiser ``q`` of ``C(x) - price x`` over ``[lo, hi]``
+    (MW; a linear generator priced exactly at its cost takes ``lo``) and the derivative ``g =
+    b + 2 c q - price`` there (EUR/MWh)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         inside = np.where(c > 0.0, (price - b) / (2.0 * c), np.where(price > b, hi, lo))
     q = np.clip(inside, lo, hi)
     return q, b + 2.0 * c * q - price
 
 
-def balance_price(b, c, lo, hi, total: float, signal: np.ndarray) -> float:
-    """The balance price ``lambda`` (EUR/MWh) at which the best responses to ``lambda +
-    signal`` sum to ``total`` (MW): the minimiser of ``G`` (bisection; ``sum q`` is
-    non-decreasing in ``lambda``)."""
-    low = float(np.min(b + 2.0 * c * lo - signal)) - 1.0
-    high = float(np.max(b + 2.0 * c * hi - signal)) + 1.0
+def balance_prices(b, c, lo, hi, total, signal) -> np.ndarray:
+    """Per minute the ``lambda`` (EUR/MWh) at which the best responses to ``lambda + signal``
+    sum to ``total`` (MW), by bisection to round-off: the sum is non-decreasing in ``lambda``
+    (with a step at a linear generator's cost, where the root may sit); the end of the last
+    bracket whose sum is nearer ``total``."""
+    low = (b + 2.0 * c * lo - signal).min(axis=1, initial=np.inf)
+    high = (b + 2.0 * c * hi - signal).max(axis=1, initial=-np.inf)
     for _ in range(BISECTIONS):
         middle = 0.5 * (low + high)
-        if middle in (low, high):
-            break
-        if best_response(b, c, lo, hi, middle + signal)[0].sum() < total:
-            low = middle
-        else:
-            high = middle
-    return 0.5 * (low + high)
+        below = best_response(b, c, lo, hi, middle[:, None] + signal)[0].sum(axis=1) < total
+        low, high = np.where(below, middle, low), np.where(below, high, middle)
+    miss_low = np.abs(best_response(b, c, lo, hi, low[:, None] + signal)[0].sum(axis=1) - total)
+    miss_high = np.abs(best_response(b, c, lo, hi, high[:, None] + signal)[0].sum(axis=1) - total)
+    return np.where(miss_low < miss_high, low, high)
 
 
-def own_intervals(c, lo, hi, q, slope, gap) -> tuple[np.ndarray, np.ndarray]:
-    """Where ``g_i (y - q_i) + c_i (y - q_i)^2 <= gap`` within ``[lo_i, hi_i]`` (MW): the
-    half-width ``2 gap / (|g_i| + sqrt(g_i^2 + 4 c_i gap))`` on each side of ``q_i`` the limits
-    leave open (both inside, where ``g_i`` is 0; above ``lo``, below ``hi``)."""
+def own_intervals(c, lo, hi, q, g, gap) -> tuple[np.ndarray, np.ndarray]:
+    """Where ``g (x - q) + c (x - q)^2 <= gap`` within ``[lo, hi]`` (MW), on each side of ``q``
+    the limits leave open (both inside, where ``g`` is 0)."""
     inside = (q > lo) & (q < hi)
-    g = np.where(inside, 0.0, np.abs(slope))
+    slope = np.where(inside, 0.0, np.abs(g))
     with np.errstate(divide="ignore", invalid="ignore"):
-        width = 2.0 * gap / (g + np.sqrt(g**2 + 4.0 * c * gap))
-    flat = (c == 0.0) & (g == 0.0)  # a linear generator at its margin: any set point
+        width = 2.0 * gap / (slope + np.sqrt(slope**2 + 4.0 * c * gap))
+    flat = (c == 0.0) & (slope == 0.0)  # a linear generator at its margin: any set point
     width = np.where(flat, np.inf, np.where(gap == 0.0, 0.0, width))
     low = np.where(q > lo, np.maximum(q - width, lo), q)
     high = np.where(q < hi, np.minimum(q + width, hi), q)
     return low, high
 
 
-def propagate(low, high, demand, balance_slack, rows: Rows, mu, gap) -> tuple[np.ndarray, ...]:
-    """Narrow the intervals ``[low, high]`` (MW) by the balance ``sum y = demand`` (within
-    ``balance_slack``) and each row's window ``-e0 - gap / mu <= A y <= -e0`` (the lower side
-    only for a priced row), a few passes of interval propagation."""
-    n_rows = len(rows.e0)
-    A = np.vstack([np.ones(len(low)), rows.A]) if n_rows else np.ones((1, len(low)))
+def propagate(low, high, demand, balance_slack, A, e0, mu, gap) -> tuple[np.ndarray, np.ndarray]:
+    """One minute's intervals ``[low, high]`` (MW) narrowed by the balance ``sum y = demand``
+    (within ``balance_slack``) and each row's window ``-e0 - gap / mu <= A y <= -e0`` (the
+    lower side only for a priced row), a few passes of interval propagation."""
+    matrix = np.vstack([np.ones(len(low)), A])
     with np.errstate(divide="ignore"):
-        floor = np.where(mu > 0.0, -rows.e0 - gap / np.where(mu > 0.0, mu, 1.0), -np.inf)
+        floor = np.where(mu > 0.0, -e0 - gap / np.where(mu > 0.0, mu, 1.0), -np.inf)
     left = np.concatenate([[demand - balance_slack], floor])
-    right = np.concatenate([[demand + balance_slack], -rows.e0])
+    right = np.concatenate([[demand + balance_slack], -e0])
+    members = [np.flatnonzero(row) for row in matrix]
     for _ in range(PROPAGATION_PASSES):
-        new_low, new_high = _propagation_pass(A, left, right, low, high)
-        if np.array_equal(new_low, low) and np.array_equal(new_high, high):
+        before = (low.copy(), high.copy())
+        for r, idx in enumerate(members):
+            if len(idx):
+                _narrow_row(matrix[r, idx], idx, left[r], right[r], low, high)
+        if np.array_equal(before[0], low) and np.array_equal(before[1], high):
             break
-        low, high = new_low, new_high
     return low, high
 
 
-def _propagation_pass(A, left, right, low, high) -> tuple[np.ndarray, np.ndarray]:
-    """One pass: for each row ``left <= A y <= right`` and each member ``i``, the values
-    ``A_ri y_i`` can take with every other member anywhere in its interval."""
-    for r in range(A.shape[0]):
-        a = A[r]
-        members = np.flatnonzero(a)
-        if not len(members):
-            continue
-        coef = a[members]
-        least = np.where(coef > 0, coef * low[members], coef * high[members])
-        most = np.where(coef > 0, coef * high[members], coef * low[members])
-        if np.isinf(least).any() or np.isinf(most).any():
-            continue
-        sum_least, sum_most = least.sum(), most.sum()
-        slack = 4.0 * np.finfo(float).eps * (np.abs(least).sum() + np.abs(most).sum() + 1e-300)
-        term_low = left[r] - (sum_most - most) - slack  # A_ri y_i >= this
-        term_high = right[r] - (sum_least - least) + slack  # A_ri y_i <= this
-        with np.errstate(invalid="ignore"):
-            y_low = np.where(coef > 0, term_low / coef, term_high / coef)
-            y_high = np.where(coef > 0, term_high / coef, term_low / coef)
-        low = low.copy()
-        high = high.copy()
-        low[members] = np.maximum(low[members], np.nan_to_num(y_low, nan=-np.inf))
-        high[members] = np.minimum(high[members], np.nan_to_num(y_high, nan=np.inf))
-    return low, high
+def _narrow_row(coef, idx, left, right, low, high) -> None:
+    """One row ``left <= sum coef y[idx] <= right``: each member's interval narrowed, in place,
+    to what the row allows with every other member anywhere in its own (a few units of
+    round-off of slack)."""
+    least = np.where(coef > 0, coef * low[idx], coef * high[idx])
+    most = np.where(coef > 0, coef * high[idx], coef * low[idx])
+    slack = 4.0 * np.finfo(float).eps * (np.abs(least).sum() + np.abs(most).sum())
+    floor = left - (most.sum() - most) - slack  # coef y >= floor
+    ceiling = right - (least.sum() - least) + slack  # coef y <= ceiling
+    with np.errstate(invalid="ignore"):
+        new_low = np.where(coef > 0, floor / coef, ceiling / coef)
+        new_high = np.where(coef > 0, ceiling / coef, floor / coef)
+    low[idx] = np.maximum(low[idx], np.nan_to_num(new_low, nan=-np.inf))
+    high[idx] = np.minimum(high[idx], np.nan_to_num(new_high, nan=np.inf))
 
 
-@dataclass(frozen=True)
-class KktPoint:
-    """An exact KKT point of the DC-OPF near an end state: set points ``p`` (MW), the balance
-    price ``balance_price`` (EUR/MWh) and the row prices ``mu`` (EUR/MWh per MW)."""
+def polish(batch: Batch, p, mu, margin, where) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The KKT point of the DC-OPF on each minute's active set: ``(y, prices, ok)`` (MW,
+    EUR/MWh per MW, per minute whether it is a KKT point within round-off). Generators within
+    ``margin`` (MW, per minute) of a limit are held on it, priced or overflowing rows on their
+    bounds; the free generators' deviations from ``p``, ``lambda`` and the held rows' prices
+    solve stationarity (``b_i + 2 c_i y_i - lambda + sum_r mu_r A_ri = 0``), the balance and
+    the held rows. Minutes with the same active set share one KKT matrix (one least-squares
+    solve for all of them)."""
+    margin = np.broadcast_to(margin, (len(p),))[:, None]
+    at_lo = p <= batch.lo + margin
+    at_hi = ~at_lo & (p >= batch.hi - margin)
+    held_value = np.where(at_lo, batch.lo, np.where(at_hi, batch.hi, p))
+    excess = batch.e0 + p @ batch.A.T
+    rows_held = (mu > 0.0) | (excess > 0.0)
+    y = held_value.copy()
+    prices = np.zeros_like(mu)
+    ok = np.zeros(len(p), dtype=bool)
+    state = np.concatenate([at_lo * 1 + at_hi * 2, rows_held * 1], axis=1).astype(np.int8)
+    patterns, group = np.unique(state[where], axis=0, return_inverse=True)
+    minutes = np.flatnonzero(where)
+    for k in range(len(patterns)):
+        chosen = minutes[group.ravel() == k]
+        fixed = at_lo[chosen[0]] | at_hi[chosen[0]]
+        held = np.flatnonzero(rows_held[chosen[0]])
+        y[chosen], prices[chosen], lam = _solve_active_set(batch, p, held_value, fixed, held,
+                                                           chosen)  # fmt: skip
+        ok[chosen] = _is_kkt_point(batch, y, prices, lam, at_lo, at_hi, chosen)
+    return y, prices, ok
 
-    p: np.ndarray
-    balance_price: float
-    mu: np.ndarray
 
-
-def polish(
-    b, c, lo, hi, p, demand: float, rows: Rows, mu, margin_mw: float
-) -> KktPoint | None:
-    """The KKT point of the DC-OPF on the end state's active set, or ``None`` if there is
-    none there: generators within ``margin_mw`` of a limit held on it, the priced (or
-    overflowing) rows held on their bounds, and the rest solved from stationarity
-    (``b_i + 2 c_i y_i - lambda + sum_r mu_r A_ri = 0``), the balance and the held rows (a
-    linear system; least squares, nearest the end state, when the active set leaves it
-    singular). The point counts only if it is a KKT point within round-off: inside the limits,
-    every other row within its bound, ``mu >= 0`` and each held generator's reduced cost of the
-    right sign."""
-    n = len(p)
-    at_lo = p <= lo + margin_mw
-    at_hi = ~at_lo & (p >= hi - margin_mw)
-    fixed = at_lo | at_hi
+def _solve_active_set(batch: Batch, p, held_value, fixed, held, chosen):
+    """The least-squares solution (nearest ``p``) of one active set's KKT system for the
+    minutes ``chosen``: ``(y, prices, lambda)``."""
     free = np.flatnonzero(~fixed)
-    value = np.where(at_lo, lo, np.where(at_hi, hi, p))
-    excess = rows.e0 + rows.A @ p if len(rows.e0) else np.zeros(0)
-    held = np.flatnonzero((mu > 0.0) | (excess > 0.0))
-    A_free = rows.A[np.ix_(held, free)]
     m, k = len(free), len(held)
+    A_free = batch.A[np.ix_(held, free)]
     K = np.zeros((m + 1 + k, m + 1 + k))
-    K[:m, :m] = np.diag(2.0 * c[free])
+    K[:m, :m] = np.diag(2.0 * batch.c[free])
     K[:m, m] = -1.0
     K[:m, m + 1 :] = A_free.T
     K[m, :m] = 1.0
     K[m + 1 :, :m] = A_free
+    base = held_value[chosen]
     rhs = np.concatenate([
-        -b[free] - 2.0 * c[free] * p[free],
-        [demand - value.sum()],
-        -(rows.e0[held] + rows.A[held] @ value),
-    ])  # the deviation d = y - p of the free generators, then lambda, mu
-    solution, *_ = np.linalg.lstsq(K, rhs, rcond=None)
-    y = value.copy()
-    y[free] = p[free] + solution[:m]
-    lam = float(solution[m]) if m or k else 0.0
-    prices = np.zeros(len(rows.e0))
-    prices[held] = solution[m + 1 :]
-    scale = max(float(np.abs(hi).max(initial=0.0)), demand, 1e-300)
-    round_off = 1e-9 * scale
-    price_scale = max(float(np.abs(b).max(initial=0.0)), abs(lam), 1.0)
-    residual = K @ solution - rhs
-    if np.abs(residual).max(initial=0.0) > 1e-9 * max(price_scale, scale):
-        return None
-    if (y < lo - round_off).any() or (y > hi + round_off).any():
-        return None
-    if (prices < -1e-9 * price_scale).any():
-        return None
-    after = rows.e0 + rows.A @ y if len(rows.e0) else np.zeros(0)
-    if len(after) and after.max() > round_off:
-        return None
-    prices = np.maximum(prices, 0.0)
-    reduced = b + 2.0 * c * y - lam + (rows.A.T @ prices if len(prices) else 0.0)
-    tolerance = 1e-9 * price_scale
-    if (reduced[at_lo & (hi > lo)] < -tolerance).any():
-        return None
-    if (reduced[at_hi & (hi > lo)] > tolerance).any():
-        return None
-    return KktPoint(np.clip(y, lo, hi), lam, prices)
+        -batch.b[free] - 2.0 * batch.c[free] * p[np.ix_(chosen, free)],
+        (batch.demand[chosen] - base.sum(axis=1))[:, None],
+        -(batch.e0[np.ix_(chosen, held)] + base @ batch.A[held].T),
+    ], axis=1)  # the free generators' deviations from p, lambda, the held rows' prices
+    solution = np.linalg.lstsq(K, rhs.T, rcond=None)[0].T if K.size else np.zeros((len(chosen), 0))
+    y = base.copy()
+    y[:, free] = p[np.ix_(chosen, free)] + solution[:, :m]
+    prices = np.zeros((len(chosen), batch.e0.shape[1]))
+    prices[:, held] = solution[:, m + 1 :]
+    lam = solution[:, m] if m + k else np.zeros(len(chosen))
+    residual = np.abs(solution @ K.T - rhs).max(axis=1, initial=0.0)
+    scale = np.maximum(np.abs(rhs).max(axis=1, initial=0.0), 1.0)
+    lam = np.where(residual <= 1e-9 * scale, lam, np.nan)  # an inconsistent active set
+    return y, prices, lam
 
 
-def certify_end_state(
-    b, c, lo, hi, p, demand: float, rows: Rows, mu, margins_mw=(0.0,)
-) -> Certificate:
-    """The certificate of set points ``p`` (MW) with the controllers' prices ``mu``: the
-    intervals that the gap bound of ``p`` itself proves to hold the optimum (:func:`certify`),
-    narrowed by those of each exact KKT point ``p_hat`` found on the end state's active set
-    (:func:`polish`, tried with each of ``margins_mw``) with its own prices. Each is a proof,
-    so the optimum lies in their intersection; the bound is its farthest end from ``p``."""
-    round_off = 1e-12 * max(demand, 1e-300)
-    best = certify(b, c, lo, hi, p, demand, rows, mu, round_off)
-    low, high = best.low_mw, best.high_mw
-    for margin in margins_mw:
-        point = polish(b, c, lo, hi, p, demand, rows, mu, margin)
-        if point is None:
-            continue
-        exact = certify(b, c, lo, hi, point.p, demand, rows, point.mu, round_off)
-        if exact.reason is not None:
-            continue
-        low, high = np.maximum(low, exact.low_mw), np.minimum(high, exact.high_mw)
-        if best.reason is not None or exact.gap < best.gap:
-            best = exact
-    if (low > high).any():  # two proofs that disagree: round-off beyond what was allowed
-        return _nothing(len(p), "the proofs of the end state disagree")
-    bound = np.maximum(np.abs(p - low), np.abs(high - p))
-    return Certificate(bound, best.gap, best.balance_price, low, high)
-
-
-def problem_rows(problem, minute: int) -> Rows:
-    """The rows of ``problem``'s DC-OPF at the 1-based ``minute``: each limited line's
-    ``flow - U`` then ``-flow - U`` (``flow = load_flow - D p``), then the voltage rows'
-    low-bound then high-bound excesses (MW equivalents, modes/voltage.py)."""
-    row = minute - 1
-    down = problem.down
-    n_lines = len(problem.limit)
-    line_flow = problem.line_load_flow[row]
-    A = [-down, down]
-    e0 = [line_flow - problem.limit, -line_flow - problem.limit]
-    if problem.n_voltage:
-        n_v = problem.n_voltage
-        load = problem.load_flow[row]
-        A += [-problem.voltage_sens, problem.voltage_sens]
-        e0 += [load[n_lines : n_lines + n_v], load[n_lines + n_v :]]
-    return Rows(np.vstack(A), np.concatenate(e0))
+def _is_kkt_point(batch: Batch, y, prices, lam, at_lo, at_hi, chosen) -> np.ndarray:
+    """Per minute ``chosen``, is ``y`` with ``lam`` and ``prices`` a KKT point within
+    :data:`KKT_ROUND_OFF` (of the largest power and price)? Clips ``y`` into its limits and the
+    prices to ``>= 0`` where it is."""
+    lo, hi = batch.lo[chosen], batch.hi[chosen]
+    yy, pp = y[chosen], prices[chosen]
+    power_tol = KKT_ROUND_OFF * np.maximum(batch.demand[chosen], np.abs(hi).max(axis=1))
+    price_tol = KKT_ROUND_OFF * np.maximum(np.abs(lam), np.abs(batch.b).max(initial=1.0))
+    inside = ((yy >= lo - power_tol[:, None]) & (yy <= hi + power_tol[:, None])).all(axis=1)
+    nonnegative = (pp >= -price_tol[:, None]).all(axis=1)
+    after = batch.e0[chosen] + yy @ batch.A.T
+    within = (after <= power_tol[:, None]).all(axis=1)
+    reduced = batch.b + 2.0 * batch.c * yy - lam[:, None] + np.maximum(pp, 0.0) @ batch.A
+    width = hi > lo
+    signs = ~((at_lo[chosen] & width & (reduced < -price_tol[:, None]))
+              | (at_hi[chosen] & width & (reduced > price_tol[:, None]))).any(axis=1)  # fmt: skip
+    ok = inside & nonnegative & within & signs & np.isfinite(lam)
+    y[chosen] = np.where(ok[:, None], np.clip(yy, lo, hi), yy)
+    prices[chosen] = np.where(ok[:, None], np.maximum(pp, 0.0), pp)
+    return ok

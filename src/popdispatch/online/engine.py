@@ -16,7 +16,8 @@ from popdispatch.integrate import Status, Term, workspace
 from popdispatch.modes import get_mode
 from popdispatch.modes.exact import price_weights
 from popdispatch.online.day import DayArrays, DayInputs, integrate_day
-from popdispatch.online.kkt import KktTolerances, kkt_violations
+from popdispatch.online.certificate import Certificate, certify_minutes
+from popdispatch.online.kkt import KktTolerances, kkt_violations, line_prices, voltage_prices
 from popdispatch.online.settings import RunSettings
 from popdispatch.warm_start import WARM_STARTS, WarmStart, start_tag
 
@@ -95,6 +96,23 @@ class Engine:
         for r, reason in zip(rows, checked, strict=True):
             reasons[r] = reason
         return reasons
+
+    def certificates(
+        self, minutes: np.ndarray, p_mw: np.ndarray, z: np.ndarray
+    ) -> list[Certificate] | None:
+        """Per minute, the distance certificate of the end state (set points ``p_mw``, MW, and
+        controller states ``z``) against the settings' accuracy, with the prices the
+        controllers broadcast; ``None`` in a mode that does not claim the DC-OPF."""
+        if not self.mode.claims_dc_opf:
+            return None
+        minutes = np.asarray(minutes, dtype=np.int64)
+        rows = minutes - 1
+        weight = self.price_weight(minutes)
+        _, line_mu = line_prices(self.problem, rows, p_mw, z, weight)
+        _, voltage_mu = voltage_prices(self.problem, rows, p_mw, z, weight)
+        mu = np.concatenate([line_mu, voltage_mu], axis=1)
+        accuracy = self.settings.accuracy_mw(self.problem.demand[rows])
+        return certify_minutes(self.problem, minutes, p_mw, mu, np.atleast_1d(accuracy))
 
     def price_weight(self, minutes: np.ndarray) -> float | np.ndarray:
         """The augmented-Lagrangian weight the controllers broadcast with at the 1-based

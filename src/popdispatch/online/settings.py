@@ -40,6 +40,9 @@ class RunSettings:
     limits (p.u., ``None``: no bound; docs/voltage.md): with either given, exact mode becomes
     the ``voltage`` mode (its line prices plus LinDistFlow voltage prices), and the problem a
     run takes must carry the same limits (:func:`popdispatch.runs.with_voltage`).
+    ``accuracy_kw`` and ``accuracy_rel``: the accuracy a mode that claims the DC-OPF must
+    prove to call a minute converged, ``max(accuracy_kw, accuracy_rel * demand)`` (kW) on every
+    set point (the distance certificate, :mod:`popdispatch.online.certificate`).
 
     Construction validates the combination without touching any data, so a command line can
     check its options before loading a feeder: bad values or combinations raise
@@ -58,6 +61,8 @@ class RunSettings:
     tol_floor_kw: float | None = None
     vmin_pu: float | None = None
     vmax_pu: float | None = None
+    accuracy_kw: float = 1e-3
+    accuracy_rel: float = 1e-6
 
     def __post_init__(self) -> None:
         if self.voltage_limited and self.mode == "exact":
@@ -118,6 +123,12 @@ class RunSettings:
                 f"prices; {mode.name} mode has none (use --mode exact)",
                 "--price-law",
             )
+        if not (0 < self.accuracy_kw < float("inf")):
+            raise OptionError(f"accuracy must be positive, got {self.accuracy_kw} kW",
+                              "--accuracy-kw")  # fmt: skip
+        if not (0 <= self.accuracy_rel < 1):
+            raise OptionError(f"relative accuracy must be in [0, 1), got {self.accuracy_rel}",
+                              "--accuracy-rel")  # fmt: skip
         if self.tol_floor_kw is not None and not self.tol_floor_kw > 0:
             raise OptionError(
                 f"tolerance floor must be positive, got {self.tol_floor_kw} kW", "--tol-floor-kw"
@@ -153,6 +164,11 @@ class RunSettings:
                 f"revision rule (exact); {mode.name} mode continues the shares",
                 "--warm-start",
             )
+
+    def accuracy_mw(self, demand_mw):
+        """The accuracy to prove at a demand ``demand_mw`` (MW; one value or an array), MW:
+        ``max(accuracy_kw / 1000, accuracy_rel * demand_mw)``."""
+        return np.maximum(self.accuracy_kw / 1000.0, self.accuracy_rel * np.asarray(demand_mw))
 
     @property
     def field(self) -> Field | None:
