@@ -39,7 +39,9 @@ from popdispatch.dynamics.capacity import ROOM_ULPS
 RATE_CAP = 50.0
 
 
-def revision_rates(c: np.ndarray, spread: float, demand: float, cap: float = RATE_CAP) -> np.ndarray:
+def revision_rates(
+    c: np.ndarray, spread: float, demand: float, cap: float = RATE_CAP
+) -> np.ndarray:
     """Each generator's revision rate ``r_i = (S / P) / (2 c_i)``, at most ``cap``
     (dimensionless): ``c`` EUR/MW^2h, ``spread`` ``S`` EUR/MWh and ``demand`` ``P`` MW (the
     scales of :func:`popdispatch.modes.exact.scales`)."""

@@ -38,8 +38,8 @@ def final_residual(x, z, term, params, minute, ws):
     one = ws.first
     ws.counters.evaluations[0] += 1
     _, residual = evaluate_stage(x, z, one.p, one.f, one.w, one.v, one.room, one.mass,
-                                 one.inflow, one.outflow, one.z_rate, one.order, term, params, minute,
-                                 ws.game)  # fmt: skip
+                                 one.inflow, one.outflow, one.z_rate, one.order, term, params,
+                                 minute, ws.game)  # fmt: skip
     return residual
 
 

@@ -257,9 +257,9 @@ def advance_euler(method, x, z, term, params, minute, ws, stepper, h_try):
     one = ws.first
     congested, residual = euler_steps(stepper.substeps, True, stepper.dt / stepper.substeps, x,
                                       z, term, params, minute, one.p, one.f, one.w, one.v,
-                                      one.room, one.mass, one.inflow, one.outflow, one.z_rate, one.order,
-                                      ws.first_limited, ws.game, ws.counters.evaluations, x,
-                                      z)  # fmt: skip
+                                      one.room, one.mass, one.inflow, one.outflow, one.z_rate,
+                                      one.order, ws.first_limited, ws.game,
+                                      ws.counters.evaluations, x, z)  # fmt: skip
     return congested, residual, h_try
 
 

@@ -112,8 +112,9 @@ def run_snapshot(
     final = setpoints[-1]
     flows = limited_flows_mw(problem, final, minute)
     rested = run.status == Status.CONVERGED
+    infeasible = np.array([run.status == Status.INFEASIBLE])
     verdict = _verdicts(engine, np.array([minute]), final[None], engine.z[None],
-                        np.array([rested]), np.array([run.status == Status.INFEASIBLE]))  # fmt: skip
+                        np.array([rested]), infeasible)  # fmt: skip
     certified, reason = bool(verdict.certified[0]), verdict.reasons[0]
     line_price, voltage_price = _prices(engine, np.array([minute]), final[None], engine.z[None])
     return SnapshotResult(
@@ -150,7 +151,11 @@ class _Verdict:
 
 
 def _verdicts(
-    engine: Engine, minutes: np.ndarray, p_mw: np.ndarray, z: np.ndarray, rested: np.ndarray,
+    engine: Engine,
+    minutes: np.ndarray,
+    p_mw: np.ndarray,
+    z: np.ndarray,
+    rested: np.ndarray,
     infeasible: np.ndarray,
 ) -> _Verdict:
     """Each minute's verdict: in a mode that claims the DC-OPF, certified when the distance

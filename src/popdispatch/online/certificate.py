@@ -176,8 +176,11 @@ def prove(batch: Batch, y, mu, feasibility, target, where) -> tuple[np.ndarray, 
     lam = balance_prices(b, c, lo, hi, total, signal)
     q, g = best_response(b, c, lo, hi, lam[:, None] + signal)
     d = y - q
-    gap = (np.maximum(g * d + c * d * d, 0.0).sum(axis=1)
-           + np.maximum(-mu * excess, 0.0).sum(axis=1) + np.abs(lam * (batch.demand - total)))
+    gap = (
+        np.maximum(g * d + c * d * d, 0.0).sum(axis=1)
+        + np.maximum(-mu * excess, 0.0).sum(axis=1)
+        + np.abs(lam * (batch.demand - total))
+    )
     low, high = own_intervals(c, lo, hi, q, g, gap[:, None])
     wide = feasible & (_farthest(y, low, high) > target)
     for m in np.flatnonzero(wide):
@@ -306,11 +309,14 @@ def _solve_active_set(batch: Batch, p, held_value, fixed, held, chosen):
     K[m, :m] = 1.0
     K[m + 1 :, :m] = A_free
     base = held_value[chosen]
-    rhs = np.concatenate([
-        -batch.b[free] - 2.0 * batch.c[free] * p[np.ix_(chosen, free)],
-        (batch.demand[chosen] - base.sum(axis=1))[:, None],
-        -(batch.e0[np.ix_(chosen, held)] + base @ batch.A[held].T),
-    ], axis=1)  # the free generators' deviations from p, lambda, the held rows' prices
+    rhs = np.concatenate(
+        [
+            -batch.b[free] - 2.0 * batch.c[free] * p[np.ix_(chosen, free)],
+            (batch.demand[chosen] - base.sum(axis=1))[:, None],
+            -(batch.e0[np.ix_(chosen, held)] + base @ batch.A[held].T),
+        ],
+        axis=1,
+    )  # the free generators' deviations from p, lambda, the held rows' prices
     solution = np.linalg.lstsq(K, rhs.T, rcond=None)[0].T if K.size else np.zeros((len(chosen), 0))
     y = base.copy()
     y[:, free] = p[np.ix_(chosen, free)] + solution[:, :m]

@@ -237,9 +237,7 @@ class KktPoint:
     mu: np.ndarray
 
 
-def polish(
-    b, c, lo, hi, p, demand: float, rows: Rows, mu, margin_mw: float
-) -> KktPoint | None:
+def polish(b, c, lo, hi, p, demand: float, rows: Rows, mu, margin_mw: float) -> KktPoint | None:
     """The KKT point of the DC-OPF on the end state's active set, or ``None`` if there is
     none there: generators within ``margin_mw`` of a limit held on it, the priced (or
     overflowing) rows held on their bounds, and the rest solved from stationarity
@@ -248,7 +246,6 @@ def polish(
     singular). The point counts only if it is a KKT point within round-off: inside the limits,
     every other row within its bound, ``mu >= 0`` and each held generator's reduced cost of the
     right sign."""
-    n = len(p)
     at_lo = p <= lo + margin_mw
     at_hi = ~at_lo & (p >= hi - margin_mw)
     fixed = at_lo | at_hi
@@ -264,11 +261,13 @@ def polish(
     K[:m, m + 1 :] = A_free.T
     K[m, :m] = 1.0
     K[m + 1 :, :m] = A_free
-    rhs = np.concatenate([
-        -b[free] - 2.0 * c[free] * p[free],
-        [demand - value.sum()],
-        -(rows.e0[held] + rows.A[held] @ value),
-    ])  # the deviation d = y - p of the free generators, then lambda, mu
+    rhs = np.concatenate(
+        [
+            -b[free] - 2.0 * c[free] * p[free],
+            [demand - value.sum()],
+            -(rows.e0[held] + rows.A[held] @ value),
+        ]
+    )  # the deviation d = y - p of the free generators, then lambda, mu
     solution, *_ = np.linalg.lstsq(K, rhs, rcond=None)
     y = value.copy()
     y[free] = p[free] + solution[:m]

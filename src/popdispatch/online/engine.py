@@ -15,8 +15,8 @@ from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.integrate import Status, Term, workspace
 from popdispatch.modes import get_mode
 from popdispatch.modes.exact import price_weights
-from popdispatch.online.day import DayArrays, DayInputs, integrate_day
 from popdispatch.online.certificate import Certificate, certify_minutes
+from popdispatch.online.day import DayArrays, DayInputs, integrate_day
 from popdispatch.online.kkt import KktTolerances, kkt_violations, line_prices, voltage_prices
 from popdispatch.online.settings import RunSettings
 from popdispatch.warm_start import WARM_STARTS, WarmStart, start_tag
