@@ -126,15 +126,18 @@ def weights(field: Field, x, lo, hi, active, rate=None):
     return share, share, np.full(len(x), np.inf), share
 
 
-def pair_flows(f, w, v, graph):
+def pair_flows(f, w, v, graph, mass=None, room=None):
     """``(inflow, outflow)``: ``T[i, j] = g_ij w_i v_j [f_i - f_j]_+`` plus the relay
-    (:func:`relay_matrix`), summed over j / over i."""
+    (:func:`relay_matrix`; ``mass``, ``room``: the movable masses and rooms that say who is
+    blocked, default the sender weights and no upper limits), summed over j / over i."""
     T = graph * w[:, None] * v[None, :] * np.maximum(f[:, None] - f[None, :], 0.0)
-    T = T + relay_matrix(f, w, v, graph)
+    mass = v if mass is None else mass
+    room = np.full(len(f), np.inf) if room is None else room
+    T = T + relay_matrix(f, w, v, graph, mass, room)
     return T.sum(axis=1), T.sum(axis=0)
 
 
-def relay_matrix(f, w, v, graph) -> np.ndarray:
+def relay_matrix(f, w, v, graph, mass, room) -> np.ndarray:
     """The relay of distributed Smith on a graph (dynamics/pairwise.py ``relay_flows``),
     written from its definition with networkx: each connected set of blocked strategies
     together with its neighbours is a group; every member of it sends to the group's best
@@ -144,11 +147,11 @@ def relay_matrix(f, w, v, graph) -> np.ndarray:
     relay = np.zeros((n, n))
     if (graph + np.eye(n) > 0).all():
         return relay
-    blocked = ~((w > 0) & (v > RELAY_MASS))
+    blocked = ~((w > 0) & (mass > RELAY_MASS) & (room > RELAY_MASS))
     g = nx.from_numpy_array(graph)
     for members in nx.connected_components(g.subgraph(np.flatnonzero(blocked).tolist())):
         group = set(members) | {b for k in members for b in g.neighbors(k)}
-        receivers = [c for c in sorted(group) if w[c] > 0]
+        receivers = [c for c in sorted(group) if w[c] > 0 and room[c] > RELAY_MASS]
         if not receivers:
             continue
         best = max(receivers, key=lambda c: (f[c], -c))
@@ -185,7 +188,7 @@ class ReferenceMinute:
             self.mode.code, x * self.demand, z, self.problem, self.minute, self.fp
         )
         w, v, room, mass = weights(self.field, x, self.lo, self.hi, self.active, self.rate)
-        inflow, outflow = pair_flows(f, w, v, self.graph)
+        inflow, outflow = pair_flows(f, w, v, self.graph, mass, room)
         return (f, w, v, room, mass, inflow, outflow, z_rate), congestion, residual
 
     def limited_stage(self, h, x, z, point):
@@ -193,27 +196,28 @@ class ReferenceMinute:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             alpha = np.where(h * outflow > mass, mass / (h * outflow), 1.0)
             # the receivers from the flows of the limited senders
-            into = pair_flows(f, w, alpha * v, self.graph)[0] if (alpha < 1.0).any() else inflow
+            limited = (alpha < 1.0).any()
+            into = pair_flows(f, w, alpha * v, self.graph, mass, room)[0] if limited else inflow
             beta = np.where(h * into > room, room / (h * into), 1.0)
         if (alpha < 1.0).any() or (beta < 1.0).any():
-            inflow, outflow = pair_flows(f, beta * w, alpha * v, self.graph)
+            inflow, outflow = pair_flows(f, beta * w, alpha * v, self.graph, mass, room)
         return x + h * (inflow - outflow), np.maximum(z + h * z_rate, 0.0)
 
     def heun_combination(self, h, x, z, one, two):
-        (f1, w1, v1, room1, mass1, in1, out1, zr1), (f2, w2, v2, _, _, in2, out2, zr2) = one, two
+        (f1, w1, v1, room1, mass1, in1, out1, zr1), (f2, w2, v2, room2, mass2, in2, out2, zr2) = one, two
         half = 0.5 * h
         out, into = half * (out1 + out2), half * (in1 + in2)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             alpha = np.where(out > mass1, mass1 / out, 1.0)
             if (alpha < 1.0).any():  # the receivers from the flows of the limited senders
                 into = half * (
-                    pair_flows(f1, w1, alpha * v1, self.graph)[0]
-                    + pair_flows(f2, w2, alpha * v2, self.graph)[0]
+                    pair_flows(f1, w1, alpha * v1, self.graph, mass1, room1)[0]
+                    + pair_flows(f2, w2, alpha * v2, self.graph, mass2, room2)[0]
                 )
             beta = np.where(into > room1, room1 / into, 1.0)
         if (alpha < 1.0).any() or (beta < 1.0).any():
-            in1, out1 = pair_flows(f1, beta * w1, alpha * v1, self.graph)
-            in2, out2 = pair_flows(f2, beta * w2, alpha * v2, self.graph)
+            in1, out1 = pair_flows(f1, beta * w1, alpha * v1, self.graph, mass1, room1)
+            in2, out2 = pair_flows(f2, beta * w2, alpha * v2, self.graph, mass2, room2)
         return x + half * (in1 - out1 + in2 - out2), np.maximum(z + half * (zr1 + zr2), 0.0)
 
     def advance(self, x, z, h_try):

@@ -152,7 +152,7 @@ def test_heun_combination_matches_numpy_and_stays_in_the_domain(n, seed, h):
     in2, out2 = _fill(ws, 1, f2, w2, v2, np.maximum(hi - x1, 0.0))
     x_out = np.empty(n)
     one, two = ws.first, ws.second
-    heun_combination(h, x.copy(), np.zeros(0), *one[1:], two.f, two.w, two.v,
+    heun_combination(h, x.copy(), np.zeros(0), *one[1:], two.f, two.w, two.v, two.room, two.mass,
                      two.inflow, two.outflow, two.z_rate, two.order, ws.first_limited,
                      ws.second_limited, *RULES[2:], x_out, np.zeros(0))  # fmt: skip
     half = 0.5 * h

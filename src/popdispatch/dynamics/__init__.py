@@ -75,7 +75,7 @@ def field_rate(
     if complete:
         sort_by_fitness(f, order)
     indptr, indices = csr.indptr.astype(np.int64), csr.indices.astype(np.int64)
-    pairwise_flows(f, w, v, complete, indptr, indices, order, inflow, outflow)
+    pairwise_flows(f, w, v, mass, room, complete, indptr, indices, order, inflow, outflow)
     return inflow - outflow
 
 

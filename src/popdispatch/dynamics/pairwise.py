@@ -165,10 +165,12 @@ RELAY_MASS = 1e-7
 
 
 @nb.njit(cache=True, inline="always")
-def blocked(w, v, k):
-    """Whether strategy ``k`` cannot take part in a comparison both ways (``w_k = 0``: at its
-    upper limit, offline; or ``v_k <= RELAY_MASS``: at its lower limit, extinct): it relays."""
-    return not (w[k] > 0.0 and v[k] > RELAY_MASS)
+def blocked(w, mass, room, k):
+    """Whether strategy ``k`` cannot take part in a comparison both ways (``w_k = 0``: offline;
+    ``room_k <= RELAY_MASS``: at its upper limit; movable ``mass_k <= RELAY_MASS``: at its lower
+    limit, extinct): it relays. (A generator a few nanoshares below its limit would otherwise
+    stay a receiver that passes on only what it can still absorb, and cut a path in two.)"""
+    return not (w[k] > 0.0 and mass[k] > RELAY_MASS and room[k] > RELAY_MASS)
 
 
 @nb.njit(cache=True, inline="always")
@@ -187,7 +189,7 @@ def relay_root(label, k):
 
 
 @nb.njit(cache=True, inline="always")
-def relay_groups(f, w, v, indptr, indices, label):
+def relay_groups(f, w, mass, room, indptr, indices, label):
     """Relay groups and their best receivers into ``label`` (int, length n); False if no
     strategy is blocked.
 
@@ -200,7 +202,7 @@ def relay_groups(f, w, v, indptr, indices, label):
     n = f.shape[0]
     any_blocked = False
     for k in range(n):
-        if blocked(w, v, k):
+        if blocked(w, mass, room, k):
             label[k] = -2 - n
             any_blocked = True
         else:
@@ -223,7 +225,7 @@ def relay_groups(f, w, v, indptr, indices, label):
         r = relay_root(label, k)
         for e in range(indptr[k], indptr[k + 1] + 1):
             c = k if e == indptr[k + 1] else indices[e]
-            if w[c] <= 0.0:
+            if w[c] <= 0.0 or room[c] <= RELAY_MASS:
                 continue
             best = -2 - label[r]
             if best == n or f[c] > f[best] or (f[c] == f[best] and c < best):
@@ -244,7 +246,7 @@ def relay_send(f, w, v, label, a, r, inflow, outflow):
 
 
 @nb.njit(cache=True, inline="always")
-def relay_flows(f, w, v, indptr, indices, label, inflow, outflow):
+def relay_flows(f, w, v, mass, room, indptr, indices, label, inflow, outflow):
     """Add the relayed flows of distributed Smith on a graph to ``inflow``/``outflow``
     (``label``: int scratch of length n); nothing when no strategy is blocked.
 
@@ -260,7 +262,7 @@ def relay_flows(f, w, v, indptr, indices, label, inflow, outflow):
     that can send is worse than one that can receive anywhere in the graph, the
     box-constrained equilibrium of the complete graph (docs/agents.md, "the relay").
     """
-    if not relay_groups(f, w, v, indptr, indices, label):
+    if not relay_groups(f, w, mass, room, indptr, indices, label):
         return
     for a in range(f.shape[0]):
         if v[a] <= 0.0:
@@ -283,7 +285,7 @@ def relay_flows(f, w, v, indptr, indices, label, inflow, outflow):
 
 
 @nb.njit(cache=True, inline="always")
-def pairwise_flows(f, w, v, complete, indptr, indices, order, inflow, outflow):
+def pairwise_flows(f, w, v, mass, room, complete, indptr, indices, order, inflow, outflow):
     """Dispatch to :func:`complete_graph_flows` (``order`` already sorted) or
     :func:`graph_flows` plus the relay (:func:`relay_flows`, ``order`` as its scratch: the
     order by fitness is only read on the complete graph)."""
@@ -291,10 +293,10 @@ def pairwise_flows(f, w, v, complete, indptr, indices, order, inflow, outflow):
         complete_graph_flows(f, w, v, order, inflow, outflow)
     else:
         graph_flows(f, w, v, indptr, indices, inflow, outflow)
-        relay_flows(f, w, v, indptr, indices, order, inflow, outflow)
+        relay_flows(f, w, v, mass, room, indptr, indices, order, inflow, outflow)
 
 
-def graph_flows_of(graph, f, w, v, order, inflow, outflow):
+def graph_flows_of(graph, f, w, v, mass, room, order, inflow, outflow):
     """:func:`pairwise_flows` on ``graph`` (a :class:`CompleteGraph`, ``order`` already
     sorted, or a :class:`SparseGraph`), the kernel chosen by the record's class when numba
     types the call; compiled code only."""
@@ -313,20 +315,20 @@ def _graph_class(graph) -> type | None:
 
 
 @overload(graph_flows_of, inline="always")
-def _graph_flows_of(graph, f, w, v, order, inflow, outflow):
+def _graph_flows_of(graph, f, w, v, mass, room, order, inflow, outflow):
     cls = _graph_class(graph)
     if cls is CompleteGraph:
 
-        def complete(graph, f, w, v, order, inflow, outflow):
+        def complete(graph, f, w, v, mass, room, order, inflow, outflow):
             complete_graph_flows(f, w, v, order, inflow, outflow)
 
         return complete
     if cls is SparseGraph:
 
-        def sparse(graph, f, w, v, order, inflow, outflow):
+        def sparse(graph, f, w, v, mass, room, order, inflow, outflow):
             indptr, indices = graph.indptr, graph.indices
             graph_flows(f, w, v, indptr, indices, inflow, outflow)
-            relay_flows(f, w, v, indptr, indices, order, inflow, outflow)
+            relay_flows(f, w, v, mass, room, indptr, indices, order, inflow, outflow)
 
         return sparse
     return None

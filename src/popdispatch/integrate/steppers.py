@@ -174,11 +174,11 @@ def evaluate_stage(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order,
 
 
 @nb.njit(cache=True)
-def limited_flows(f, w, v, graph, order, inflow, outflow):
+def limited_flows(f, w, v, mass, room, graph, order, inflow, outflow):
     """:func:`~popdispatch.dynamics.pairwise.graph_flows_of` of limited weights on ``graph``,
     compiled once and called by the limiter's four sites (inlined, numba typed and LLVM
     optimised a copy at each)."""
-    graph_flows_of(graph, f, w, v, order, inflow, outflow)
+    graph_flows_of(graph, f, w, v, mass, room, order, inflow, outflow)
 
 
 @nb.njit(cache=True, inline="always")
@@ -219,7 +219,7 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
                 senders = True
         into = inflow
         if senders:
-            limited_flows(f, w, lim_v, graph, order, lim_in, lim_out)
+            limited_flows(f, w, lim_v, mass, room, graph, order, lim_in, lim_out)
             into = lim_in
         limited_any = senders
         for i in range(x.shape[0]):
@@ -228,7 +228,7 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
                 lim_w[i] = w[i] * (room[i] / (h * into[i]))
                 limited_any = True
         if limited_any:
-            limited_flows(f, lim_w, lim_v, graph, order, lim_in, lim_out)
+            limited_flows(f, lim_w, lim_v, mass, room, graph, order, lim_in, lim_out)
             for i in range(x.shape[0]):
                 x_out[i] = x[i] + h * (lim_in[i] - lim_out[i])
         else:
@@ -264,8 +264,9 @@ def advance_euler(method, x, z, term, params, minute, ws, stepper, h_try):
 
 
 @nb.njit(cache=True, inline="always")
-def heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, f2, w2, v2, in2,
-                     out2, zr2, order2, lim1, lim2, graph, x_out, z_out):  # fmt: skip
+def heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, f2, w2, v2,
+                     room2, mass2, in2, out2, zr2, order2, lim1, lim2, graph, x_out,
+                     z_out):  # fmt: skip
     """``x_out = x + h/2 (k1 + k2)`` from the raw flows at both points, flux-limited as one step.
 
     Where the combined step would carry a strategy past its movable mass or its room, the
@@ -292,8 +293,8 @@ def heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, 
             senders = True
         sv1[i], sv2[i] = alpha * v1[i], alpha * v2[i]
     if senders:
-        limited_flows(f1, w1, sv1, graph, order1, sin1, sout1)
-        limited_flows(f2, w2, sv2, graph, order2, sin2, sout2)
+        limited_flows(f1, w1, sv1, mass1, room1, graph, order1, sin1, sout1)
+        limited_flows(f2, w2, sv2, mass2, room2, graph, order2, sin2, sout2)
     limited = senders
     for i in range(x.shape[0]):
         beta = 1.0
@@ -303,8 +304,8 @@ def heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, 
             limited = True
         sw1[i], sw2[i] = beta * w1[i], beta * w2[i]
     if limited:
-        limited_flows(f1, sw1, sv1, graph, order1, sin1, sout1)
-        limited_flows(f2, sw2, sv2, graph, order2, sin2, sout2)
+        limited_flows(f1, sw1, sv1, mass1, room1, graph, order1, sin1, sout1)
+        limited_flows(f2, sw2, sv2, mass2, room2, graph, order2, sin2, sout2)
         for i in range(x.shape[0]):
             x_out[i] = x[i] + half * (sin1[i] - sout1[i] + sin2[i] - sout2[i])
     else:
@@ -382,7 +383,8 @@ def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
         evaluate_stage(x1, z1, p2, f2, w2, v2, room2, mass2, in2, out2, zr2, order2, term, params,
                        minute, work)  # fmt: skip
         heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, f2, w2, v2,
-                         in2, out2, zr2, order2, lim1, lim2, graph, x2, z2)  # fmt: skip
+                         room2, mass2, in2, out2, zr2, order2, lim1, lim2, graph, x2,
+                         z2)  # fmt: skip
         err = error_norm(x2, x1, z2, z1, rtol, atol, price_atol)
         rate = stiffness(h, x, z, mass1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,
                          price_atol)  # fmt: skip

@@ -149,5 +149,5 @@ def evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term,
             mass)  # fmt: skip
     graph = term.graph
     sort_for(graph, f, order)
-    graph_flows_of(graph, f, w, v, order, inflow, outflow)
+    graph_flows_of(graph, f, w, v, mass, room, order, inflow, outflow)
     return congestion, residual

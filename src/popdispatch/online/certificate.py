@@ -225,6 +225,7 @@ def own_intervals(c, lo, hi, q, g, gap) -> tuple[np.ndarray, np.ndarray]:
         width = 2.0 * gap / (slope + np.sqrt(slope**2 + 4.0 * c * gap))
     flat = (c == 0.0) & (slope == 0.0)  # a linear generator at its margin: any set point
     width = np.where(flat, np.inf, np.where(gap == 0.0, 0.0, width))
+    width = width + 8.0 * np.finfo(float).eps * np.maximum(np.abs(q), np.abs(hi))  # round-off
     low = np.where(q > lo, np.maximum(q - width, lo), q)
     high = np.where(q < hi, np.minimum(q + width, hi), q)
     return low, high
@@ -317,9 +318,17 @@ def _solve_active_set(batch: Batch, p, held_value, fixed, held, chosen):
         ],
         axis=1,
     )  # the free generators' deviations from p, lambda, the held rows' prices
-    solution = np.linalg.lstsq(K, rhs.T, rcond=None)[0].T if K.size else np.zeros((len(chosen), 0))
+    solution = np.zeros((len(chosen), 0))
+    if K.size:  # least squares, then one step of iterative refinement on its residual
+        solution = np.linalg.lstsq(K, rhs.T, rcond=None)[0].T
+        solution += np.linalg.lstsq(K, (rhs - solution @ K.T).T, rcond=None)[0].T
     y = base.copy()
     y[:, free] = p[np.ix_(chosen, free)] + solution[:, :m]
+    if m:  # the solve's round-off off the balance, to the free generator with the most room
+        room = np.minimum(y[:, free] - batch.lo[np.ix_(chosen, free)],
+                          batch.hi[np.ix_(chosen, free)] - y[:, free])  # fmt: skip
+        widest = free[np.argmax(room, axis=1)]
+        y[np.arange(len(chosen)), widest] += batch.demand[chosen] - y.sum(axis=1)
     prices = np.zeros((len(chosen), batch.e0.shape[1]))
     prices[:, held] = solution[:, m + 1 :]
     lam = solution[:, m] if m + k else np.zeros(len(chosen))
