@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
+from qp_exact import exact_dc_opf
 
 from popdispatch.feeder.generators import make_fleet
 from popdispatch.feeder.model import Feeder
@@ -16,8 +17,6 @@ from popdispatch.feeder.profiles import single_minute_profiles
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.game.problem import build_problem
 from popdispatch.online.certificate import Batch, certify_minutes
-
-from qp_exact import exact_dc_opf
 
 
 def random_fleet_problem(seed: int, n_gens: int, n_limits: int, linear_share: float = 0.2):

@@ -204,7 +204,8 @@ class ReferenceMinute:
         return x + h * (inflow - outflow), np.maximum(z + h * z_rate, 0.0)
 
     def heun_combination(self, h, x, z, one, two):
-        (f1, w1, v1, room1, mass1, in1, out1, zr1), (f2, w2, v2, room2, mass2, in2, out2, zr2) = one, two
+        f1, w1, v1, room1, mass1, in1, out1, zr1 = one
+        f2, w2, v2, room2, mass2, in2, out2, zr2 = two
         half = 0.5 * h
         out, into = half * (out1 + out2), half * (in1 + in2)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):

@@ -84,7 +84,8 @@ def test_compiled_relay_equals_the_reference(graph, seed):
     v = np.where(rng.random(n) < 0.3, rng.choice([0.0, RELAY_MASS / 2], n), rng.random(n))
     indptr, indices = csr(graph, n)
     inflow, outflow = np.zeros(n), np.zeros(n)
-    relay_flows(f, w, v, v, np.full(len(f), np.inf), indptr, indices, np.empty(n, dtype=np.int64), inflow, outflow)
+    no_limit = np.full(len(f), np.inf)
+    relay_flows(f, w, v, v, no_limit, indptr, indices, np.empty(n, dtype=np.int64), inflow, outflow)
     ref_in, ref_out = reference_relay(f, w, v, graph)
     np.testing.assert_allclose(inflow, ref_in, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(outflow, ref_out, rtol=1e-12, atol=1e-15)
@@ -100,7 +101,8 @@ def test_no_blocked_strategy_leaves_the_graph_flows_alone():
     inflow, outflow = np.zeros(n), np.zeros(n)
     graph_flows(f, w, v, indptr, indices, inflow, outflow)
     before = inflow.copy(), outflow.copy()
-    relay_flows(f, w, v, v, np.full(len(f), np.inf), indptr, indices, np.empty(n, dtype=np.int64), inflow, outflow)
+    no_limit = np.full(len(f), np.inf)
+    relay_flows(f, w, v, v, no_limit, indptr, indices, np.empty(n, dtype=np.int64), inflow, outflow)
     assert np.array_equal(inflow, before[0]) and np.array_equal(outflow, before[1])
 
 
@@ -112,7 +114,8 @@ def test_a_saturated_chain_relays_between_its_ends():
     v = np.array([0.5, 0.2, 0.3, 0.1])
     indptr, indices = csr(nx.path_graph(4), 4)
     inflow, outflow = np.zeros(4), np.zeros(4)
-    relay_flows(f, w, v, v, np.full(len(f), np.inf), indptr, indices, np.empty(4, dtype=np.int64), inflow, outflow)
+    no_limit = np.full(len(f), np.inf)
+    relay_flows(f, w, v, v, no_limit, indptr, indices, np.empty(4, dtype=np.int64), inflow, outflow)
     # group {1, 2} + {0, 3}: best receiver 3 (0 is worse); 0 sends 3 * 0.5, 1 and 2 are better
     np.testing.assert_array_equal(inflow, [0.0, 0.0, 0.0, 1.5])
     np.testing.assert_array_equal(outflow, [1.5, 0.0, 0.0, 0.0])
