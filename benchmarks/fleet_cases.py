@@ -13,14 +13,13 @@ Feeders: the MATPOWER radial cases (``$POPDISPATCH_FEEDERS/matpower``, else
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from popdispatch.feeder import Feeder
-from popdispatch.feeder.generators import make_fleet
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.game.problem import DispatchProblem, build_problem_from_loads
 
@@ -79,7 +78,17 @@ def random_fleet(rng: np.random.Generator, feeder: Feeder, demand_kw: float) -> 
         rows.append((buses[j], 0.0, float(rng.uniform(5, 55)), _curvature(rng, demand_kw),
                      pmin, pmax))  # fmt: skip
         names.append(f"g{k}")
-    return make_fleet(rows, names)
+    return fleet_table(rows, names)
+
+
+def fleet_table(rows: list[tuple], names: list[str]) -> pd.DataFrame:
+    """A fleet table from ``(bus, a, b, c, pmin_kw, pmax_kw)`` rows, buses as the feeder names
+    them (numbers or OpenDSS names)."""
+    from popdispatch.feeder.generators import FLEET_COLUMNS
+
+    table = pd.DataFrame(rows, columns=FLEET_COLUMNS)
+    table.index = pd.Index(names, name="generator")
+    return table
 
 
 def _curvature(rng: np.random.Generator, demand_kw: float) -> float:
@@ -152,3 +161,32 @@ def matpower_feeder(path: Path) -> Feeder:
     from popdispatch.readers import read_matpower
 
     return read_matpower(path, ratings=False)
+
+
+def opendss_feeders() -> dict:
+    """The OpenDSS IEEE test feeders of the shared folder, by name -> loader (none without
+    OpenDSSDirect.py or the data)."""
+    masters = {"ieee13": "ieee13/IEEE13Nodeckt.dss", "ieee34": "ieee34/ieee34Mod1.dss"}
+    found = {}
+    for name, relative in masters.items():
+        path = SHARED / "opendss" / relative
+        if path.is_file():
+            found[name] = lambda p=path: _opendss(p)
+    return found
+
+
+def _opendss(path: Path) -> Feeder:
+    """An OpenDSS feeder read with a placeholder fleet at its source bus (``sourcebus`` in
+    both IEEE files), which :func:`fleet_case` replaces."""
+    from popdispatch.readers import read_opendss_master
+
+    placeholder = fleet_table([("sourcebus", 0.0, 1.0, 1.0, 0.0, 1.0)], ["src"])
+    return read_opendss_master(path, ratings=False, fleet=placeholder)
+
+
+def synthetic_base(n_buses: int) -> Feeder:
+    """The synthetic feeder of ``n_buses`` buses (seed 1) at its nominal peak loads."""
+    from popdispatch.feeder.synthetic import synthetic_feeder
+
+    feeder = synthetic_feeder(n_buses, 10, seed=1)
+    return replace(feeder, loads=feeder.loads.assign(p_kw=feeder.loads.peak_kw))

@@ -26,9 +26,11 @@ from popdispatch.modes.mechanism import Mode, ModeCode
 #: Default dimensionless constants (:class:`ExactConstants`), measured on every case of
 #: benchmarks/bench_scale.py (docs/exact-mode.md, "Every scale").
 GAIN, WEIGHT, PRICE_RATE = 1000.0, 2.5, 1500.0
-#: The revision gain of the curvature-scaled revision (dynamics/newton.py), 1/s: each marginal
-#: cost relaxes at this rate.
-NEWTON_GAIN = 300.0
+#: The curvature-scaled revision's constants (dynamics/newton.py): its gain (1/s: each marginal
+#: cost relaxes at this rate), its price rate (1/s) and the cap of a flat generator's revision
+#: rate, measured on random fleets, the ieee-elv day and the synthetic feeders
+#: (docs/exact-mode.md, "Revision rates").
+NEWTON_GAIN, NEWTON_PRICE_RATE, NEWTON_RATE_CAP = 300.0, 3000.0, 10.0
 #: Exact mode's revision protocols: each generator's revision scaled by its own curvature
 #: (dynamics/newton.py), or capacity-constrained Smith (dynamics/capacity.py).
 REVISIONS = ("newton", "capacity")
@@ -55,16 +57,19 @@ class ExactConstants:
 
     gain: float | None = None
     C: float = WEIGHT
-    price_rate: float = PRICE_RATE
+    price_rate: float | None = None
     price_law: PriceLaw = PriceLaw.PLAIN
     revision: str = "newton"
-    rate_cap: float = 50.0
+    rate_cap: float = NEWTON_RATE_CAP
 
     def __post_init__(self) -> None:
         if self.revision not in REVISIONS:
             raise ValueError(f"unknown revision {self.revision!r} (known: {', '.join(REVISIONS)})")
+        newton = self.revision == "newton"
         if self.gain is None:
-            object.__setattr__(self, "gain", NEWTON_GAIN if self.revision == "newton" else GAIN)
+            object.__setattr__(self, "gain", NEWTON_GAIN if newton else GAIN)
+        if self.price_rate is None:
+            object.__setattr__(self, "price_rate", NEWTON_PRICE_RATE if newton else PRICE_RATE)
         for name in ("gain", "C", "price_rate", "rate_cap"):
             value = getattr(self, name)
             if not (value > 0 and value < float("inf")):

@@ -40,6 +40,7 @@ class SnapshotResult:
     ``trajectory_kw``: set points per iteration (rows 0..last, columns generators);
     ``converged_at`` / ``first_congestion``: iterations (None if never);
     ``overflow_kw``: final overflow per limited line (max(|flow| - U, 0)).
+    ``evaluations``: of the game and field, in the run (the integrator's cost).
     ``line_price_eur_per_mwh`` (per limited line) and ``voltage_price_eur_per_mwh`` (per
     monitored bus): the prices the engine's controllers broadcast at the end state, EUR/MWh
     (:func:`~popdispatch.online.kkt.net_prices`: a line's ``mu_up - mu_down``, a bus's
@@ -76,6 +77,7 @@ class SnapshotResult:
     voltage_price_eur_per_mwh: np.ndarray | None = None
     distance_bound_kw: float | None = None
     accuracy_kw: float | None = None
+    evaluations: int | None = None
 
     @property
     def setpoints_kw(self) -> np.ndarray:
@@ -104,6 +106,7 @@ def run_snapshot(
     engine = Engine(problem, settings)
     x = initial_shares(problem, settings.x0, minute)
     engine.warm_up(x, minute)
+    evaluated = engine.evaluations
     start = time.perf_counter()
     run = engine.run_minute(x, minute)
     setpoints, converged_at = run.trajectory, run.converged_at
@@ -136,6 +139,7 @@ def run_snapshot(
         voltage_price_eur_per_mwh=None if voltage_price is None else voltage_price[0],
         distance_bound_kw=None if verdict.bound_kw is None else float(verdict.bound_kw[0]),
         accuracy_kw=None if verdict.bound_kw is None else float(verdict.accuracy_kw[0]),
+        evaluations=engine.evaluations - evaluated,
     )
 
 

