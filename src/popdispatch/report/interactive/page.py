@@ -61,10 +61,13 @@ def format_value(key: str, value) -> str:
     return "-" if value is None else str(value)
 
 
-def header_html(title: str, run_info: Mapping, notes: list[str]) -> str:
-    """The page's header: title, a table of the run's parameters, notes, the whole summary."""
+def header_html(title: str, run_info: Mapping, notes: list[str], step: str = "minute") -> str:
+    """The page's header: title, a table of the run's parameters, notes, the whole summary.
+    ``step``: what a step of the series is called (``"minute"``, or ``"step"`` in a series of
+    other steps, e.g. quarter hours), in the labels that name one."""
     rows = "".join(
-        f"<span><b>{html.escape(label)}</b>{html.escape(format_value(key, run_info[key]))}</span>"
+        f"<span><b>{html.escape(label.replace('minute', step))}</b>"
+        f"{html.escape(format_value(key, run_info[key]))}</span>"
         for key, label in HEADER_KEYS
         if key in run_info
     )
