@@ -366,6 +366,18 @@ def _yardstick(s: dict, text: str) -> str:
     return text.replace("DC-OPF", "LinDistFlow OPF") if s.get("voltage") else text
 
 
+def reproduce_text(out, html: bool = False) -> str:
+    """``popdispatch reproduce``: where the results are and what each file holds."""
+    pages = "\n  base_day.html, congestion.html: the interactive reports" if html else ""
+    return (
+        f"results in {out}:\n"
+        "  report.md: each experiment, the paper's reported figure against ours and the DC-OPF\n"
+        "  figures/: the figures as PNG and PDF\n"
+        "  summary.json: every number of report.md (the --json object)\n"
+        "  *.csv: the time series of each experiment" + pages
+    )
+
+
 def cases_summary(table) -> dict:
     """``popdispatch cases --json``: ``{"cases": [...]}``, one object per built-in case."""
     rows = table.to_dict(orient="index").items()
