@@ -11,6 +11,7 @@ the commands' own.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -165,3 +166,45 @@ def test_the_toml_fleet_reads_as_its_csv_twin(tmp_path: Path):
     got = read_fleet(tmp_path / "fleet.toml")
     assert list(got.index) == ["grid", "dg"]
     assert got.astype(str).equals(twin.astype(str))
+
+
+# -- numbers of the official day (with the official ELV data) -------------------------------------
+
+
+def day_json(*args: str) -> dict:
+    from helpers import official_folder
+
+    done = shell(" ".join(["popdispatch", "day", "--mode", "exact", "--profiles",
+                           str(official_folder()), *args, "--json", "-q"]), Path.cwd())  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+def test_the_event_example_numbers_are_the_official_days():
+    text = one_line(README.read_text())
+    claim = re.search(r"its energy drops from ([\d.]+) to ([\d.]+) kWh, G817 takes over "
+                      r"\(([\d.]+) -> ([\d.]+) kWh\) and the day costs ([\d.]+) EUR instead of "
+                      r"([\d.]+);", text)  # fmt: skip
+    before, after, g817_before, g817_after, cost_after, cost_before = claim.groups()
+    plain = day_json()
+    outage = day_json("--event", "114:off@600", "--event", "114:on@720")
+    assert f"{plain['energy_kwh']['114']:.2f}" == before
+    assert f"{outage['energy_kwh']['114']:.2f}" == after
+    assert f"{plain['energy_kwh']['817']:.2f}" == g817_before
+    assert f"{outage['energy_kwh']['817']:.2f}" == g817_after
+    assert f"{outage['cost_eur']:.4f}" == cost_after and f"{plain['cost_eur']:.4f}" == cost_before
+
+
+def test_the_ac_check_numbers_are_the_official_days():
+    pytest.importorskip("power_grid_model", reason="--ac needs the ac extra")
+    text = one_line(README.read_text())
+    claim = re.search(r"losses ([\d.]+) kWh \(at most ([\d.]+) kW at minute (\d+)\), voltages "
+                      r"([\d.]+) p\.u\. \(bus (\d+)\) to ([\d.]+) p\.u\., the limited line (\d+) "
+                      r"at ([\d.]+) % of its rating", text)  # fmt: skip
+    ac = day_json("--limit", "505:666=28", "--ac")["ac"]
+    shown = (
+        f"{ac['losses_kwh']:.2f}", f"{ac['max_losses_kw']:.2f}", str(ac["max_losses_minute"]),
+        f"{ac['v_min_pu']:.4f}", str(ac["v_min_bus"]), f"{ac['v_max_pu']:.4f}",
+        ac["max_loading_line"].removeprefix("LINE"), f"{ac['max_loading_percent']:.1f}",
+    )  # fmt: skip
+    assert claim.groups() == shown
