@@ -547,7 +547,7 @@ def colour_bar_at(stops: list, fraction: float) -> np.ndarray:
 def test_a_bus_shows_the_colour_the_colour_bar_gives_its_voltage(browser, small, tmp_path):
     """Bus 2 at 0.93 p.u., bus 5 at 1.0 and bus 4 at 1.04: each marker as drawn has the colour
     the drawn colour bar shows at that voltage (the markers once ran red-low while the bar
-    read red-high), and the low bus is red."""
+    read red-high), the low bus blue and the high one red (docs/report.md)."""
     problem, profiles, comparison = small
     volts = {2: 0.93, 5: 1.0, 4: 1.04}
     voltages = pd.DataFrame(volts, index=np.arange(1, MINUTES + 1))
@@ -563,7 +563,8 @@ def test_a_bus_shows_the_colour_the_colour_bar_gives_its_voltage(browser, small,
         np.testing.assert_allclose(fill, colour_bar_at(drawn["stops"], fraction), atol=3.0,
                                    err_msg=name)  # fmt: skip
     low = drawn["fills"][drawn["buses"].index("bus 2")]
-    assert low[0] > 2 * low[2]  # red, not blue
+    high = drawn["fills"][drawn["buses"].index("bus 4")]
+    assert low[2] > 2 * low[0] and high[0] > high[2]  # blue low, red high
     assert page.errors == []
 
 

@@ -25,13 +25,13 @@ from popdispatch.report.interactive.steps import BINDING, OVERLOADED, Steps
 MAX_LINE_TRACES = 400
 #: |flow| from low (light) to high (dark): the upper part of ColorBrewer's YlGnBu.
 FLOW_SCALE = [[0.0, "#c7e9b4"], [0.3, "#41b6c4"], [0.65, "#225ea8"], [1.0, "#081d58"]]
-#: Bus voltage from low (red) through 1.0 p.u. (white) to high (blue): ColorBrewer's RdBu,
-#: written out so that the markers (coloured here) and the colour bar (drawn by plotly.js, whose
-#: own "RdBu" runs the other way) read from one scale.
+#: Bus voltage from low (blue) through 1.0 p.u. (white) to high (red): ColorBrewer's RdBu
+#: reversed, written out so that the markers (coloured here) and the colour bar (drawn by
+#: plotly.js) read from one scale; plotly.py's "RdBu" and plotly.js's run opposite ways.
 VOLTAGE_SCALE = [
     [k / 10, color] for k, color in enumerate([
-        "#67001f", "#b2182b", "#d6604d", "#f4a582", "#fddbc7", "#f7f7f7", "#d1e5f0", "#92c5de",
-        "#4393c3", "#2166ac", "#053061",
+        "#053061", "#2166ac", "#4393c3", "#92c5de", "#d1e5f0", "#f7f7f7", "#fddbc7", "#f4a582",
+        "#d6604d", "#b2182b", "#67001f",
     ])
 ]  # fmt: skip
 STATE_COLORS = {0: "#ffffff", BINDING: "#f39c12", OVERLOADED: "#c0392b"}
