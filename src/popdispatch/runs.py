@@ -112,6 +112,32 @@ class FeederSource:
         return f"the feeder in {where}" if where else f"the {self.case or 'ieee-elv'} feeder"
 
 
+#: The numbers a fleet may give, inclusive, with the file's column names and units: a number
+#: outside is a typo or a placeholder (``1e30`` for "unlimited") that no solver handles.
+#: Powers up to 10 GW, costs far beyond any market's price cap.
+FLEET_RANGES = {
+    "a": ("a_eur_per_h", 1e9, "EUR/h"),
+    "b": ("b_eur_per_mwh", 1e6, "EUR/MWh"),
+    "c": ("c_eur_per_mw2h", 1e8, "EUR/(MW^2 h)"),
+    "pmin_kw": ("pmin_kw", 1e7, "kW"),
+    "pmax_kw": ("pmax_kw", 1e7, "kW"),
+}
+
+
+def check_fleet_ranges(fleet: pd.DataFrame, path: Path | None = None) -> None:
+    """:class:`~popdispatch.errors.FleetError` naming the file ``path``, the row (1-based, in
+    the file's order) and the column of the first number outside :data:`FLEET_RANGES` (or the
+    generator, for a network's own fleet)."""
+    from popdispatch.errors import FleetError
+
+    for row, (name, values) in enumerate(fleet.iterrows(), start=1):
+        for column, (label, upper, unit) in FLEET_RANGES.items():
+            value = float(values[column])
+            if not 0.0 <= value <= upper:
+                where = f"{path}: row {row} ({name})" if path is not None else f"generator {name!r}"
+                raise FleetError(f"{where}: {label} = {value:g} is outside 0..{upper:g} {unit}")
+
+
 #: Network file suffix -> reader in :mod:`popdispatch.readers`.
 NETWORK_READERS = {".m": "read_matpower", ".json": "read_pandapower", ".dss": "read_opendss_master"}
 
@@ -134,6 +160,15 @@ def load_feeder(source: FeederSource | Path | None = None) -> Feeder:
     from popdispatch.feeder.generators import read_fleet
 
     fleet = read_fleet(source.fleet) if source.fleet is not None else None
+    if fleet is not None:
+        check_fleet_ranges(fleet, source.fleet)
+    feeder = _read_feeder(source, fleet)
+    if fleet is None:
+        check_fleet_ranges(feeder.generators)
+    return feeder
+
+
+def _read_feeder(source: FeederSource, fleet: pd.DataFrame | None) -> Feeder:
     if source.net is not None:
         return read_network(source.net, fleet, source.root, source.ratings)
     if source.case is not None:

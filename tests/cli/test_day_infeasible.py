@@ -104,7 +104,8 @@ def test_infeasible_snapshot_prints_what_is_known(tmp_path):
     out = tmp_path / "snap"
     result = run("snapshot", "--minute", "566", "--limit", "505:666=0", "--json", "-q",
                  "--out", str(out))  # fmt: skip
-    assert_one_line_error(result, 1, "minute 566 is infeasible", "capacity 65.000 kW")
+    assert_one_line_error(result, 1, "minute 566 is infeasible", "line limits",
+                          "--limit 505:666=0 kW on 505-578")  # fmt: skip
     no_nan(result.stdout)
     summary = json.loads(result.stdout)
     assert summary["status"] == "infeasible"
@@ -122,7 +123,7 @@ def test_infeasible_snapshot_and_opf_text_say_what_is_not_known():
     snap = run("snapshot", "--minute", "566", "--limit", "505:666=0", "-q")
     assert snap.returncode == 1
     no_nan(snap.stdout)
-    assert "DC-OPF: infeasible (no dispatch meets" in snap.stdout
+    assert "DC-OPF: infeasible: line limits: --limit 505:666=0 kW on 505-578, " in snap.stdout
     assert "iteration -" not in snap.stdout
     assert "G114         114        26.925        10.000 *" in snap.stdout
     assert "* set point outside its limits: G1" in snap.stdout
@@ -130,5 +131,5 @@ def test_infeasible_snapshot_and_opf_text_say_what_is_not_known():
     opf = run("opf", "--minute", "566", "--limit", "505:666=0", "-q")
     assert opf.returncode == 1
     no_nan(opf.stdout)
-    assert "infeasible (no dispatch meets" in opf.stdout
+    assert "infeasible: line limits: --limit 505:666=0 kW on 505-578," in opf.stdout
     assert "online capacity 65.000 kW" in opf.stdout

@@ -5,6 +5,7 @@ since this test process has imported everything already."""
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import subprocess
@@ -92,13 +93,18 @@ def test_quick_progress_never_imports_tqdm():
     assert "tqdm" not in imported_after(code)
 
 
-def test_late_bar_counts_from_the_start(monkeypatch):
-    """A bar due after DELAY_S (here 0 s) is made then and continues the count."""
-    import io
+class Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
 
+
+def test_late_bar_counts_from_the_start(monkeypatch):
+    """On a terminal a bar due after DELAY_S (here 0 s) is made then and continues the count,
+    its rate counted over every unit from the first (never "?it/s")."""
     from popdispatch.report import progress
 
     monkeypatch.setattr(progress, "DELAY_S", 0.0)
+    monkeypatch.setattr(progress.sys, "stderr", Terminal())
     out = io.StringIO()
     bar = progress._DelayedBar("slow", 7, {"file": out, "leave": True, "mininterval": 0.0})
     for _ in range(7):
@@ -106,6 +112,7 @@ def test_late_bar_counts_from_the_start(monkeypatch):
     assert bar.bar is not None and bar.bar.n == 7
     bar.close()
     assert "slow" in out.getvalue() and "7/7" in out.getvalue()
+    assert "?it/s" not in out.getvalue()
 
 
 def test_command_help_imports_no_engine():

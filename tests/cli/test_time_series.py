@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from test_networks import CASE33, FEEDERS, needs_feeders
 
 from popdispatch.feeder import ieee_elv
 
 from helpers import official_folder
 from test_commands import assert_one_line_error, gens, run
+from test_networks import CASE33, FEEDERS, needs_feeders
 
 STEPS = 8
 

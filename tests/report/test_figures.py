@@ -197,6 +197,70 @@ def test_detection_figure_labels_leave_the_controllers_visible(detection_figure)
         assert not any(extent.overlaps(b) for b in boxes), text.get_text()
 
 
+def _labels_inside(ax, renderer) -> list[str]:
+    """Generator labels of a map whose marker is in view but whose text runs over the frame."""
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    out = []
+    for text in ax.texts:
+        x, y = text.xy
+        if x0 <= x <= x1 and y0 <= y <= y1:
+            box = text.get_window_extent(renderer)
+            frame = ax.get_window_extent(renderer)
+            if not (frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0
+                    and box.y1 <= frame.y1):  # fmt: skip
+                out.append(text.get_text())
+    return out
+
+
+def test_detection_figure_labels_stay_inside_their_maps(detection_figure):
+    fig, renderer = detection_figure
+    maps = [ax for ax in fig.axes if ax.axison and ax.texts]
+    assert len(maps) == 2
+    for ax in maps:
+        assert _labels_inside(ax, renderer) == [], ax.get_title()
+
+
+def test_detection_figure_has_no_empty_band_above_its_legend(detection_figure):
+    """The square maps fill their row: the legend starts right under them (at most 0.25 in
+    of white between the lower map frame and the legend)."""
+    fig, renderer = detection_figure
+    maps = [ax.get_window_extent(renderer) for ax in fig.axes if ax.axison]
+    legend = next(lg for ax in fig.axes if (lg := ax.get_legend())).get_window_extent(renderer)
+    gap = min(box.y0 for box in maps) - legend.y1
+    assert 0 <= gap <= 0.25 * fig.dpi
+
+
+@pytest.fixture(scope="module")
+def flow_figure(peak_problem):
+    from popdispatch.opf import solve_opf
+    from popdispatch.report.reproduce import peak_load_kw
+    from popdispatch.scenarios import PEAK_MINUTE
+
+    opf = solve_opf(peak_problem, PEAK_MINUTE)
+    fig = figures.feeder_flow_figure(peak_problem, opf.p_kw, PEAK_MINUTE,
+                                     peak_load_kw(peak_problem))  # fmt: skip
+    return fig, _render(fig)
+
+
+def test_flow_figure_labels_stay_inside_the_map(flow_figure):
+    fig, renderer = flow_figure
+    assert _labels_inside(fig.axes[0], renderer) == []
+    assert any(t.get_text().startswith("G1 ") for t in fig.axes[0].texts)
+
+
+def test_wide_flow_lines_are_drawn_without_gaps_at_their_joints(flow_figure):
+    """Each original line is its own segment: with butt ends a wide line shows a white notch
+    at every joint of a bend; round ends and joins close them."""
+    from matplotlib.collections import LineCollection
+
+    fig, _ = flow_figure
+    wide = [c for c in fig.axes[0].collections
+            if isinstance(c, LineCollection) and max(c.get_linewidths()) > 2]  # fmt: skip
+    assert wide
+    for collection in wide:
+        assert collection.get_capstyle() == "round" and collection.get_joinstyle() == "round"
+
+
 def test_detection_figure_text_blocks_do_not_overlap(detection_figure):
     fig, renderer = detection_figure
     blocks = [lg.get_window_extent(renderer) for ax in fig.axes if (lg := ax.get_legend())]
@@ -298,3 +362,89 @@ def test_day_figure_uses_the_series_step_length():
                                   timeline=week)  # fmt: skip
     assert fig.axes[0].get_lines()[0].get_xdata()[-1] == pytest.approx(168)
     assert fig.axes[-1].get_xlabel().startswith("time since 2016-01-04 00:00, h")
+
+
+@pytest.mark.parametrize("n", [1, 2, 4, 5])
+def test_day_figure_has_one_panel_per_generator_and_no_empty_one(n):
+    """A fleet of four draws four panels (2 x 2), five draws five: no panel left empty on its
+    default 0-1 axes; each column's lowest panel carries the time axis."""
+    online = np.ones((120, n), bool)
+    day = _day(np.ones((120, 6), bool), "x")
+    day.run.generators = NAMES[:n]
+    day.run.setpoints_kw = day.run.setpoints_kw[:, :n]
+    day.run.online = online
+    day.opf_kw = day.run.setpoints_kw
+    fig = figures.base_day_figure(day, list(range(n)))
+    _render(fig)
+    assert len(fig.axes) == n
+    for ax in fig.axes:
+        assert ax.get_lines() and ax.get_ylim() != (0.0, 1.0)
+    labelled = [ax for ax in fig.axes if ax.get_xlabel()]
+    columns = {round(ax.get_position().x0, 3) for ax in fig.axes}
+    assert len(labelled) == len(columns)
+    for ax in labelled:
+        assert any(t.get_text() for t in ax.get_xticklabels())
+
+
+# -- figure 7 ---------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def voltage_figure():
+    """Figure 7's shape: case33bw's buses, four dispatches, the source and four DGs (one with
+    a rounding residue below zero)."""
+    buses = np.arange(1, 34, dtype=float)
+    profile = pd.DataFrame(
+        {
+            name: 1.0 - 0.002 * k * buses
+            for k, name in enumerate(
+                ["DC exact", "voltage-aware", "AC OPF", "AC-corrected"], start=1
+            )
+        },
+        index=buses,
+    )
+    points = pd.DataFrame(
+        {
+            "DC exact": [3715.0, 0, 0, 0, 0],
+            "voltage-aware": [2727.7, 392.1, 595.2, 0, 0],
+            "AC OPF": [2786.7, 408.6, 600.0, 0, 31.2],
+            "AC-corrected": [2786.7, 408.5, 600.0, -0.02, 31.1],
+        },
+        index=["source", "DG18", "DG33", "DG25", "DG30"],
+    )
+    costs = dict(zip(points.columns, [86.0, 104.4, 105.7, 105.7], strict=True))
+    from popdispatch.report.reproduce import branch_label
+
+    label = branch_label(list(range(1, 34)), [19, 23, 26], {19: 2, 23: 3, 26: 6})
+    fig = figures.voltage_profile_figure(profile, points, costs, 0.95, "case33bw", label)
+    return fig, _render(fig)  # fmt: skip
+
+
+def test_voltage_figure_legend_covers_no_data(voltage_figure):
+    fig, renderer = voltage_figure
+    (legend,) = fig.legends
+    box = legend.get_window_extent(renderer)
+    for ax in fig.axes:
+        assert not box.overlaps(ax.get_window_extent(renderer))
+    assert fig.bbox.contains(box.x0, box.y0) and fig.bbox.contains(box.x1, box.y1)
+    names = [t.get_text() for t in legend.get_texts()]
+    assert "DC exact: 86.000 EUR/h" in names and "vmin 0.95 p.u." in names
+
+
+def test_voltage_figure_bars_read_in_plain_kw(voltage_figure):
+    """A linear axis (a symlog one read 0, 10^2, 10^3) and each bar's value written on it,
+    never "-0"."""
+    fig, renderer = voltage_figure
+    bars = fig.axes[1]
+    assert bars.get_yscale() == "linear"
+    values = [t.get_text() for t in bars.texts]
+    assert "3715" in values and "31" in values and "-0" not in values
+
+
+def test_voltage_figure_x_label_says_which_buses_are_which_branch(voltage_figure):
+    fig, renderer = voltage_figure
+    label = fig.axes[0].get_xlabel()
+    assert "main feeder 1-18" in label
+    assert "laterals 19-22 (from bus 2), 23-25 (from bus 3), 26-33 (from bus 6)" in label
+    box = fig.axes[0].xaxis.label.get_window_extent(renderer)
+    assert fig.bbox.contains(box.x0, box.y0) and fig.bbox.contains(box.x1, box.y1)

@@ -277,6 +277,12 @@ def test_a_dated_series_is_labelled_by_its_times(small, monkeypatch) -> None:
     labels = panel["data"][0]["customdata"]
     assert labels == [f"{times[step - 1]:%Y-%m-%d %H:%M}" for step in drawn]
     assert "of 12 steps, evenly spaced" in text
+    # the slider and the header call a quarter hour a step, not a minute
+    assert figure["layout"]["sliders"][0]["currentvalue"]["prefix"] == "step "
+    info = {"case": "small", "first_minute": 1, "last_minute": 12, "step_minutes": 15.0}
+    header = day_report_html(comparison, problem, dated, run_info=info).split("<script")[0]
+    assert "<b>first step</b>1" in header and "<b>last step</b>12" in header
+    assert "first minute" not in header
 
 
 def test_panels_show_the_error_to_the_dc_opf_and_the_demand(small) -> None:
@@ -358,6 +364,15 @@ def test_voltages_colour_the_buses(small) -> None:
     first, last = builder.updates(0)[index], builder.updates(MINUTES - 1)[index]
     assert first["customdata"] == [0.95, 1.0] and last["customdata"] == [1.0, 1.0]
     assert first["marker"]["color"][0] != last["marker"]["color"][0]
+
+
+def test_the_elv_map_is_drawn_on_its_own_coordinates() -> None:
+    """As the static figures draw it: the ELV puts a few of its 906 buses on one spot, which
+    must not turn the map into a tree layout (that one read upside down against them)."""
+    from popdispatch.feeder.cases import ieee_elv
+
+    feeder = ieee_elv()
+    pd.testing.assert_frame_equal(bus_coordinates(feeder), feeder.buses[["x", "y"]].astype(float))
 
 
 def test_a_feeder_without_coordinates_gets_a_layered_layout() -> None:
@@ -498,6 +513,58 @@ def test_play_runs_through_the_frames(browser, small, tmp_path) -> None:
     page.wait_for_timeout(300)
     state = page.evaluate(MAP_STATE)
     assert state["cursor"] == float(state["title"].split()[1])  # the panels kept up
+    assert page.errors == []
+
+
+BUS_COLOURS = """() => {
+  const map = document.getElementById('popdispatch-map');
+  const i = map.data.findIndex(t => t.name === 'bus voltage');
+  const node = [...map.querySelectorAll('.scatterlayer .trace')]
+      .find(t => t.__data__ && t.__data__[0].trace.index === i);
+  const bar = [...map.querySelectorAll('.colorbar')]
+      .find(c => c.querySelector('.cbtitle').textContent.startsWith('voltage'));
+  const gradient = document.getElementById(
+      bar.querySelector('rect.cbfill').style.fill.match(/#([^"')]+)/)[1]);
+  return {
+    buses: map.data[i].text, fills: [...node.querySelectorAll('path.point')]
+        .map(p => p.style.fill.match(/\\d+/g).map(Number)),
+    cmin: map._fullData[i].marker.cmin, cmax: map._fullData[i].marker.cmax,
+    from_bottom: gradient.getAttribute('y1') === '1' && gradient.getAttribute('y2') === '0',
+    stops: [...gradient.querySelectorAll('stop')].map(s => [parseFloat(s.getAttribute('offset')),
+        s.getAttribute('stop-color').match(/\\d+/g).map(Number)]),
+  };
+}"""
+
+
+def colour_bar_at(stops: list, fraction: float) -> np.ndarray:
+    """The colour bar's colour at ``fraction`` (0 = its cmin end) from its gradient's stops
+    (offsets in percent, RGB), interpolated as the browser draws it."""
+    offsets = np.array([offset for offset, _ in stops]) / 100.0
+    rgb = np.array([colour for _, colour in stops], dtype=float)
+    return np.array([np.interp(fraction, offsets, rgb[:, c]) for c in range(3)])
+
+
+def test_a_bus_shows_the_colour_the_colour_bar_gives_its_voltage(browser, small, tmp_path):
+    """Bus 2 at 0.93 p.u., bus 5 at 1.0 and bus 4 at 1.04: each marker as drawn has the colour
+    the drawn colour bar shows at that voltage (the markers once ran red-low while the bar
+    read red-high), the low bus blue and the high one red (docs/report.md)."""
+    problem, profiles, comparison = small
+    volts = {2: 0.93, 5: 1.0, 4: 1.04}
+    voltages = pd.DataFrame(volts, index=np.arange(1, MINUTES + 1))
+    path = write_day_html(tmp_path / "volts.html", comparison, problem, profiles,
+                          voltages_pu=voltages)  # fmt: skip
+    page = open_report(browser, path)
+    drawn = page.evaluate(BUS_COLOURS)
+    assert drawn["from_bottom"]  # offset 0 (cmin) at the bar's bottom
+    assert drawn["cmin"] <= 0.93 and drawn["cmax"] >= 1.04
+    for name, fill in zip(drawn["buses"], drawn["fills"], strict=True):
+        volt = volts[int(name.split()[1])]
+        fraction = (volt - drawn["cmin"]) / (drawn["cmax"] - drawn["cmin"])
+        np.testing.assert_allclose(fill, colour_bar_at(drawn["stops"], fraction), atol=3.0,
+                                   err_msg=name)  # fmt: skip
+    low = drawn["fills"][drawn["buses"].index("bus 2")]
+    high = drawn["fills"][drawn["buses"].index("bus 4")]
+    assert low[2] > 2 * low[0] and high[0] > high[2]  # blue low, red high
     assert page.errors == []
 
 

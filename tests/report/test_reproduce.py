@@ -133,6 +133,21 @@ def test_report_table_carries_paper_ours_and_dc_opf(reproduction):
     assert all(r.count(" | ") == 3 for r in rows)  # no stray column separators
 
 
+def test_every_figure_entry_of_the_report_has_a_title_and_no_issue_number(reproduction):
+    from popdispatch.report.markdown import FIGURES
+
+    summary = rp.reproduction_summary(reproduction)
+    assert rp.VOLTAGE_FIGURE in FIGURES
+    report = reproduction_report(summary, list(FIGURES))
+    entries = [line for line in report.splitlines() if "`figures/" in line]
+    assert len(entries) == 7
+    for line in entries:
+        assert not line.startswith("- fig"), line  # a title, not the file's stem
+    if summary["voltage"] is not None:
+        report += rp.voltage_markdown(summary["voltage"])
+    assert "issue" not in report.lower()
+
+
 def test_every_figure_is_written_as_png_and_pdf(reproduction, tmp_path):
     with staged_folder(tmp_path / "out") as folder:
         stems = rp.make_figures(reproduction, folder, Progress(quiet=True))

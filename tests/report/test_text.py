@@ -61,4 +61,4 @@ def test_infeasible_opf_text_has_no_table_of_unknowns():
     }  # fmt: skip
     text = opf_text(summary)
     assert "p_kw" not in text and "nan" not in text.lower()
-    assert "infeasible (no dispatch meets" in text and "limits: 505:666=0 kW" in text
+    assert "infeasible: no dispatch meets" in text and "limits: 505:666=0 kW" in text

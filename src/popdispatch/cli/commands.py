@@ -51,6 +51,7 @@ from popdispatch.report.text import (
     infeasible_day_message,
     infeasible_minute_message,
     opf_text,
+    reproduce_text,
     snapshot_text,
 )
 
@@ -264,9 +265,7 @@ def reproduce(profiles, out, mode, minutes, html, as_json, quiet) -> None:
     rep = run_reproduction(day_profiles, settings, span, progress)
     with staged_folder(out) as folder:
         summary = write_reproduction(rep, folder, progress, day_profiles if html else None)
-    progress.note(f"wrote {out}/report.md, summary.json and figures/")
-    if as_json:
-        click.echo(json_text(summary), nl=False)
+    click.echo(json_text(summary) if as_json else reproduce_text(out, html), nl=not as_json)
 
 
 @cli.command(short_help="One minute as a MATPOWER or pandapower case.")

@@ -13,9 +13,13 @@ from typing import NamedTuple
 import click
 
 from popdispatch.constants import MINUTES_PER_DAY
-from popdispatch.report.output import check_writable
+from popdispatch.report.output import check_writable, missing_folder
 
 Limit = tuple[int, int, float]
+
+#: The largest line limit ``--limit`` takes, kW (10 GW, as a fleet's powers: ``runs.
+#: FLEET_RANGES``); an unlimited line is one without a ``--limit``.
+MAX_LIMIT_KW = 1e7
 
 
 class LimitType(click.ParamType):
@@ -33,6 +37,9 @@ class LimitType(click.ParamType):
         a, b, kw = int(match[1]), int(match[2]), _float(match[3])
         if kw is None or kw < 0:
             self.fail(f"{value!r}: limit {match[3]!r} is not a finite number >= 0 kW", param, ctx)
+        if kw > MAX_LIMIT_KW:
+            self.fail(f"{value!r}: limit {kw:g} kW is above {MAX_LIMIT_KW:g} kW (10 GW); leave "
+                      "a line unlimited by giving no --limit for it", param, ctx)  # fmt: skip
         if a == b:
             self.fail(f"{value!r}: buses A and B are the same; no line between them", param, ctx)
         return a, b, kw
@@ -416,14 +423,14 @@ def settings_from(
 
 
 def check_out(out: Path | None) -> None:
-    """Usage error (exit 2) before any work if ``--out`` cannot be created where it is asked."""
-    if out is not None and not out.absolute().parent.is_dir():
-        raise click.BadParameter(
-            f"cannot write {out}: folder {out.absolute().parent} does not exist",
-            param_hint="'--out'",
-        )
-    if out is not None:
-        check_writable(out)  # read-only or forbidden: one line, exit 1, before any work
+    """Usage error (exit 2) before any work if ``--out`` cannot be created where it is asked
+    (its folder missing, or a part of its path a file)."""
+    if out is None:
+        return
+    missing = missing_folder(out)
+    if missing is not None:
+        raise click.BadParameter(f"cannot write {out}: {missing}", param_hint="'--out'")
+    check_writable(out)  # read-only, forbidden or refused: one line, exit 1, before any work
 
 
 def refuse_opendss(ctx: click.Context, param: click.Parameter, value) -> None:

@@ -139,28 +139,57 @@ def _main(argv: Sequence[str] | None) -> int:
 
     try:
         code = cli.main(args=argv, prog_name="popdispatch", standalone_mode=False)
-    except OptionError as exc:
-        where = f" {exc.option}" if exc.option else ""
-        click.echo(f"popdispatch: error: invalid value for{where}: {_one_line(str(exc))}", err=True)
-        return EXIT_USAGE
-    except click.UsageError as exc:
-        where = exc.ctx.command_path if exc.ctx else "popdispatch"
-        click.echo(f"{where}: error: {_one_line(exc.format_message())}", err=True)
-        return EXIT_USAGE
-    except click.ClickException as exc:
-        click.echo(f"popdispatch: error: {_one_line(exc.format_message())}", err=True)
-        return exc.exit_code
     except (click.Abort, KeyboardInterrupt):
-        click.echo("popdispatch: interrupted; no output written", err=True)
+        _error("interrupted; no output written")
         return EXIT_INTERRUPTED
-    except (Failure, PopdispatchError, ValueError, OSError) as exc:
-        if debug:
+    except Exception as exc:
+        if interrupt.fired and not debug:
+            _error("interrupted; no output written")
+            return EXIT_INTERRUPTED
+        code, message = _problem(exc)
+        if debug and code == EXIT_PROBLEM:
             raise
-        click.echo(f"popdispatch: error: {_one_line(str(exc))}", err=True)
-        return EXIT_PROBLEM
-    except Exception:
-        if not interrupt.fired or debug:
-            raise
-        click.echo("popdispatch: interrupted; no output written", err=True)
-        return EXIT_INTERRUPTED
+        _error(message)
+        return code
     return code if isinstance(code, int) else 0
+
+
+def _error(message: str) -> None:
+    """The one line every error prints on stderr: ``popdispatch: error: <message>``."""
+    click.echo(f"popdispatch: error: {_one_line(message)}", err=True)
+
+
+def _problem(exc: Exception) -> tuple[int, str]:
+    """``(exit code, message)`` of an exception: bad usage (exit 2) names the option; a
+    problem (exit 1) says what failed; anything unforeseen says it is a bug."""
+    if isinstance(exc, OptionError):
+        where = f" {exc.option}" if exc.option else ""
+        return EXIT_USAGE, f"invalid value for{where}: {exc}"
+    if isinstance(exc, click.BadParameter) and not isinstance(exc, click.MissingParameter):
+        return EXIT_USAGE, f"invalid value for {_option_of(exc)}: {exc.message}"
+    if isinstance(exc, click.UsageError):
+        return EXIT_USAGE, _lower_first(exc.format_message())
+    if isinstance(exc, click.ClickException):
+        return exc.exit_code, _lower_first(exc.format_message())
+    if isinstance(exc, Failure | PopdispatchError | ValueError | OSError):
+        return EXIT_PROBLEM, str(exc)
+    if isinstance(exc, RuntimeError):  # a solver that gave up (Clarabel, HiGHS)
+        return EXIT_PROBLEM, f"{exc} (a solver failed; check the numbers of the fleet and limits)"
+    return EXIT_PROBLEM, (
+        f"unexpected {type(exc).__name__}: {exc} (a bug in popdispatch: POPDISPATCH_DEBUG=1 "
+        "shows the traceback)"
+    )
+
+
+def _option_of(exc: click.BadParameter) -> str:
+    """The option a :class:`click.BadParameter` is about, as the user typed it (``--minute``)."""
+    hint = exc.param_hint
+    if isinstance(hint, list | tuple):
+        hint = hint[0] if hint else None
+    if hint is None and exc.param is not None:
+        hint = " / ".join(getattr(exc.param, "opts", None) or [exc.param.name])
+    return str(hint or "an option").replace("'", "").replace('"', "")
+
+
+def _lower_first(text: str) -> str:
+    return text[:1].lower() + text[1:]

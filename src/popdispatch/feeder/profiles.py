@@ -12,6 +12,7 @@ of day (minute 1 starts at 00:00, minute 566 at 09:25).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -93,8 +94,16 @@ class Timeline:
         return position + 1
 
     def _parse(self, text: str, option: str):
+        dated = not isinstance(self.times, pd.TimedeltaIndex)
+        if dated and re.fullmatch(r"\s*\d{1,2}:\d{2}(:\d{2})?\s*", str(text)):
+            first = self.labels([1])[0][:10]
+            raise OptionError(
+                f"{text!r} has no date, and this series is dated (from {first}): give the day "
+                f"too, e.g. {first}T{str(text).strip()}",
+                option,
+            )
         try:
-            if isinstance(self.times, pd.TimedeltaIndex):
+            if not dated:
                 clock = str(text).strip()
                 return pd.Timedelta(clock + (":00" if clock.count(":") == 1 else ""))
             when = pd.Timestamp(text)

@@ -224,7 +224,7 @@ def _load(net_or_path):
         try:
             net = pp.from_json(str(path))
         except Exception as exc:  # pandapower raises many kinds
-            raise FeederError(f"cannot read pandapower JSON {path}: {exc}") from None
+            raise FeederError(f"cannot read pandapower JSON {path}: {_why(path, exc)}") from None
         default = path.stem
     else:
         net = net_or_path
@@ -235,6 +235,21 @@ def _load(net_or_path):
     if isinstance(own, str) and own.strip():
         default = own.strip()
     return net, default
+
+
+def _why(path: Path, exc: Exception) -> str:
+    """What is wrong with a file pandapower cannot read: JSON that is no pandapower net (such
+    as ``{}``: pandapower's own message is then about its internals), else its message."""
+    import json
+
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return str(exc)
+    if not isinstance(data, dict) or not ({"bus", "_object"} & set(data)):
+        return ("the JSON holds no pandapower network (pandapower.to_json writes one: its "
+                "bus, line, load, ... tables)")  # fmt: skip
+    return str(exc)
 
 
 def _table(net, name: str) -> pd.DataFrame | None:

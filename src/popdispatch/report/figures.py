@@ -139,20 +139,23 @@ def _draw_network(ax, reduced: ReducedFeeder, widths: np.ndarray, colors) -> Non
     colors = np.asarray(colors, dtype=object)
     ax.add_collection(
         LineCollection(
-            segments[kept], colors=list(colors[which[kept]]), linewidths=widths[which[kept]]
+            segments[kept], colors=list(colors[which[kept]]), linewidths=widths[which[kept]],
+            capstyle="round", joinstyle="round",  # wide lines join without gaps
         )
-    )
+    )  # fmt: skip
     ax.set_aspect("equal")
     ax.autoscale_view()
+    ax.margins(0.04)
     ax.grid(False)
     ax.set_xticks([])
     ax.set_yticks([])
 
 
 def _draw_loads_and_generators(
-    ax, reduced: ReducedFeeder, labels: dict[str, str], offset: tuple[float, float] = (5, 4)
+    ax, reduced: ReducedFeeder, labels: dict[str, str], offset: float = 5.0
 ) -> None:
-    """Loads, the source and the generators (labelled at ``offset`` points from the marker)."""
+    """Loads, the source and the generators, each labelled ``offset`` points from its marker
+    towards the middle of the axes' current view (so no label runs over the frame)."""
     original = reduced.original
     load_xy = original.buses.loc[original.loads.bus, ["x", "y"]].to_numpy()
     ax.scatter(
@@ -172,14 +175,16 @@ def _draw_loads_and_generators(
         zorder=5,
         label="generator",
     )
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
     for name, (x, y) in zip(gens.index, gen_xy, strict=True):
+        right, up = x <= (x0 + x1) / 2, y <= (y0 + y1) / 2
         ax.annotate(
             labels.get(name, name),
             (x, y),
-            xytext=offset,
+            xytext=(offset if right else -offset, offset if up else -offset),
             textcoords="offset points",
-            ha="left" if offset[0] >= 0 else "right",
-            va="bottom" if offset[1] >= 0 else "top",
+            ha="left" if right else "right",
+            va="bottom" if up else "top",
             fontsize=7,
             zorder=6,
             bbox=LABEL_BOX,
@@ -241,14 +246,17 @@ def congestion_detection_figure(
     is_limited = np.isin(np.arange(reduced.n_lines), problem.lines)
     colors = np.where(_subtree_lines(reduced, line) == child_sends, PENALTY, INCENTIVE)
     colors = np.where(is_limited, "black", colors)
-    fig = Figure(figsize=(DOUBLE, 5.8), layout="constrained")
-    grid = fig.add_gridspec(2, 2, height_ratios=[4.0, 1.4])
+    # square maps side by side: the map row as tall as a column is wide, the legend and the
+    # caption right under it (a taller row leaves a band of white around square maps)
+    fig = Figure(figsize=(DOUBLE, 5.0), layout="constrained")
+    grid = fig.add_gridspec(2, 2, height_ratios=[3.6, 1.25])
     overview, zoom, foot = (fig.add_subplot(g) for g in (grid[0, 0], grid[0, 1], grid[1, :]))
     labels = {n: f"{n} {s:+.1f}" for n, s in zip(problem.generators, signal, strict=True)}
-    for ax, offset in ((overview, (5, 4)), (zoom, (-7, -7))):
+    for ax in (overview, zoom):
         _draw_network(ax, reduced, np.where(is_limited, 3.0, 0.9), colors)
-        _draw_loads_and_generators(ax, reduced, labels, offset)
     _zoom_to(zoom, problem.feeder.original.buses, _path_buses(problem))
+    for ax, offset in ((overview, 6.0), (zoom, 10.0)):  # the zoom's clear of its controllers
+        _draw_loads_and_generators(ax, reduced, labels, offset)
     controllers = _draw_controllers(zoom, problem, line, limited[k], C)
     limit_kw = problem.limit[k] * KW_PER_MW
     overview.plot([], [], color="black", lw=3, label=f"limited path (U = {limit_kw:g} kW)")
@@ -391,7 +399,11 @@ def base_day_figure(
     run = result.run
     starts, hours = step_spans_h(run.minutes, timeline)
     colors = generator_colors(run.generators)
-    fig, axes = new_figure(DOUBLE, 4.4, nrows=2, ncols=3, sharex=True)
+    n = len(run.generators)
+    ncols = 2 if n == 4 else min(n, 3)  # four as 2 x 2, not 3 + 1
+    nrows = -(-n // ncols)
+    fig, axes = new_figure(DOUBLE, 0.7 + 1.85 * nrows, nrows=nrows, ncols=ncols, sharex=True)
+    bottoms = _panels_for(axes, n)
     opf = result.opf_kw
     online = np.asarray(run.online, dtype=bool).reshape(len(hours), -1)
     for k, (ax, name) in enumerate(zip(axes.flat, run.generators, strict=False)):
@@ -402,7 +414,7 @@ def base_day_figure(
         ax.set_title(f"{name} (bus {buses[k]})" + ("" if online[:, k].all() else ", outage"))
         ax.set_ylabel("output, kW")
     _hours_axis(axes[0, 0], starts, hours)
-    for ax in axes[-1]:
+    for ax in bottoms:
         ax.set_xlabel(_time_label(starts, timeline))
     handles = [
         Line2D([], [], color="grey", label="dynamics (colour per generator)"),
@@ -418,6 +430,21 @@ def base_day_figure(
         fontsize=9,
     )
     return fig
+
+
+def _panels_for(axes: np.ndarray, n: int) -> list:
+    """Keep the first ``n`` panels of a grid (row by row), remove the others; returns the
+    lowest kept panel of each column, which shows the shared time axis."""
+    nrows, ncols = axes.shape
+    for ax in axes.flat[n:]:
+        ax.remove()
+    bottoms = []
+    for col in range(ncols):
+        rows = [r for r in range(nrows) if r * ncols + col < n]
+        ax = axes[rows[-1], col]
+        ax.tick_params(labelbottom=True)
+        bottoms.append(ax)
+    return bottoms
 
 
 def _hours_axis(ax, starts: np.ndarray, ends: np.ndarray) -> None:
@@ -600,26 +627,32 @@ def voltage_profile_figure(
     """The ``voltage`` scenario: the AC voltage of every bus (``profile_pu``: index bus number,
     one column per dispatch, p.u.; a NaN row breaks the line between two branches) with the
     lower limit, and each dispatch's set points (``setpoints_kw``: index generator, same
-    columns, kW) with its cost (``costs``, EUR/h). ``branches``: the x axis' label."""
-    fig, axes = new_figure(DOUBLE, 2.6, ncols=2, width_ratios=[1.6, 1.0])
+    columns, kW; linear axis, each bar labelled with its value). One legend under both panels
+    names each dispatch (one colour in both) with its cost (``costs``, EUR/h). ``branches``:
+    the profile's x axis label."""
+    fig, axes = new_figure(DOUBLE, 3.1, ncols=2, width_ratios=[1.6, 1.0])
     ax, bars = axes[0]
     styles = ["-o", "-s", "--^", ":x"]
+    colors = [f"C{k}" for k in range(len(profile_pu.columns))]
     for k, column in enumerate(profile_pu.columns):
-        ax.plot(profile_pu.index, profile_pu[column], styles[k % 4], ms=2.5, label=column)
-    ax.axhline(vmin_pu, color=PENALTY, lw=0.8, ls=":", label=f"vmin {vmin_pu:g} p.u.")
+        ax.plot(profile_pu.index, profile_pu[column], styles[k % 4], color=colors[k], ms=2.5,
+                label=f"{column}: {costs[column]:.3f} EUR/h")  # fmt: skip
+    ax.axhline(vmin_pu, color="black", lw=0.8, ls=(0, (6, 3)), label=f"vmin {vmin_pu:g} p.u.")
     ax.set_xlabel(branches)
     ax.set_ylabel("AC voltage (p.u.)")
     ax.set_title(title)
-    ax.legend(loc="lower left")
     width = 0.8 / max(len(setpoints_kw.columns), 1)
     positions = np.arange(len(setpoints_kw.index))
     for k, column in enumerate(setpoints_kw.columns):
-        label = f"{column}: {costs[column]:.3f} EUR/h"
         offset = (k - (len(setpoints_kw.columns) - 1) / 2) * width
-        bars.bar(positions + offset, setpoints_kw[column], width, label=label)
+        values = [v if abs(v) >= 0.5 else 0.0 for v in setpoints_kw[column]]  # no "-0"
+        drawn = bars.bar(positions + offset, values, width, color=colors[k])
+        bars.bar_label(drawn, labels=[f"{v:.0f}" for v in values], rotation=90, padding=2,
+                       fontsize=5.5)  # fmt: skip
     bars.set_xticks(positions, setpoints_kw.index)
-    bars.set_yscale("symlog", linthresh=100.0)
     bars.set_ylabel("set point (kW)")
-    bars.set_title("set points; cost with the losses")
-    bars.legend(loc="upper right")
+    bars.set_ylim(0, 1.18 * float(np.nanmax(setpoints_kw.to_numpy())))  # room for the labels
+    bars.set_title("set points of each dispatch")
+    fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncols=3,
+               title="each dispatch and its cost with the AC losses")  # fmt: skip
     return fig

@@ -28,6 +28,8 @@ FIGURES = {
     "fig4_base_day": "Generator output over the base day (paper fig. 4)",
     "fig5_congestion_iterations": "Congestion scenario per iteration (paper fig. 5)",
     "fig6_extinction": "Extinction: replicator against Smith (section II-C)",
+    "fig7_voltage_profile": "Voltage limits on case33bw: AC voltage profile and set points of "
+    "each dispatch (beyond the paper)",
 }
 
 

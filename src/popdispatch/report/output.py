@@ -32,7 +32,7 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     or interruption. Returns ``path``.
     """
     path = Path(path)
-    with _output_errors(path):
+    with _output_errors(path, creating=True):
         fd, tmp_name = tempfile.mkstemp(
             prefix=f".{path.name}.", suffix=".tmp" + path.suffix, dir=path.parent
         )
@@ -149,11 +149,25 @@ NOT_WRITABLE = {
 }
 
 
+def missing_folder(out: str | Path) -> str | None:
+    """Why ``out``'s folder is not there (``folder F does not exist``, or ``F is a file, not a
+    folder`` for the first part of the path that is a file), None where it is."""
+    parent = Path(out).absolute().parent
+    if parent.is_dir():
+        return None
+    for part in (parent, *parent.parents):
+        if part.exists():
+            if not part.is_dir():
+                return f"{part} is a file, not a folder"
+            break
+    return f"folder {parent} does not exist"
+
+
 def check_target(out: Path) -> None:
     """Raise :class:`OutputError` unless ``out`` is, or can become, a folder."""
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise OutputError(f"cannot write to {out}: folder {parent} does not exist")
+    missing = missing_folder(out)
+    if missing is not None:
+        raise OutputError(f"cannot write to {out}: {missing}")
     if out.exists() and not out.is_dir():
         raise OutputError(f"cannot write to {out}: it exists and is not a folder")
 
@@ -175,21 +189,27 @@ def _make_staging(out: Path) -> Path:
         where, prefix = out, ".popdispatch-tmp-"
     else:
         where, prefix = (out.parent if str(out.parent) else Path(".")), f".{out.name}.tmp-"
-    with _output_errors(out):
+    with _output_errors(out, creating=True):
         return Path(tempfile.mkdtemp(prefix=prefix, dir=where))
 
 
 @contextlib.contextmanager
-def _output_errors(out: Path) -> Iterator[None]:
-    """Turn "cannot write here" errors into one-line :class:`OutputError` naming ``out``."""
+def _output_errors(out: Path, creating: bool = False) -> Iterator[None]:
+    """Turn "cannot write here" errors into one-line :class:`OutputError` naming ``out`` and
+    the reason, never a temporary name. ``creating``: the block only creates the staging file
+    or folder, so any error there means the place takes no new files (a pseudo file system
+    such as ``/proc`` says "no such file or directory"); elsewhere other errors pass."""
     try:
         yield
     except OutputError:
         raise
     except OSError as exc:
         reason = NOT_WRITABLE.get(exc.errno)
-        if reason is None:
+        if reason is None and not creating:
             raise
+        if reason is None:
+            folder = out if out.is_dir() else (out.parent if str(out.parent) else Path("."))
+            reason = f"{folder} does not take new files ({(exc.strerror or str(exc)).lower()})"
         raise OutputError(exc.errno, f"cannot write to {out}: {reason}") from exc
 
 

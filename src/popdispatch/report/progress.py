@@ -123,28 +123,38 @@ class Progress:
 
 class _DelayedBar:
     """A tqdm bar made only once ``DELAY_S`` has passed since the bar was asked for (tqdm's own
-    ``delay`` needs tqdm imported first); it then starts from the count and the time so far."""
+    ``delay`` needs tqdm imported first); it then starts from the count and the time so far,
+    its rate and remaining time counted from the first unit. Where stderr is not a terminal
+    (a log) no bar is drawn: one line with the count and the time is written at the end of a
+    loop that took over ``DELAY_S``."""
 
     def __init__(self, description: str, total: int | None, options: dict) -> None:
         self.description, self.total, self.options = description, total, options
         self.start = time.time()  # tqdm's clock
         self.count = 0
         self.bar = None
+        self.terminal = sys.stderr.isatty()
 
     def advance(self, *_) -> None:
         """One unit done."""
         self.count += 1
         if self.bar is not None:
             self.bar.update(1)
-        elif time.time() - self.start > DELAY_S:
-            options = {**self.options, "delay": 0.0}
+        elif self.terminal and time.time() - self.start > DELAY_S:
+            # delay > 0: tqdm draws nothing before its start time and count are set
+            options = {**self.options, "delay": 1e-9}
             self.bar = tqdm(desc=self.description, total=self.total, initial=self.count, **options)
-            self.bar.start_t = self.start  # elapsed time and rate from the first unit
+            self.bar.start_t = self.start  # elapsed time from the first unit
+            self.bar.initial = 0  # and the rate over every unit
             self.bar.refresh()
 
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
+        elapsed = time.time() - self.start
+        if not self.terminal and elapsed > DELAY_S:
+            of = "" if self.total is None else f"/{self.total}"
+            _write(f"{self.description}: {self.count}{of} in {elapsed:.1f} s")
 
 
 def _write(line: str) -> None:

@@ -3,13 +3,13 @@
 1. minute 566 without limits and the whole base day (Smith, no line limits) against the DC-OPF,
 2. the congestion scenario (minute 566, the 505-666 path limited to 28 kW),
 3. the extinction comparison (replicator and Smith, generator G114 starting at zero share),
-4. the ``voltage`` scenario on case33bw (issue 14; with power-grid-model installed): the DC
-   exact dispatch, the voltage-aware dispatch and pandapower's AC OPF, checked in AC.
+4. beyond the paper, the ``voltage`` scenario on case33bw (with power-grid-model installed):
+   the DC exact dispatch, the voltage-aware dispatch and pandapower's AC OPF, checked in AC.
 
 Minute 566 always uses the official loads (pandapower's snapshot); the day uses the profiles it
 is given. On a machine with more than one core the voltage scenario runs in a second process
-while the others run (issue 13: on the first run after installing, both processes compile
-their own kernels at once; ``benchmarks/bench_first_run.py --commands reproduce``).
+while the others run (on the first run after installing, both processes compile their own
+kernels at once; ``benchmarks/bench_first_run.py --commands reproduce``).
 Outputs: ``figures/*.png|pdf``, ``base_day.csv``, ``congestion.csv``, ``extinction.csv``,
 ``voltage.csv`` (bus voltages of the voltage scenario), ``summary.json`` and ``report.md``.
 """
@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -77,12 +78,13 @@ class Reproduction:
 def voltage_in_background(settings: RunSettings, parallel: bool) -> Iterator[AsyncResult | None]:
     """The voltage scenario started in a second process (spawned: a fresh interpreter, no
     inherited threads or compiler state) when ``parallel``, as a pending result; else None
-    (run it in this process). The process is terminated when the block ends, so an error or
-    Ctrl-C here does not wait for it."""
+    (run it in this process). The process ignores Ctrl-C (a terminal sends it to every
+    process of the command; this one's would print its own traceback) and is terminated when
+    the block ends, so an error or Ctrl-C here does not wait for it."""
     pool = None
     if parallel:
         try:
-            pool = multiprocessing.get_context("spawn").Pool(1)
+            pool = multiprocessing.get_context("spawn").Pool(1, initializer=_ignore_interrupts)
         except (OSError, ImportError):  # no process pool here (e.g. no POSIX semaphores)
             pool = None
     if pool is None:
@@ -90,6 +92,11 @@ def voltage_in_background(settings: RunSettings, parallel: bool) -> Iterator[Asy
         return
     with pool:
         yield pool.apply_async(voltage, (settings,))
+
+
+def _ignore_interrupts() -> None:
+    """A worker's initializer: SIGINT ignored (the command's own process reports it)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def run_reproduction(
@@ -331,12 +338,22 @@ def voltage_figure(result: VoltageResult):
     parent = {int(buses[c]) + 1: int(buses[p]) + 1 for c, p in enumerate(tree.parent) if p >= 0}
     starts = [b for b in profile.index if b in parent and parent[b] != b - 1]
     gaps = pd.DataFrame(np.nan, index=[b - 0.5 for b in starts], columns=profile.columns)
-    label = "bus (MATPOWER number; branches from " + ", ".join(
-        f"{parent[b]}: {b}-" for b in starts) + ")"  # fmt: skip
+    label = branch_label(list(profile.index), starts, parent)
     title = "case33bw: AC voltage profile of each dispatch"
     return figures.voltage_profile_figure(pd.concat([profile, gaps]).sort_index(), points,
                                           _ac_costs(result), result.problem.vmin_pu, title,
                                           label)  # fmt: skip
+
+
+def branch_label(buses: list[int], starts: list[int], parent: dict[int, int]) -> str:
+    """The profile's x label: which bus numbers are the main feeder and which each lateral,
+    e.g. ``bus (MATPOWER number): main feeder 1-18;`` over ``laterals 19-22 (from bus 2),
+    ...``."""
+    ends = [*(b - 1 for b in starts[1:]), max(buses)]
+    main = f"main feeder {min(buses)}-{starts[0] - 1}" if starts else "the feeder"
+    spans = zip(starts, ends, strict=True)
+    laterals = ", ".join(f"{a}-{b} (from bus {parent[a]})" for a, b in spans)
+    return f"bus (MATPOWER number): {main}" + (f";\nlaterals {laterals}" if starts else "")
 
 
 def voltage_summary(result: VoltageResult) -> dict:
@@ -386,7 +403,7 @@ def voltage_markdown(v: dict) -> str:
         for name, d in v["dispatches"].items()
     ]
     lines = [
-        "## Voltage limits: case33bw (issue 14, docs/voltage.md)",
+        "## Voltage limits: case33bw (beyond the paper; docs/voltage.md)",
         "",
         f"Source and four DGs, limits {v['vmin_pu']:g}-{v['vmax_pu']:g} p.u.; buses in MATPOWER "
         "numbering; cost with the AC losses bought at the source.",

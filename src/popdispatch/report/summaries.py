@@ -23,6 +23,7 @@ from popdispatch.feeder.profiles import Timeline, day_timeline
 from popdispatch.feeder.reduction import ReducedFeeder
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.opf import OpfResult
+from popdispatch.report.infeasibility import diagnose
 from popdispatch.scenarios import DayComparison, SnapshotComparison
 
 #: Set points closer than this to the DC-OPF count as "on the DC-OPF", kW.
@@ -44,6 +45,76 @@ def _limits(
             row["lines_on_path"] = len(problem.feeder.original.path_lines(a, b))
         rows.append(row)
     return rows
+
+
+#: A limited line counts as binding where the DC-OPF's flow is within this of its limit, kW.
+BINDING_KW = 1e-3
+
+
+def limits_in_force(
+    problem: DispatchProblem,
+    limits: Sequence[tuple[int, int, float]] = (),
+    opf_kw: np.ndarray | None = None,
+    minutes: Sequence[int] = (),
+) -> list[dict]:
+    """Every line limit the run applies, one row per limited line of the reduced feeder (the
+    problem's order): ``from_bus`` and ``to_bus`` (its key-node ends, as the source format
+    names them), ``limit_kw``, ``source`` (``"--limit"``: one of ``limits``, the path limits
+    given; ``"rating"``: the network's own rating of an original line, see the readers),
+    ``element`` (the option as given, ``A:B=KW``, or the rated original line's name) and
+    ``binding_minutes``: at how many of ``minutes`` (1-based) the DC-OPF set points
+    ``opf_kw`` (kW, one row per minute; NaN where infeasible) carry the line within
+    :data:`BINDING_KW` of its limit (null without them). A reduced line holds the tightest
+    limit of the original lines it merges; a ``--limit`` equal to a rating is named as the
+    ``--limit``."""
+    original = problem.feeder.original
+    rows = problem.feeder.lines.iloc[np.asarray(problem.lines, dtype=int)]
+    option_of = _limit_options(original, limits)
+    line_map = problem.feeder.line_map
+    merged_into = pd.Series(line_map.index).groupby(line_map.to_numpy()).agg(list)
+    original_kw = original.lines.limit_kw
+    ends = source_bus_ids(original, np.concatenate([rows.from_bus, rows.to_bus]))
+    binding = _binding_minutes(problem, opf_kw, minutes)
+    out = []
+    for k, (line, row) in enumerate(zip(problem.lines, rows.itertuples(), strict=True)):
+        tightest = [name for name in merged_into[line] if original_kw[name] == row.limit_kw]
+        options = [option_of[name] for name in tightest if name in option_of]
+        out.append({
+            "from_bus": ends[k], "to_bus": ends[len(rows) + k], "limit_kw": float(row.limit_kw),
+            "source": "--limit" if options else "rating",
+            "element": options[0] if options else str(tightest[0]),
+            "binding_minutes": None if binding is None else int(binding[k]),
+        })  # fmt: skip
+    return out
+
+
+def _binding_minutes(problem: DispatchProblem, opf_kw, minutes) -> np.ndarray | None:
+    """Per limited line, the minutes where the DC-OPF holds it at its limit (None: no OPF)."""
+    if opf_kw is None:
+        return None
+    p_mw = np.atleast_2d(np.asarray(opf_kw, dtype=float)) / KW_PER_MW
+    rows = np.asarray(minutes, dtype=np.int64) - 1
+    flows_kw = (problem.line_load_flow[rows] - p_mw @ problem.down.T) * KW_PER_MW
+    with np.errstate(invalid="ignore"):
+        at_limit = np.abs(flows_kw) >= problem.limit * KW_PER_MW - BINDING_KW
+    return at_limit.sum(axis=0)
+
+
+def _limit_options(original: Feeder, limits: Sequence[tuple[int, int, float]]) -> dict[str, str]:
+    """Original line name -> the ``--limit`` (``A:B=KW``) that sets its limit (the tightest
+    one where several cover it)."""
+    set_by: dict[str, tuple[float, str]] = {}
+    for a, b, kw in limits:
+        for name in original.path_lines(a, b):
+            if name not in set_by or kw < set_by[name][0]:
+                set_by[name] = (kw, f"{a}:{b}={kw:g}")
+    return {name: option for name, (_, option) in set_by.items()}
+
+
+def _why(problem: DispatchProblem, minute: int, opf: OpfResult, in_force: list[dict]):
+    """Why ``minute`` has no DC-OPF (:func:`~popdispatch.report.infeasibility.diagnose`);
+    ``None`` where it has one."""
+    return None if opf.status == "optimal" else diagnose(problem, minute, in_force)
 
 
 def setpoint_bounds_kw(problem: DispatchProblem, online: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -154,6 +225,7 @@ def opf_summary(
     8601, from ``timeline``, default a day of minutes)."""
     buses = generator_buses(problem)
     online = problem.online[opf.minute - 1]
+    in_force = limits_in_force(problem, limits, opf.p_kw, [opf.minute])
     return {
         "status": opf.status,
         "minute": opf.minute,
@@ -163,6 +235,8 @@ def opf_summary(
         "case": problem.feeder.original.name,
         "profile_source": problem.profile_source,
         "limits": _limits(limits, problem),
+        "limits_in_force": in_force,
+        "infeasibility": _why(problem, opf.minute, opf, in_force),
         "generators": [
             {"name": name, "bus": bus, "p_kw": _finite(p)}
             for name, bus, p in zip(problem.generators, buses, opf.p_kw, strict=True)
@@ -203,6 +277,7 @@ def snapshot_summary(
     outside = outside_limits(problem, run.setpoints_kw, online)
     error = result.max_abs_error_kw if opf.status == "optimal" else None
     cost = float(_cost(problem, run.setpoints_kw))
+    in_force = limits_in_force(problem, limits, opf.p_kw, [run.minute])
     return {
         "status": snapshot_status(result),
         "dynamics_status": run.status,
@@ -217,6 +292,8 @@ def snapshot_summary(
         "graph": settings.graph if isinstance(settings.graph, str) else "custom",
         "profile_source": run.profile_source,
         "limits": _limits(limits, problem),
+        "limits_in_force": in_force,
+        "infeasibility": _why(problem, run.minute, opf, in_force),
         "generators": _snapshot_generators(problem, run.setpoints_kw, opf.p_kw, online),
         "generators_outside_limits": list(problem.generators[outside]),
         "iterations": run.iterations,
@@ -342,6 +419,8 @@ def day_summary(
     settings = run.settings
     timeline = _timeline(problem, timeline)
     first, last = int(run.minutes[0]), int(run.minutes[-1])
+    in_force = limits_in_force(problem, limits, result.opf_kw, run.minutes)
+    bad = result.infeasible_minutes
     return {
         "status": day_status(result),
         "minutes": len(run.minutes),
@@ -361,8 +440,10 @@ def day_summary(
         "warm_start": settings.warm_start_policy,
         "graph": settings.graph if isinstance(settings.graph, str) else "custom",
         "limits": _limits(limits, problem),
+        "limits_in_force": in_force,
         "events": list(events),
-        "infeasible_minutes": result.infeasible_minutes,
+        "infeasible_minutes": bad,
+        "infeasibility": diagnose(problem, bad[0], in_force) if bad else None,
         "price_runaway_minutes": _runaway_minutes(run),
         "stalled_minutes": sorted(int(m) for m in getattr(run, "stall_reasons", {})),
         "converged_minutes": int(run.converged.sum()),

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-NO_DISPATCH = "infeasible (no dispatch meets the demand within the generator and line limits)"
 OUTSIDE_MARK = "*"
 
 
@@ -31,16 +30,36 @@ def minute_ranges(minutes: Sequence[int]) -> str:
     return ", ".join(parts)
 
 
-def limits_text(limits: Sequence[dict]) -> str:
-    """``limits: 505:666=28 kW (3 lines)`` for the ``--limit`` options applied, or ``none``."""
-    if not limits:
-        return "limits: none"
-    parts = []
+def limits_text(limits: Sequence[dict], in_force: Sequence[dict] = (), shown: int = 6) -> str:
+    """``limits: 505:666=28 kW (3 lines)`` for the ``--limit`` options applied, then the
+    network's own ratings in force (``in_force``: the ``limits_in_force`` rows; ``shown`` of
+    them named: those the DC-OPF holds at their limit first, then the tightest), or
+    ``none``."""
+    options = []
     for row in limits:
         count = row.get("lines_on_path")
         lines = "" if count is None else f" ({count} line{'s' if count != 1 else ''})"
-        parts.append(f"{row['from_bus']}:{row['to_bus']}={row['limit_kw']:g} kW{lines}")
-    return "limits: " + ", ".join(parts)
+        options.append(f"{row['from_bus']}:{row['to_bus']}={row['limit_kw']:g} kW{lines}")
+    parts = [", ".join(options)] if options else []
+    ratings = sorted((r for r in in_force if r["source"] == "rating"),
+                     key=lambda r: (-(r.get("binding_minutes") or 0), r["limit_kw"]))  # fmt: skip
+    if ratings:
+        named = ", ".join(
+            f"{r['from_bus']}-{r['to_bus']} {r['limit_kw']:.6g} kW ({r['element']})"
+            + _binding(r.get("binding_minutes"))
+            for r in ratings[:shown]
+        )
+        more = (f" and {len(ratings) - shown} more (--json: limits_in_force)"
+                if len(ratings) > shown else "")  # fmt: skip
+        count = f"{len(ratings)} line{'s' if len(ratings) != 1 else ''}"
+        parts.append(f"the network's ratings on {count}: {named}{more}")
+    return "limits: " + ("; ".join(parts) if parts else "none")
+
+
+def _binding(minutes: int | None) -> str:
+    if not minutes:
+        return ""
+    return " binding" if minutes == 1 else f" binding at {minutes} minutes"
 
 
 def events_text(events: Sequence[str]) -> str:
@@ -96,7 +115,8 @@ def _inputs(s: dict) -> str:
     """Feeder, profiles and limits lines shared by every minute and day text."""
     case = s.get("case")
     return (f"feeder: {case}\n" if case else "") + (
-        f"profiles: {s['profile_source']}\n{limits_text(s.get('limits', []))}"
+        f"profiles: {s['profile_source']}\n"
+        f"{limits_text(s.get('limits', []), s.get('limits_in_force') or [])}"
     )
 
 
@@ -113,7 +133,7 @@ def opf_text(summary: dict) -> str:
     if s.get("capacity_kw") is not None:
         demand += f", online capacity {s['capacity_kw']:.3f} kW"
     if s["status"] != "optimal":
-        return f"{head}{NO_DISPATCH}\n{demand}\n{_inputs(s)}"
+        return f"{head}{_no_dispatch(s)}\n{demand}\n{_inputs(s)}"
     price = s.get("marginal_price_eur_per_mwh")
     return (
         f"{head}{s['status']}; {demand}; cost {_fmt(s['cost'], ' EUR/h', 6)}"
@@ -134,15 +154,41 @@ def _run_line(s: dict) -> str:
             f"away from the DC-OPF: {s.get('stall_reason')}"
         )
     elif s.get("dynamics_status") == "infeasible":
-        run = f"stopped at iteration {total}: line prices ran away (no feasible rest point)"
+        run = f"stopped at iteration {total}: {_priced(s)} prices ran away (no feasible rest point)"
     else:
         run = f"not converged within {total} iterations"
-    first = s["first_congestion_iteration"]
-    congestion = "no congestion" if first is None else f"first congestion at iteration {first}"
     return (
-        f"{run}; {congestion}; engine {s['wall_seconds']:.3f} s, "
+        f"{run}{_first_signal(s)}; engine {s['wall_seconds']:.3f} s, "
         f"whole command {s['command_seconds']:.1f} s"
     )
+
+
+def _priced(s: dict) -> str:
+    """What carries prices in a run: ``line``, ``voltage`` or ``line and voltage``."""
+    lines = bool(s.get("limits_in_force") or s.get("limits"))
+    if s.get("mode") != "voltage":
+        return "line"
+    return "line and voltage" if lines else "voltage"
+
+
+def _first_signal(s: dict) -> str:
+    """``; first congestion at iteration K`` (``; no congestion``) where lines are limited; in
+    voltage mode the first price of a voltage limit (or a line); nothing without limits."""
+    first = s["first_congestion_iteration"]
+    if s.get("mode") == "voltage":
+        what = f"first {_priced(s)} price"
+        return f"; no {_priced(s)} price" if first is None else f"; {what} at iteration {first}"
+    if not (s.get("limits_in_force") or s.get("limits")):
+        return ""
+    return "; no congestion" if first is None else f"; first congestion at iteration {first}"
+
+
+def _no_dispatch(s: dict) -> str:
+    """``infeasible: <why>`` (:func:`popdispatch.report.infeasibility.cause_text`)."""
+    from popdispatch.report.infeasibility import cause_text, ratings_hint
+
+    why = s.get("infeasibility")
+    return f"infeasible: {cause_text(why)}{ratings_hint(why)}"
 
 
 def ac_text(ac: dict | None) -> str:
@@ -216,7 +262,7 @@ def _snapshot_text(s: dict) -> str:
     dynamics = f"status: {s['status']} ({_run_line(s)})\n"
     if s["status"] == "infeasible":
         return (
-            head + f"DC-OPF: {NO_DISPATCH}\n" + dynamics
+            head + f"DC-OPF: {_no_dispatch(s)}\n" + dynamics
             + generator_lines(rows, ["setpoint_kw", "pmax_kw"]) + tail
             + f"\nmax overflow = {s['max_overflow_kw']:.3f} kW; cost of the set points "
             f"{s['cost']:.6f} EUR/h (no DC-OPF to compare with)"
@@ -261,11 +307,13 @@ def _day_notes(s: dict) -> list[str]:
     infeasible = s["infeasible_minutes"]
     if infeasible:
         count = len(infeasible)
+        why = s.get("infeasibility")
+        first = f"\n  at minute {why['minute']}: {_no_dispatch(s)}" if why else ""
         notes.append(
             f"DC-OPF infeasible at {count} minute{'s' if count != 1 else ''}: "
             f"{minute_ranges(infeasible)} (no DC-OPF values there; the dynamics ran them: "
             f"all {s['minutes']} minutes cost {s['cost_all_minutes']:.5f} EUR; --out writes "
-            "their set points and overflow to day.csv)"
+            f"their set points and overflow to day.csv){first}"
         )
     stalled = s.get("stalled_minutes") or []
     if stalled:
@@ -318,6 +366,18 @@ def _yardstick(s: dict, text: str) -> str:
     return text.replace("DC-OPF", "LinDistFlow OPF") if s.get("voltage") else text
 
 
+def reproduce_text(out, html: bool = False) -> str:
+    """``popdispatch reproduce``: where the results are and what each file holds."""
+    pages = "\n  base_day.html, congestion.html: the interactive reports" if html else ""
+    return (
+        f"results in {out}:\n"
+        "  report.md: each experiment, the paper's reported figure against ours and the DC-OPF\n"
+        "  figures/: the figures as PNG and PDF\n"
+        "  summary.json: every number of report.md (the --json object)\n"
+        "  *.csv: the time series of each experiment" + pages
+    )
+
+
 def cases_summary(table) -> dict:
     """``popdispatch cases --json``: ``{"cases": [...]}``, one object per built-in case."""
     rows = table.to_dict(orient="index").items()
@@ -336,21 +396,36 @@ def cases_text(table) -> str:
 
 
 def infeasible_minute_message(summary: dict) -> str:
-    """One line: the DC-OPF of a minute is infeasible, with its demand and online capacity."""
-    return (
-        f"the DC-OPF of minute {summary['minute']} is infeasible: no dispatch meets the demand "
-        f"{summary['demand_kw']:.3f} kW within the generator limits (online capacity "
-        f"{summary['capacity_kw']:.3f} kW) and the given line limits"
+    """One line: the DC-OPF (LinDistFlow OPF with voltage limits) of a minute is infeasible,
+    and why (:func:`popdispatch.report.infeasibility.cause_text`)."""
+    from popdispatch.report.infeasibility import cause_text, ratings_hint
+
+    why = summary.get("infeasibility")
+    if why is None:  # a summary made without the diagnosis: demand and capacity
+        why = {"cause": None}
+        text = (f"no dispatch meets the demand {summary['demand_kw']:.3f} kW within the "
+                f"generator limits (online capacity {summary['capacity_kw']:.3f} kW) and the "
+                "line limits")  # fmt: skip
+    else:
+        text = cause_text(why)
+    minute = summary["minute"]
+    return _yardstick(
+        summary, f"the DC-OPF of minute {minute} is infeasible: {text}{ratings_hint(why)}"
     )
 
 
 def infeasible_day_message(summary: dict, shown: int = 5) -> str:
-    """One line naming how many minutes, and which first, have no feasible DC-OPF."""
+    """One line naming how many minutes, and which first, have no feasible DC-OPF, and why
+    the first of them has none."""
+    from popdispatch.report.infeasibility import cause_text, ratings_hint
+
     bad = summary["infeasible_minutes"]
     ranges = minute_ranges(bad).split(", ")
     listed = ", ".join(ranges[:shown]) + (", ..." if len(ranges) > shown else "")
-    return (
+    why = summary.get("infeasibility")
+    first = f"; at minute {why['minute']}: {cause_text(why)}{ratings_hint(why)}" if why else ""
+    return _yardstick(summary, (
         f"the DC-OPF is infeasible at {len(bad)} of {summary['minutes']} minutes ({listed}) "
-        "with the given limits and events; every minute was run and reported "
+        f"with the limits and events in force{first}; every minute was run and reported "
         "(infeasible_minutes)"
-    )
+    ))  # fmt: skip

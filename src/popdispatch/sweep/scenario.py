@@ -21,6 +21,8 @@ from popdispatch.sweep.store import FAILED, write_scenario
 #: ``day`` summary keys not carried (deprecated, unit-less twins of ``*_eur`` keys) or
 #: replaced by the scenario's own parameters (``limits``, ``events`` as text).
 DROPPED_KEYS = {"cost", "opf_cost", "cost_unit", "cost_all_minutes", "limits", "events", "case"}
+#: ``day`` summary keys always stored as JSON text (``*_json``): lists of objects, or null.
+JSON_KEYS = {"limits_in_force", "infeasibility"}
 
 
 @dataclass(frozen=True)
@@ -77,9 +79,8 @@ def summary_row(summary: dict, result) -> dict:
     for key, value in summary.items():
         if key in DROPPED_KEYS:
             continue
-        row[f"{key}_json" if isinstance(value, dict) else key] = (
-            json.dumps(value) if isinstance(value, dict) else value
-        )
+        as_json = isinstance(value, dict) or key in JSON_KEYS
+        row[f"{key}_json" if as_json else key] = json.dumps(value) if as_json else value
     if summary["cost_eur"] is not None and summary["opf_cost_eur"] is not None:
         row["cost_gap_eur"] = summary["cost_eur"] - summary["opf_cost_eur"]
     row["mean_iterations"] = float(np.mean(result.run.iterations))

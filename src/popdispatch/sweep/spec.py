@@ -182,8 +182,8 @@ def parse_steps(value, where: str, key: str = "steps") -> StepRange:
 
     if value == "day":
         return StepRange(1, MINUTES_PER_DAY)
-    if isinstance(value, int) and not isinstance(value, bool):
-        value = f"{value}-{value}"
+    if isinstance(value, int) and not isinstance(value, bool) or str(value).strip().isdigit():
+        value = f"{str(value).strip()}-{str(value).strip()}"
     try:
         first, last = MinutesType().convert(str(value), None, None)
     except click.BadParameter as exc:

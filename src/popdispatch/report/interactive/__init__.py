@@ -25,6 +25,7 @@ from popdispatch.report.interactive.steps import (
     default_every,
     frame_rows,
     snapshot_steps,
+    step_name,
 )
 from popdispatch.scenarios import DayComparison, SnapshotComparison
 
@@ -119,7 +120,7 @@ def day_report_html(
                      "spaced, plus every step with a map frame.")  # fmt: skip
     return page_html(
         title,
-        header_html(title, info, notes),
+        header_html(title, info, notes, steps.step_name),
         map_figure(problem, steps, rows, titles),
         panel_figure(problem, steps.take(drawn), int(steps.values[rows[-1]])),
     )
@@ -151,21 +152,23 @@ def snapshot_report_html(
     states = steps.line_states(problem)
     error = steps.abs_error_kw
     dt = run.settings.stepping.dt
+    series_step = step_name(profiles)
     titles = [
-        f"minute {run.minute} ({steps.times[r]}), iteration {r} ({r * dt:.2f} s): max |error| "
+        f"{series_step} {run.minute} ({steps.times[r]}), iteration {r} ({r * dt:.2f} s): max "
+        "|error| "
         f"to the DC-OPF "
         f"{_kw(error[r])}, {_at_limit(states[r])}"
         for r in (int(r) for r in rows)
     ]
     info = _run_info(run_info, problem, steps, comparison)
     mode = run.settings.mode
-    title = f"popdispatch snapshot: {info.get('case')}, minute {run.minute}, {mode} mode"
+    title = f"popdispatch snapshot: {info.get('case')}, {series_step} {run.minute}, {mode} mode"
     notes = [frame_count_note("iteration", rows, len(steps.values), every), *NOTES]
     if voltages_pu is not None:
         notes.append("Bus voltages are those of the final set points.")
     return page_html(
         title,
-        header_html(title, info, notes),
+        header_html(title, info, notes, series_step),
         map_figure(problem, steps, rows, titles),
         panel_figure(problem, steps.take(panel_rows(steps, rows)), int(rows[-1])),
     )

@@ -25,7 +25,15 @@ from popdispatch.report.interactive.steps import BINDING, OVERLOADED, Steps
 MAX_LINE_TRACES = 400
 #: |flow| from low (light) to high (dark): the upper part of ColorBrewer's YlGnBu.
 FLOW_SCALE = [[0.0, "#c7e9b4"], [0.3, "#41b6c4"], [0.65, "#225ea8"], [1.0, "#081d58"]]
-VOLTAGE_SCALE = "RdBu"
+#: Bus voltage from low (blue) through 1.0 p.u. (white) to high (red): ColorBrewer's RdBu
+#: reversed, written out so that the markers (coloured here) and the colour bar (drawn by
+#: plotly.js) read from one scale; plotly.py's "RdBu" and plotly.js's run opposite ways.
+VOLTAGE_SCALE = [
+    [k / 10, color] for k, color in enumerate([
+        "#053061", "#2166ac", "#4393c3", "#92c5de", "#d1e5f0", "#f7f7f7", "#fddbc7", "#f4a582",
+        "#d6604d", "#b2182b", "#67001f",
+    ])
+]  # fmt: skip
 STATE_COLORS = {0: "#ffffff", BINDING: "#f39c12", OVERLOADED: "#c0392b"}
 STATE_NAMES = {0: "idle", BINDING: "binding", OVERLOADED: "overloaded"}
 OFFLINE_COLOR = "#9e9e9e"
@@ -37,12 +45,18 @@ def generator_colors(names) -> list[str]:
     return [GENERATOR_PALETTE[k % len(GENERATOR_PALETTE)] for k in range(len(names))]
 
 
+#: A feeder's own coordinates are drawn when at least this share of its buses sit at distinct
+#: places (the ELV puts 906 buses at 866: a few buses share a spot with a neighbour).
+DISTINCT_SHARE = 0.5
+
+
 def bus_coordinates(feeder: Feeder) -> pd.DataFrame:
-    """``x``, ``y`` per bus: the feeder's own where every bus has distinct finite ones, else a
-    layered tree layout (``x`` = lines from the source, ``y`` = leaf order, a parent centred
-    over its children)."""
+    """``x``, ``y`` per bus: the feeder's own (as the static figures draw them) where every bus
+    has finite ones and at least :data:`DISTINCT_SHARE` of the buses sit at distinct places,
+    else a layered tree layout (``x`` = lines from the source, ``y`` = leaf order, a parent
+    centred over its children)."""
     xy = feeder.buses[["x", "y"]].to_numpy(float)
-    if np.isfinite(xy).all() and len(np.unique(xy, axis=0)) == len(xy):
+    if np.isfinite(xy).all() and len(np.unique(xy, axis=0)) >= DISTINCT_SHARE * len(xy):
         return feeder.buses[["x", "y"]].astype(float)
     tree = feeder.bus_tree()
     depth = np.zeros(tree.n_nodes)
@@ -336,8 +350,8 @@ def frame_bytes(problem: DispatchProblem, steps: Steps) -> int:
 
 def map_figure(problem: DispatchProblem, steps: Steps, rows: np.ndarray, titles: list[str]) -> dict:
     """The map as a plotly figure dict: traces in the state of the last kept step, one frame
-    per kept step row (named by its step value, titled ``titles[j]``), a slider and play and
-    pause buttons."""
+    per kept step row (named by its step value, titled ``titles[j]``), a slider (its value
+    called by the steps' :attr:`~Steps.step_name`) and play and pause buttons."""
     builder = MapBuilder(problem, steps)
     data = builder.build_traces(int(rows[-1]))
     frames = []
@@ -354,7 +368,7 @@ def map_figure(problem: DispatchProblem, steps: Steps, rows: np.ndarray, titles:
         "plot_bgcolor": "#ffffff", "height": 720, "hovermode": "closest",
         "legend": {"orientation": "h", "y": -0.02, "x": 0.0, "yanchor": "top"},
         "margin": {"l": 10, "r": 10, "t": 50, "b": 150},
-        "sliders": [_slider(frames, steps.kind)], "updatemenus": [_play_buttons()],
+        "sliders": [_slider(frames, steps.step_name)], "updatemenus": [_play_buttons()],
     }  # fmt: skip
     return {"data": data, "layout": layout, "frames": frames}
 

@@ -22,7 +22,8 @@ HEADER_KEYS = [
     ("minute", "minute"), ("time", "time"), ("first_minute", "first minute"),
     ("last_minute", "last minute"), ("first_time", "first time"), ("last_time", "last time"),
     ("step_minutes", "step, min"),
-    ("demand_kw", "demand, kW"), ("limits", "line limits"), ("events", "events"),
+    ("demand_kw", "demand, kW"), ("limits", "line limits"),
+    ("limits_in_force", "line limits in force"), ("events", "events"),
     ("profile_source", "profile source"), ("iterations", "iterations"),
     ("converged_iteration", "converged at iteration"),
     ("first_congestion_iteration", "congestion detected at iteration"),
@@ -54,6 +55,13 @@ def format_value(key: str, value) -> str:
         return ", ".join(
             f"{row['from_bus']}-{row['to_bus']} at {row['limit_kw']:g} kW" for row in value
         )
+    if key == "limits_in_force":
+        shown = 6
+        rows = [f"{row['from_bus']}-{row['to_bus']} at {row['limit_kw']:.6g} kW ("
+                + ("--limit " if row["source"] == "--limit" else "rating of ")
+                + f"{row['element']})" for row in value[:shown]]  # fmt: skip
+        more = f" and {len(value) - shown} more" if len(value) > shown else ""
+        return ", ".join(rows) + more if rows else "none"
     if isinstance(value, list | tuple):
         return ", ".join(str(v) for v in value) if value else "none"
     if isinstance(value, float):
@@ -61,10 +69,13 @@ def format_value(key: str, value) -> str:
     return "-" if value is None else str(value)
 
 
-def header_html(title: str, run_info: Mapping, notes: list[str]) -> str:
-    """The page's header: title, a table of the run's parameters, notes, the whole summary."""
+def header_html(title: str, run_info: Mapping, notes: list[str], step: str = "minute") -> str:
+    """The page's header: title, a table of the run's parameters, notes, the whole summary.
+    ``step``: what a step of the series is called (``"minute"``, or ``"step"`` in a series of
+    other steps, e.g. quarter hours), in the labels that name one."""
     rows = "".join(
-        f"<span><b>{html.escape(label)}</b>{html.escape(format_value(key, run_info[key]))}</span>"
+        f"<span><b>{html.escape(label.replace('minute', step))}</b>"
+        f"{html.escape(format_value(key, run_info[key]))}</span>"
         for key, label in HEADER_KEYS
         if key in run_info
     )
