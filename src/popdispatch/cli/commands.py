@@ -16,6 +16,7 @@ from popdispatch.cli.options import (
     WARM_START_CHOICE,
     EventType,
     MinutesType,
+    accuracy_options,
     build,
     check_out,
     check_shares,
@@ -120,6 +121,7 @@ def opf(minute: int, limits, profiles, source, as_json: bool, quiet: bool) -> in
 @minute_option
 @limit_option
 @run_options
+@accuracy_options
 @series_options
 @feeder_options
 @out_option
@@ -127,8 +129,8 @@ def opf(minute: int, limits, profiles, source, as_json: bool, quiet: bool) -> in
 @json_option
 @quiet_option
 def snapshot(
-    minute, limits, dynamics, mode, x0, graph, constants, price_law, profiles, source, out,
-    analyses, as_json, quiet,
+    minute, limits, dynamics, mode, x0, graph, constants, price_law, accuracy, profiles, source,
+    out, analyses, as_json, quiet,
 ) -> int:  # fmt: skip
     """One minute of dynamics: trajectory, convergence, comparison with the DC-OPF.
 
@@ -141,7 +143,7 @@ def snapshot(
     progress = Progress(quiet)
     check_out(out)
     settings = analyses.settings(settings_from(dynamics, mode, x0, graph, None, constants,
-                                                price_law))  # fmt: skip
+                                                price_law, accuracy))  # fmt: skip
     check_shares(x0, progress, source)
     announce_compile(progress, settings)
     problem, series = build(source, profiles, minute, limits, progress)
@@ -161,6 +163,7 @@ def snapshot(
 @cli.command(short_help="The online day, minute by minute, against the DC-OPF.")
 @limit_option
 @run_options
+@accuracy_options
 @option(
     "--event",
     "events",
@@ -185,8 +188,8 @@ def snapshot(
 @json_option
 @quiet_option
 def day(
-    limits, dynamics, mode, x0, graph, constants, price_law, events, minutes, warm_start, profiles,
-    source, out, analyses, as_json, quiet,
+    limits, dynamics, mode, x0, graph, constants, price_law, accuracy, events, minutes, warm_start,
+    profiles, source, out, analyses, as_json, quiet,
 ) -> int:  # fmt: skip
     """The online day: every minute continues from the last (warm start), against the DC-OPF.
 
@@ -208,7 +211,7 @@ def day(
     progress = Progress(quiet)
     check_out(out)
     settings = analyses.settings(settings_from(dynamics, mode, x0, graph, warm_start,
-                                                constants, price_law))  # fmt: skip
+                                                constants, price_law, accuracy))  # fmt: skip
     check_shares(x0, progress, source)
     announce_compile(progress, settings)
     problem, series = build(source, profiles, None, limits, progress, events, minutes)

@@ -355,6 +355,38 @@ def run_options(func):
     return func
 
 
+def accuracy_options(func):
+    """``--accuracy-kw`` and ``--accuracy-rel``, handed to the command as one ``accuracy``
+    (``(kW, relative)``): what a mode that claims the DC-OPF must prove to call a minute
+    converged."""
+
+    @functools.wraps(func)
+    def command(*args, accuracy_kw, accuracy_rel, **kwargs):
+        return func(*args, accuracy=(accuracy_kw, accuracy_rel), **kwargs)
+
+    decorators = [
+        option(
+            "--accuracy-kw",
+            type=click.FloatRange(min=0.0, min_open=True),
+            default=1e-3,
+            show_default=True,
+            help="Exact and voltage mode: a minute is converged only when every set point is "
+            "proved within max(this, --accuracy-rel x demand) kW of the DC-OPF (the distance "
+            "certificate, docs/exact-mode.md).",
+        ),
+        option(
+            "--accuracy-rel",
+            type=click.FloatRange(min=0.0, max=1.0, max_open=True),
+            default=1e-6,
+            show_default=True,
+            help="The accuracy relative to the minute's demand (see --accuracy-kw).",
+        ),
+    ]
+    for decorate in reversed(decorators):
+        command = decorate(command)
+    return command
+
+
 def feeder_options(func):
     """``--opendss``, ``--net``, ``--case``, ``--fleet``, ``--root`` and ``--no-ratings``,
     handed to the command as one ``source`` (:class:`popdispatch.runs.FeederSource`), checked
@@ -401,18 +433,20 @@ def feeder_options(func):
 
 def settings_from(
     dynamics: str, mode: str, x0, graph: str, warm_start: str | None = None, constants=None,
-    price_law: str = "plain",
+    price_law: str = "plain", accuracy: tuple[float, float] = (1e-3, 1e-6),
 ):  # fmt: skip
     """The run's :class:`~popdispatch.online.RunSettings`; ``constants`` (``--constants``, a
     :class:`~popdispatch.game.fitness.FitnessParameters`) replace the default ones;
     ``price_law`` (``--price-law``) is exact mode's
-    (:class:`~popdispatch.game.parameters.PriceLaw`)."""
+    (:class:`~popdispatch.game.parameters.PriceLaw`); ``accuracy`` (``--accuracy-kw``,
+    ``--accuracy-rel``) what a converged minute must prove."""
     from popdispatch.errors import OptionError
     from popdispatch.modes.exact import ExactConstants
     from popdispatch.online import RunSettings
 
     settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0, warm_start=warm_start,
-                           exact=ExactConstants(price_law=price_law))  # fmt: skip
+                           exact=ExactConstants(price_law=price_law), accuracy_kw=accuracy[0],
+                           accuracy_rel=accuracy[1])  # fmt: skip
     if constants is not None and mode != "paper":
         raise OptionError(  # exact mode reads settings.exact: the constants would be ignored
             f"--constants sets paper mode's constants (EUR/MW); {mode} mode's are dimensionless "

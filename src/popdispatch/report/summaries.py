@@ -300,6 +300,8 @@ def snapshot_summary(
         "converged_iteration": run.converged_at,
         "rest_iteration": getattr(run, "rest_at", None),
         "stall_reason": getattr(run, "stall_reason", None),
+        "distance_bound_kw": _finite(getattr(run, "distance_bound_kw", None)),
+        "accuracy_kw": getattr(run, "accuracy_kw", None),
         "first_congestion_iteration": run.first_congestion,
         "max_overflow_kw": float(run.overflow_kw.max()) if run.overflow_kw.size else 0.0,
         **snapshot_prices(problem, run, opf),
@@ -447,11 +449,23 @@ def day_summary(
         "price_runaway_minutes": _runaway_minutes(run),
         "stalled_minutes": sorted(int(m) for m in getattr(run, "stall_reasons", {})),
         "converged_minutes": int(run.converged.sum()),
+        **_certificate_keys(run),
         "max_abs_price_gap_eur_per_mwh": max_price_gap(result),
         **_day_comparison(problem, result, timeline.hours[run.minutes - 1]),
         "max_overflow_kw": float(run.overflow_kw.max()) if run.overflow_kw.size else 0.0,
         "wall_seconds": run.wall_seconds,
     }
+
+
+def _certificate_keys(run) -> dict:
+    """The day's distance certificate: the largest bound any minute proves on its distance to
+    the DC-OPF (``max_distance_bound_kw``; null where a minute proves nothing, or in paper
+    mode) and the smallest accuracy a minute had to prove (``accuracy_kw``)."""
+    bound = getattr(run, "distance_bound_kw", None)
+    if bound is None:
+        return {"max_distance_bound_kw": None, "accuracy_kw": None}
+    return {"max_distance_bound_kw": _finite(float(np.max(bound))),
+            "accuracy_kw": float(np.min(run.accuracy_kw))}  # fmt: skip
 
 
 def max_price_gap(result: DayComparison) -> float | None:

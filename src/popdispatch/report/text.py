@@ -147,7 +147,7 @@ def _run_line(s: dict) -> str:
     """What the dynamics did: converged when, stopped why, and the times."""
     total, done = s["iterations"], s["converged_iteration"]
     if done is not None:
-        run = f"converged at iteration {done} of {total}"
+        run = f"converged at iteration {done} of {total}{_proved(s)}"
     elif s.get("dynamics_status") == "stalled":
         run = (
             f"at rest from iteration {_fmt(s.get('rest_iteration'), '', 0)} of {total}, "
@@ -156,11 +156,20 @@ def _run_line(s: dict) -> str:
     elif s.get("dynamics_status") == "infeasible":
         run = f"stopped at iteration {total}: {_priced(s)} prices ran away (no feasible rest point)"
     else:
-        run = f"not converged within {total} iterations"
+        run = f"not converged within {total} iterations{_proved(s)}"
     return (
         f"{run}{_first_signal(s)}; engine {s['wall_seconds']:.3f} s, "
         f"whole command {s['command_seconds']:.1f} s"
     )
+
+
+def _proved(s: dict) -> str:
+    """The distance certificate's bound against the accuracy, where the mode has one."""
+    bound, accuracy = s.get("distance_bound_kw", "missing"), s.get("accuracy_kw")
+    if accuracy is None:
+        return ""
+    shown = "unbounded" if bound is None else f"within {bound:.3g} kW"
+    return f" (proved {shown} of the DC-OPF; accuracy {accuracy:.3g} kW)"
 
 
 def _priced(s: dict) -> str:
@@ -347,8 +356,9 @@ def _span(s: dict) -> str:
 def day_text(s: dict) -> str:
     """``popdispatch day``."""
     outcome = [
-        f"status: {s['status']} ({s['converged_minutes']} of {s['minutes']} minutes converged; "
-        f"engine {s['wall_seconds']:.3f} s, whole command {s['command_seconds']:.1f} s)",
+        f"status: {s['status']} ({s['converged_minutes']} of {s['minutes']} minutes converged"
+        f"{_day_proof(s)}; engine {s['wall_seconds']:.3f} s, whole command "
+        f"{s['command_seconds']:.1f} s)",
         *_day_notes(s),
         _day_comparison(s),
         f"max overflow {s['max_overflow_kw']:.3f} kW (over all {s['minutes']} minutes)",
@@ -358,6 +368,15 @@ def day_text(s: dict) -> str:
     head = f"{_span(s)}: {s['dynamics']} dynamics, {s['mode']} mode"
     body = "\n".join([head, _inputs(s), events_text(s.get("events", [])), *outcome])
     return _yardstick(s, body) + ac_text(s.get("ac")) + voltage_text(s.get("voltage"))
+
+
+def _day_proof(s: dict) -> str:
+    """The day's largest proved distance to the DC-OPF, where the mode has a certificate."""
+    if s.get("accuracy_kw") is None:
+        return ""
+    bound = s.get("max_distance_bound_kw")
+    shown = "unbounded at some minute" if bound is None else f"each within {bound:.3g} kW"
+    return f", proved {shown} of the DC-OPF, accuracy {s['accuracy_kw']:.3g} kW"
 
 
 def _yardstick(s: dict, text: str) -> str:
