@@ -6,59 +6,13 @@ optimum to round-off."""
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
-from qp_exact import exact_dc_opf
 
-from popdispatch.feeder.generators import make_fleet
-from popdispatch.feeder.model import Feeder
-from popdispatch.feeder.profiles import single_minute_profiles
-from popdispatch.feeder.reduction import reduce_feeder
-from popdispatch.game.problem import build_problem
 from popdispatch.online.certificate import Batch, certify_minutes
 
-
-def random_fleet_problem(seed: int, n_gens: int, n_limits: int, linear_share: float = 0.2):
-    """A random radial feeder (12 buses) with ``n_gens`` generators whose curvatures are
-    log-uniform over five decades (0.02-2000 EUR/MW^2h; linear one time in five), marginal
-    costs 5-55 EUR/MWh, capacities 5-40 kW, Pmin > 0 one time in four, ``n_limits`` lines
-    above generators limited between their least reachable and their unconstrained flow."""
-    rng = np.random.default_rng(seed)
-    n_buses = 12
-    parents = [int(rng.integers(0, i)) for i in range(1, n_buses)]
-    buses = pd.DataFrame({"x": rng.random(n_buses), "y": rng.random(n_buses)},
-                         index=pd.Index(np.arange(1, n_buses + 1), name="bus"))  # fmt: skip
-    lines = pd.DataFrame(
-        {"from_bus": np.array(parents) + 1, "to_bus": np.arange(2, n_buses + 1),
-         "length_km": 0.01, "r_ohm": 0.01, "x_ohm": 0.001, "limit_kw": np.inf},
-        index=pd.Index([f"L{i}" for i in range(2, n_buses + 1)], name="line"),
-    )  # fmt: skip
-    load_buses = rng.choice(np.arange(2, n_buses + 1), size=5, replace=False)
-    loads = pd.DataFrame({"bus": load_buses},
-                         index=pd.Index([f"LD{b}" for b in load_buses], name="load"))  # fmt: skip
-    gen_buses = [1, *rng.choice(np.arange(2, n_buses + 1), size=n_gens - 1, replace=False)]
-    rows = []
-    for k, bus in enumerate(gen_buses):
-        c = 0.0 if rng.random() < linear_share else float(10 ** rng.uniform(np.log10(0.02), 3.3))
-        pmax = 200.0 if k == 0 else float(rng.uniform(5, 40))
-        pmin = float(rng.uniform(0, 0.5) * pmax) if k and rng.random() < 0.25 else 0.0
-        rows.append((int(bus), 0.0, float(rng.uniform(5, 55)), c, pmin, pmax))
-    feeder = Feeder("random", buses, lines, loads, 1, make_fleet(rows))
-    demand = float(rng.uniform(0.3, 0.9)) * sum(r[5] for r in rows[1:]) + 10.0
-    load = pd.Series(rng.dirichlet(np.ones(len(loads))) * demand, index=loads.index)
-    if n_limits:
-        chosen = rng.choice(np.arange(1, len(gen_buses)), size=min(n_limits, n_gens - 1),
-                            replace=False)  # fmt: skip
-        tree = feeder.bus_tree()
-        limits = {}
-        for k in chosen:
-            node = feeder.buses.index.get_loc(gen_buses[k])
-            line = feeder.lines.index[int(tree.parent_line[node])]
-            limits[line] = float(rng.uniform(0.5, 20.0))
-        feeder = feeder.with_line_limits(pd.Series(limits))
-    profiles = single_minute_profiles(1, load, "random")
-    return build_problem(reduce_feeder(feeder), profiles)
+from helpers import random_fleet_problem
+from qp_exact import exact_dc_opf
 
 
 def _certify(problem, p, mu, accuracy=1e-6):
