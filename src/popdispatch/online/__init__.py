@@ -101,14 +101,19 @@ class SnapshotResult:
 def run_snapshot(
     problem: DispatchProblem, minute: int, settings: RunSettings | None = None
 ) -> SnapshotResult:
-    """Run the dynamics for one minute from ``settings.x0`` until converged or the horizon."""
+    """Run the dynamics for one minute from ``settings.x0`` until converged or the horizon.
+
+    In a mode that claims the DC-OPF, a run that comes to rest without the distance
+    certificate's proof continues (to the horizon) as long as each rest proves at least twice
+    as much as the one before: the stopping rule's window can end a run whose last watts still
+    move."""
     settings = settings or RunSettings()
     engine = Engine(problem, settings)
     x = initial_shares(problem, settings.x0, minute)
     engine.warm_up(x, minute)
     evaluated = engine.evaluations
     start = time.perf_counter()
-    run = engine.run_minute(x, minute)
+    run = _run_until_proved(engine, x, minute)
     setpoints, converged_at = run.trajectory, run.converged_at
     first_congestion = run.first_congestion
     wall = time.perf_counter() - start
@@ -141,6 +146,34 @@ def run_snapshot(
         accuracy_kw=None if verdict.bound_kw is None else float(verdict.accuracy_kw[0]),
         evaluations=engine.evaluations - evaluated,
     )
+
+
+def _run_until_proved(engine: Engine, x: np.ndarray, minute: int) -> MinuteRun:
+    """:meth:`Engine.run_minute`, continued from each rest that the certificate does not prove
+    within the accuracy while the proved bound keeps halving and the horizon allows (see
+    :func:`run_snapshot`); the rest iteration counts from the start."""
+    run = engine.run_minute(x, minute)
+    if not engine.mode.claims_dc_opf:
+        return run
+    horizon = engine.settings.stepping.max_iterations
+    accuracy = float(engine.settings.accuracy_mw(engine.problem.demand[minute - 1]))
+    pieces, done, last_bound = [run.trajectory], run.iterations, np.inf
+    first = run.first_congestion
+    while run.status == Status.CONVERGED and done < horizon:
+        p = run.x * engine.problem.demand[minute - 1]
+        bound = engine.certificates(np.array([minute]), p[None], engine.z[None])[0].distance_mw
+        if bound <= accuracy or not bound < 0.5 * last_bound:
+            break
+        last_bound = bound
+        more = engine.run_minute(run.x, minute, max_iterations=horizon - done)
+        pieces.append(more.trajectory[1:])
+        converged_at = done + more.converged_at if more.converged_at >= 0 else -1
+        done += more.iterations
+        run = more._replace(converged_at=converged_at)
+    if len(pieces) == 1:
+        return run
+    return run._replace(trajectory=np.concatenate(pieces), iterations=done,
+                        first_congestion=first)  # fmt: skip
 
 
 @dataclass(frozen=True)
