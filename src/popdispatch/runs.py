@@ -151,6 +151,18 @@ def load_feeder(source: FeederSource | Path | None = None) -> Feeder:
     return feeder if fleet is None else feeder.with_generators(fleet)
 
 
+def require_fleet(feeder: Feeder) -> Feeder:
+    """``feeder``, or :class:`~popdispatch.errors.FleetError` when it has no generator to
+    dispatch (a network read without a fleet, its generators unpriced)."""
+    if feeder.generators.empty:
+        from popdispatch.errors import FleetError
+
+        raise FleetError(
+            f"feeder {feeder.name!r} has no generator to dispatch: give a fleet (--fleet FILE)"
+        )
+    return feeder
+
+
 def network_profiles(feeder: Feeder) -> LoadProfiles:
     """A network without profiles runs on its own loads (column ``p_kw``, kW): one time step."""
     from popdispatch.errors import ProfileError
@@ -321,7 +333,7 @@ def load_run(
         raise OptionError("give --loads or --profiles, not both", "--loads")
     if source.own_loads or loads is not None:
         with progress.step(f"loading {source.label}"):
-            feeder = load_feeder(source)
+            feeder = require_fleet(load_feeder(source))
         series = series_for(source, feeder, profiles, loads, minute, progress)
     else:  # ieee-elv: the profiles (and their note) first, as before
         series = load_profiles(profiles, minute, progress)

@@ -7,8 +7,10 @@ transformer's LV side is the source, ratings become ``limit_kw``), and SimBench 
 ``simbench:<code>`` when the optional ``simbench`` package is installed. **Fleet:** a case
 whose net prices its generators (``poly_cost``; e.g. ``case33bw`` prices its ext_grid, which
 becomes a generator at the source) comes with that fleet; any other case (the Kerber and Dickert
-grids, SimBench) needs ``load_case(name, fleet=...)`` and raises
-:class:`~popdispatch.errors.FleetError` without one. There is no invented default fleet.
+grids, SimBench) has none: it can be described, and a dispatch needs ``load_case(name,
+fleet=...)`` (:class:`~popdispatch.errors.FleetError` without one). There is no invented
+default fleet. SimBench's PV and other static generators have no cost data: they are fixed
+injections following their profiles.
 
 pandapower is slow to import and to load the network (about 2-4 s together), so the tables
 popdispatch derives from it (buses, lines, loads, source bus, the minute-566 loads) are kept in
@@ -24,6 +26,7 @@ import contextlib
 import functools
 import hashlib
 import json
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
@@ -108,11 +111,11 @@ def _pandapower_net(factory: str, kwargs: tuple = ()):
 
 
 def _pandapower_case(name: str, factory: str, root: int | None = None, **kwargs) -> Callable:
-    def loader(fleet: pd.DataFrame | None, placeholder: bool = False) -> Feeder:
+    def loader(fleet: pd.DataFrame | None) -> Feeder:
         from popdispatch.readers.pandapower import _read
 
         net = _pandapower_net(factory, tuple(sorted(kwargs.items())))
-        return _read(net, fleet, root, True, name, placeholder)
+        return _read(net, fleet, root, True, name)
 
     return loader
 
@@ -176,7 +179,7 @@ def simbench_net(code: str):
     return simbench.get_simbench_net(code)
 
 
-def _simbench_case(name: str, fleet: pd.DataFrame | None, placeholder: bool = False) -> Feeder:
+def _simbench_case(name: str, fleet: pd.DataFrame | None) -> Feeder:
     from popdispatch.errors import FeederError
 
     code = name[len(SIMBENCH_PREFIX) :]
@@ -190,7 +193,7 @@ def _simbench_case(name: str, fleet: pd.DataFrame | None, placeholder: bool = Fa
         net = simbench_net(code)
     except Exception as exc:  # simbench raises plain exceptions for unknown codes
         raise FeederError(f"unknown SimBench code {code!r}: {exc}") from None
-    return _read(net, fleet, None, True, name, placeholder)
+    return _read(net, fleet, None, True, name)
 
 
 #: Cache entry of the :func:`list_cases` counts, and the version of its layout.
@@ -252,11 +255,13 @@ def _case_counts(names: list[str]) -> dict[str, np.ndarray]:
         if name == "ieee-elv":
             feeder, total = ieee_elv(), float(elv_snapshot_566_kw().sum())
         else:
-            if name.startswith(SIMBENCH_PREFIX):
-                feeder = _simbench_case(name, None, placeholder=True)
-            else:
-                feeder = CASES[name].loader(None, placeholder=True)
-            total = float(feeder.loads.p_kw.sum())
+            with warnings.catch_warnings():  # unpriced generators: counted, not dispatched
+                warnings.simplefilter("ignore", UserWarning)
+                if name.startswith(SIMBENCH_PREFIX):
+                    feeder = _simbench_case(name, None)
+                else:
+                    feeder = CASES[name].loader(None)
+            total = load_total_kw(feeder)
         rows.append((len(feeder.buses), len(feeder.lines), len(feeder.loads), total))
     values = np.array(rows, dtype=float).reshape(len(names), 4)
     return {
@@ -266,6 +271,15 @@ def _case_counts(names: list[str]) -> dict[str, np.ndarray]:
         "loads": values[:, 2].astype(np.int64),
         "total_load_kw": values[:, 3],
     }
+
+
+def load_total_kw(feeder: Feeder) -> float:
+    """The feeder's total load in its own snapshot, kW (``p_kw`` of its loads; rows of another
+    ``kind`` are fixed injections, not load)."""
+    loads = feeder.loads
+    if "kind" in loads.columns:
+        loads = loads[loads["kind"].astype(str) == "load"]
+    return float(loads["p_kw"].sum())
 
 
 def _cases_cache_key(names: list[str]) -> dict:

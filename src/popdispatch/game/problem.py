@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from popdispatch.constants import KW_PER_MW
-from popdispatch.errors import InfeasibleError, ProfileError
+from popdispatch.errors import FleetError, InfeasibleError, ProfileError
 from popdispatch.feeder.profiles import LoadProfiles, check_minute
 from popdispatch.feeder.reduction import ReducedFeeder
 from popdispatch.feeder.tree import downstream, line_flows
@@ -56,6 +56,9 @@ class DispatchProblem:
     voltage_base : per minute and voltage row, the loads-only squared voltage ``v0_j^2``,
         p.u.^2 (LinDistFlow, loads at their reactive power).
     vmin_pu, vmax_pu : the voltage limits, p.u. (NaN without).
+    fixed_injection : per minute, the fixed injections' total output, MW (the negative parts
+        of the per-load series: generators without cost data following their profiles;
+        ``demand`` is net of it). Zeros where there are none.
     """
 
     feeder: ReducedFeeder
@@ -80,6 +83,7 @@ class DispatchProblem:
     voltage_base: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     vmin_pu: float = float("nan")
     vmax_pu: float = float("nan")
+    fixed_injection: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n_generators(self) -> int:
@@ -164,6 +168,11 @@ def build_problem_from_loads(
     of ``feeder.original.loads``); any number of minutes (1440 for a day, 1 for a snapshot).
     ``check`` as in :func:`build_problem`."""
     gens = feeder.generators
+    if not len(gens):
+        raise FleetError(
+            f"feeder {feeder.original.name!r} has no generator to dispatch: give a fleet "
+            "(--fleet FILE)"
+        )
     load_kw = np.atleast_2d(np.asarray(load_kw, dtype=float))
     flows_kw = line_flows(feeder.tree, -feeder.load_injection_kw(load_kw))
     limited = np.flatnonzero(np.isfinite(feeder.lines.limit_kw.to_numpy(float)))
@@ -185,6 +194,7 @@ def build_problem_from_loads(
         load_flow=np.ascontiguousarray(flows_kw[:, limited]) / KW_PER_MW,
         online=np.ones((len(load_kw), len(gens)), dtype=bool),
         profile_source=source,
+        fixed_injection=np.maximum(-load_kw, 0.0).sum(axis=1) / KW_PER_MW,
     )
     if check:
         check_capacity(problem)
