@@ -25,6 +25,14 @@ KM_PER_DSS_UNIT = {
 }  # fmt: skip
 #: Power-delivery classes read as branches; every other two-bus one is refused by name.
 BRANCH_CLASSES = frozenset({"line", "transformer", "reactor", "capacitor"})
+#: Classes whose elements sit on one bus (or none): loads, sources, generators, meters and
+#: controls; any other class with two buses is a series element to read or refuse.
+ONE_BUS_CLASSES = frozenset({
+    "load", "generator", "pvsystem", "storage", "vsource", "isource", "windgen",
+    "energymeter", "monitor", "sensor", "capcontrol", "regcontrol", "invcontrol",
+    "expcontrol", "storagecontroller", "fuse", "recloser", "relay", "swtcontrol",
+    "gencontroller", "upfccontrol", "esppvcontrol", "gicsource", "fmonitor", "vccs",
+})  # fmt: skip
 #: Control elements that open the element they switch when their state is open.
 SWITCHING_CONTROLS = ("Fuses", "Reclosers", "SwtControls", "Relays")
 
@@ -380,23 +388,22 @@ def _winding_branches(
 
 
 def _check_other_series(ctx) -> None:
-    """Refuse two-bus power-delivery elements other than lines, transformers, reactors and
-    capacitors, naming the first."""
-    if not ctx.PDElements.First():
-        return
-    while True:
-        element = ctx.CktElement.Name()
+    """Refuse two-bus elements other than lines, transformers, reactors and capacitors (an
+    autotransformer, a fault between two buses, ...), naming the first."""
+    for element in ctx.Circuit.AllElementNames():
         cls = element.split(".")[0].lower()
-        if cls not in BRANCH_CLASSES and ctx.CktElement.Enabled():
-            buses = {bus_of(b) for b in ctx.CktElement.BusNames()}
-            if ctx.CktElement.NumTerminals() > 1 and len(buses) > 1:
-                raise FeederError(
-                    f"{element}: unsupported series element between buses {sorted(buses)} "
-                    "(popdispatch reads lines, switches, transformers, regulators, reactors "
-                    "and series capacitors)"
-                )
-        if not ctx.PDElements.Next():
-            return
+        if cls in BRANCH_CLASSES or cls in ONE_BUS_CLASSES:
+            continue
+        ctx.Circuit.SetActiveElement(element)
+        if not ctx.CktElement.Enabled() or ctx.CktElement.NumTerminals() < 2:
+            continue
+        buses = {bus_of(b) for b in ctx.CktElement.BusNames()}
+        if len(buses) > 1:
+            raise FeederError(
+                f"{element}: unsupported series element between buses {sorted(buses)} "
+                "(popdispatch reads lines, switches, transformers, regulators, reactors "
+                "and series capacitors)"
+            )
 
 
 # -- loads, injections, shapes ----------------------------------------------------------------
