@@ -21,6 +21,13 @@ from popdispatch.errors import OptionError
 from popdispatch.events import Event, apply_events
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.profiles import LoadProfiles
+from popdispatch.feeder.sources import (  # noqa: F401  (re-exported: the runs' feeders)
+    NETWORK_READERS,
+    FeederSource,
+    load_feeder,
+    read_network,
+    require_fleet,
+)
 from popdispatch.game.problem import DispatchProblem, check_online
 from popdispatch.online import RunSettings
 from popdispatch.report.progress import Progress
@@ -34,8 +41,9 @@ from popdispatch.scenarios import (
     snapshot_vs_opf,
 )
 
-#: A path limit: every line between original buses A and B limited to KW kW.
-Limit = tuple[int, int, float]
+#: A path limit: every line between original buses A and B (as the source format names them)
+#: limited to KW kW.
+Limit = tuple[int | str, int | str, float]
 
 
 def load_profiles(
@@ -55,112 +63,6 @@ def load_profiles(
     if not os.environ.get(PROFILES_ENV, "").strip():
         progress.note(f"no --profiles given: using the offline default, {profiles.source}")
     return profiles
-
-
-@dataclass(frozen=True)
-class FeederSource:
-    """Where a run's feeder comes from (the CLI's ``--opendss``, ``--net``, ``--fleet``,
-    ``--root``, ``--no-ratings``).
-
-    ``net``: a network file, read by its suffix (:data:`NETWORK_READERS`: ``.m`` MATPOWER,
-    ``.json`` pandapower, ``.dss`` OpenDSS master); it runs on its own loads (one time step,
-    repeated) with its own generators and costs, or ``fleet`` (a CSV or TOML fleet file, see
-    :func:`popdispatch.feeder.generators.read_fleet`; buses as the network numbers them) in
-    their place. ``case``: a built-in case by name (:func:`popdispatch.feeder.cases.
-    list_cases`); other than ieee-elv it runs on its own loads like a network. ``root``: the
-    source bus when the network has several. ``ratings``: line
-    limits from the network's own ratings. Without ``net``: the built-in ieee-elv case, or its
-    OpenDSS folder ``opendss``, with the paper's fleet (or ``fleet``) and the official or
-    default profiles.
-    """
-
-    opendss: Path | None = None
-    net: Path | None = None
-    fleet: Path | None = None
-    root: int | None = None
-    ratings: bool = True
-    case: str | None = None
-
-    def __post_init__(self) -> None:
-        given = [name for name, value in self._inputs() if value is not None]
-        if len(given) > 1:
-            raise OptionError(f"give one of {', '.join(given)}, not several", given[0])
-        if self.case is not None:
-            from popdispatch.feeder.cases import CASES, SIMBENCH_PREFIX
-
-            if self.case not in CASES and not self.case.startswith(SIMBENCH_PREFIX):
-                known = ", ".join(CASES)
-                raise OptionError(f"unknown case {self.case!r} (known: {known})", "--case")
-        if self.net is not None and self.net.suffix.lower() not in NETWORK_READERS:
-            known = ", ".join(NETWORK_READERS)
-            raise OptionError(f"{self.net}: unknown network format (known: {known})", "--net")
-        if self.net is None and (self.root is not None or not self.ratings):
-            raise OptionError("--root and --no-ratings apply to a --net network", "--root")
-
-    def _inputs(self) -> list[tuple[str, object]]:
-        return [("--opendss", self.opendss), ("--net", self.net), ("--case", self.case)]
-
-    @property
-    def own_loads(self) -> bool:
-        """Whether the run uses the network's own loads (not the ieee-elv profiles)."""
-        return self.net is not None or self.case not in (None, "ieee-elv")
-
-    @property
-    def label(self) -> str:
-        """What is read, for progress lines."""
-        where = self.net or self.opendss
-        return f"the feeder in {where}" if where else f"the {self.case or 'ieee-elv'} feeder"
-
-
-#: Network file suffix -> reader in :mod:`popdispatch.readers`.
-NETWORK_READERS = {".m": "read_matpower", ".json": "read_pandapower", ".dss": "read_opendss_master"}
-
-
-def read_network(path: Path, fleet=None, root: int | None = None, ratings: bool = True) -> Feeder:
-    """A network file as a feeder, by its suffix (:data:`NETWORK_READERS`)."""
-    import popdispatch.readers as readers
-
-    suffix = path.suffix.lower()
-    if suffix == ".dss" and root is not None:
-        root = str(root)  # OpenDSS names its buses; numbered ones keep their number
-    return getattr(readers, NETWORK_READERS[suffix])(path, fleet=fleet, root=root, ratings=ratings)
-
-
-def load_feeder(source: FeederSource | Path | None = None) -> Feeder:
-    """The feeder of ``source`` (a :class:`FeederSource`; a folder means its OpenDSS files;
-    ``None`` the built-in ieee-elv case)."""
-    if not isinstance(source, FeederSource):
-        source = FeederSource(opendss=source)
-    from popdispatch.feeder.generators import read_fleet
-
-    fleet = read_fleet(source.fleet) if source.fleet is not None else None
-    if source.net is not None:
-        return read_network(source.net, fleet, source.root, source.ratings)
-    if source.case is not None:
-        from popdispatch.feeder.cases import load_case
-
-        return load_case(source.case, fleet=fleet)
-    if source.opendss is not None:
-        from popdispatch.readers import read_opendss_feeder
-
-        feeder = read_opendss_feeder(source.opendss)
-    else:
-        from popdispatch.feeder.cases import ieee_elv
-
-        feeder = ieee_elv()
-    return feeder if fleet is None else feeder.with_generators(fleet)
-
-
-def require_fleet(feeder: Feeder) -> Feeder:
-    """``feeder``, or :class:`~popdispatch.errors.FleetError` when it has no generator to
-    dispatch (a network read without a fleet, its generators unpriced)."""
-    if feeder.generators.empty:
-        from popdispatch.errors import FleetError
-
-        raise FleetError(
-            f"feeder {feeder.name!r} has no generator to dispatch: give a fleet (--fleet FILE)"
-        )
-    return feeder
 
 
 def network_profiles(feeder: Feeder) -> LoadProfiles:
@@ -281,16 +183,26 @@ def check_step(minute: int | None, profiles: LoadProfiles) -> None:
 
 
 def check_limits(limits: Sequence[Limit], feeder: Feeder) -> None:
-    """:class:`OptionError` (``--limit``) for a limit naming a bus ``feeder`` lacks."""
+    """:class:`OptionError` (``--limit``) for a limit naming a bus ``feeder`` lacks (buses as
+    the source format names them: numbers, or OpenDSS names)."""
+    from popdispatch.errors import FeederError
+
     buses = feeder.buses.index
     for a, b, kw in limits:
         for bus in (a, b):
-            if bus not in buses:
-                raise OptionError(
-                    f"unknown bus {bus} in {a}:{b}={kw:g} (feeder {feeder.name} has buses "
-                    f"{buses.min()}..{buses.max()})",
-                    "--limit",
+            try:
+                feeder.bus_id(bus)
+            except FeederError:
+                named = "name" in feeder.buses.columns
+                known = (
+                    f"buses named e.g. {', '.join(feeder.bus_labels(buses[:3]))}"
+                    if named
+                    else f"buses {buses.min()}..{buses.max()}"
                 )
+                raise OptionError(
+                    f"unknown bus {bus} in {a}:{b}={kw:g} (feeder {feeder.name} has {known})",
+                    "--limit",
+                ) from None
 
 
 def load_problem(

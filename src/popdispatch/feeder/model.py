@@ -141,12 +141,18 @@ class Feeder:
         root = self.buses.index.get_loc(self.source_bus)
         return build_tree(len(self.buses), ends_a, ends_b, int(root))
 
-    def path_lines(self, bus_a: int, bus_b: int) -> list[str]:
-        """Names of the original lines on the (unique) path between two buses, from ``bus_a``."""
+    def path_lines(self, bus_a: int | str, bus_b: int | str) -> list[str]:
+        """Names of the original lines on the (unique) path between two buses, from ``bus_a``
+        (ids, or names as :meth:`bus_id` reads them)."""
+        ends = []
         for bus in (bus_a, bus_b):
-            if bus not in self.buses.index:
-                raise FeederError(f"unknown bus {bus} in path query on feeder {self.name!r}")
-        a, b = self.buses.index.get_indexer([bus_a, bus_b])
+            try:
+                ends.append(self.bus_id(bus))
+            except FeederError:
+                raise FeederError(
+                    f"unknown bus {bus} in path query on feeder {self.name!r}"
+                ) from None
+        a, b = self.buses.index.get_indexer(ends)
         return self.lines.index[tree_path_lines(self.bus_tree(), a, b)].tolist()
 
 
@@ -160,17 +166,17 @@ def bus_labels(feeder: Feeder, buses) -> list[int | str]:
 
 
 def bus_id(feeder: Feeder, label: int | str) -> int:
-    """See :meth:`Feeder.bus_id`."""
+    """See :meth:`Feeder.bus_id`: a bus name (case ignored) where the buses have names, else
+    (or when no bus has that name) the int id it spells."""
     index = feeder.buses.index
     if "name" in feeder.buses.columns:
         key = str(label).strip().lower()
         found = np.flatnonzero(feeder.buses["name"].astype(str).str.lower().to_numpy() == key)
         if len(found):
             return int(index[found[0]])
-    else:
-        text = str(label).strip()
-        if text.lstrip("-").isdigit() and int(text) in index:
-            return int(text)
+    text = str(label).strip()
+    if text.lstrip("-").isdigit() and int(text) in index:
+        return int(text)
     raise FeederError(f"feeder {feeder.name!r} has no bus {label!r}")
 
 

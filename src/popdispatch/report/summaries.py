@@ -20,7 +20,6 @@ import pandas as pd
 
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.profiles import Timeline, day_timeline
-from popdispatch.feeder.reduction import ReducedFeeder
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.opf import OpfResult
 from popdispatch.scenarios import DayComparison, SnapshotComparison
@@ -98,36 +97,6 @@ def _finite(value) -> float | None:
     return float(value) if value is not None and np.isfinite(value) else None
 
 
-def feeder_summary(feeder: Feeder, reduced: ReducedFeeder) -> dict:
-    """What the feeder is: sizes of the original and reduced networks, loads, fleet."""
-    gens = reduced.generators
-    ids = source_bus_ids(feeder, gens.bus)
-    return {
-        "case": feeder.name,
-        "buses": len(feeder.buses),
-        "original_lines": len(feeder.lines),
-        "source_bus": int(feeder.source_bus),
-        "nodes": reduced.n_nodes,
-        "key_node_buses": reduced.nodes.bus.tolist(),
-        "lines": reduced.n_lines,
-        "loads": len(feeder.loads),
-        "generators": [
-            {
-                "name": name,
-                "bus": bus,
-                "node": int(row.node),
-                "a_eur": float(row.a),
-                "b_eur_per_mwh": float(row.b),
-                "c_eur_per_mw2h": float(row.c),
-                "pmin_kw": float(row.pmin_kw),
-                "pmax_kw": float(row.pmax_kw),
-            }
-            for (name, row), bus in zip(gens.iterrows(), ids, strict=True)
-        ],
-        "capacity_kw": float(gens.pmax_kw.sum()),
-    }
-
-
 def generator_buses(problem: DispatchProblem) -> list[int | str]:
     """Original bus of every generator, in the problem's generator order, as the source format
     names it (:func:`source_bus_ids`)."""
@@ -135,13 +104,10 @@ def generator_buses(problem: DispatchProblem) -> list[int | str]:
 
 
 def source_bus_ids(feeder: Feeder, buses) -> list[int | str]:
-    """The source format's ids of ``feeder``'s ``buses``: the bus number, or the name of a bus
-    an OpenDSS file names with other than its number (``rg60``, ``sourcebus``)."""
-    numbers = [int(b) for b in buses]
-    if "name" not in feeder.buses.columns:
-        return numbers
-    names = feeder.buses["name"].astype(str)
-    return [b if names.get(b, str(b)) == str(b) else names[b] for b in numbers]
+    """The source format's ids of ``feeder``'s ``buses``: the bus numbers, or, where the format
+    names its buses (OpenDSS), every bus by its name (a string, ``"650"`` too: one JSON type
+    per network)."""
+    return feeder.bus_labels(buses)
 
 
 def opf_summary(
@@ -236,10 +202,13 @@ def snapshot_summary(
     }
 
 
-def limited_line_buses(problem: DispatchProblem) -> list[tuple[int, int]]:
-    """``(from_bus, to_bus)`` of each limited line (the reduced feeder's, original numbers)."""
+def limited_line_buses(problem: DispatchProblem) -> list[tuple[int | str, int | str]]:
+    """``(from_bus, to_bus)`` of each limited line (the reduced feeder's, named as the source
+    format names its buses, :func:`source_bus_ids`)."""
     lines = problem.feeder.lines.iloc[np.asarray(problem.lines, dtype=int)]
-    return [(int(a), int(b)) for a, b in zip(lines.from_bus, lines.to_bus, strict=True)]
+    original = problem.feeder.original
+    ends = zip(original.bus_labels(lines.from_bus), original.bus_labels(lines.to_bus), strict=True)
+    return list(ends)
 
 
 def snapshot_prices(problem: DispatchProblem, run, opf: OpfResult) -> dict:
@@ -262,10 +231,10 @@ def snapshot_prices(problem: DispatchProblem, run, opf: OpfResult) -> dict:
                                        strict=True)
     ]  # fmt: skip
     buses = [
-        {"bus": int(bus), "price_eur_per_mwh": float(price),
+        {"bus": bus, "price_eur_per_mwh": float(price),
          "opf_price_eur_per_mwh": _finite(dual) if feasible else None}
-        for bus, price, dual in zip(problem.voltage_buses, voltage, opf.voltage_price,
-                                    strict=True)
+        for bus, price, dual in zip(problem.feeder.original.bus_labels(problem.voltage_buses),
+                                    voltage, opf.voltage_price, strict=True)
     ]  # fmt: skip
     return {"line_prices": lines, "voltage_prices": buses}
 

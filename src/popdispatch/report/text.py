@@ -79,19 +79,6 @@ def outside_note(rows: list[dict], mode: str | None = None) -> str | None:
     return f"{OUTSIDE_MARK} set point outside its limits: {which}; {_why_outside(mode)}"
 
 
-def feeder_text(summary: dict) -> str:
-    """``popdispatch feeder``."""
-    gens = ", ".join(
-        f"{g['name']} (bus {g['bus']}, {g['pmax_kw']:g} kW)" for g in summary["generators"]
-    )
-    return (
-        f"feeder {summary['case']}: {summary['buses']} buses, {summary['original_lines']} lines, "
-        f"source bus {summary['source_bus']}\nreduced to {summary['nodes']} key nodes and "
-        f"{summary['lines']} lines\n{summary['loads']} loads\ngenerators: {gens}\n"
-        f"total capacity: {summary['capacity_kw']:g} kW"
-    )
-
-
 def _inputs(s: dict) -> str:
     """Feeder, profiles and limits lines shared by every minute and day text."""
     case = s.get("case")
