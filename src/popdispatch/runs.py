@@ -28,7 +28,12 @@ from popdispatch.feeder.sources import (  # noqa: F401  (re-exported: the runs' 
     read_network,
     require_fleet,
 )
-from popdispatch.game.problem import DispatchProblem, check_online
+from popdispatch.game.problem import (
+    DispatchProblem,
+    check_net_demand,
+    check_online,
+    feeder_shortfalls,
+)
 from popdispatch.online import RunSettings
 from popdispatch.report.progress import Progress
 from popdispatch.scenarios import (
@@ -80,12 +85,14 @@ def known_steps(
     source: FeederSource, profiles: Path | None = None, loads: Path | None = None
 ) -> int | None:
     """How many steps a run's series has when that is known before any data is read: the
-    ELV day (1440 minutes) or a network on its own loads (1); ``None`` for a load table or a
-    SimBench year."""
+    ELV day (1440 minutes) or a network on its own loads (1); ``None`` for a load table, a
+    SimBench year or an OpenDSS circuit (its load shapes, :mod:`popdispatch.feeder.shapes`)."""
     from popdispatch.constants import MINUTES_PER_DAY
     from popdispatch.feeder.cases import SIMBENCH_PREFIX
 
     if loads is not None:
+        return None
+    if source.net is not None and source.net.suffix.lower() == ".dss":
         return None
     if profiles is not None or not source.own_loads:
         return MINUTES_PER_DAY
@@ -101,15 +108,22 @@ def series_for(
     loads: Path | None = None,
     minute: int | None = None,
     progress: Progress | None = None,
+    series_kind: str | None = None,
 ) -> LoadProfiles:
     """The load time series of a run on ``feeder``: the table ``loads`` (CSV or Parquet, see
     :mod:`popdispatch.readers.series`), else the ELV profile folder ``profiles`` (also for a
     network read from the ELV's own files: loads match by name, case ignored), else the
-    network's own: a SimBench case's bundled year, a network's or case's own loads (one step),
-    or ieee-elv's official or default profiles (:func:`load_profiles`)."""
+    network's own: a SimBench case's bundled year, an OpenDSS circuit's load shapes of kind
+    ``series_kind`` (``daily``, ``yearly``, ``duty``; default the one its loads use,
+    :func:`popdispatch.feeder.shapes.shape_series`), a network's or case's own loads (one
+    step), or ieee-elv's official or default profiles (:func:`load_profiles`)."""
     progress = progress or Progress(quiet=True)
     if loads is not None and profiles is not None:
         raise OptionError("give --loads or --profiles, not both", "--loads")
+    if series_kind is not None and (loads is not None or profiles is not None):
+        given = "--loads" if loads is not None else "--profiles"
+        raise OptionError(f"--series runs the network's own load shapes; {given} replaces "
+                          "them: give one", "--series")  # fmt: skip
     if loads is not None:
         from popdispatch.readers.series import read_load_table
 
@@ -124,7 +138,10 @@ def series_for(
 
         with progress.step("reading SimBench's year profiles"):
             return simbench_profiles(source.case[len(SIMBENCH_PREFIX) :], feeder)
-    return network_profiles(feeder)
+    from popdispatch.feeder.shapes import shape_series
+
+    shaped = shape_series(feeder, series_kind)
+    return shaped if shaped is not None else network_profiles(feeder)
 
 
 def select_steps(
@@ -235,6 +252,7 @@ def load_run(
     events: Sequence[Event] = (),
     minutes=None,
     loads: Path | None = None,
+    series_kind: str | None = None,
 ) -> tuple[DispatchProblem, LoadProfiles]:
     """``(problem, profiles)`` of a run as the commands make it: the feeder of ``source`` with
     the time series :func:`series_for` picks (``profiles``: an ELV profile folder; ``loads``:
@@ -246,8 +264,11 @@ def load_run(
     if source.own_loads or loads is not None:
         with progress.step(f"loading {source.label}"):
             feeder = require_fleet(load_feeder(source))
-        series = series_for(source, feeder, profiles, loads, minute, progress)
+        series = series_for(source, feeder, profiles, loads, minute, progress, series_kind)
     else:  # ieee-elv: the profiles (and their note) first, as before
+        if series_kind is not None:
+            raise OptionError("--series runs a network's own load shapes (an OpenDSS circuit "
+                              "given with --net)", "--series")  # fmt: skip
         series = load_profiles(profiles, minute, progress)
         problem = _elv_run_problem(source, series, limits, progress)
         series = series.for_loads(problem.feeder.original.loads.index)
@@ -262,6 +283,8 @@ def load_run(
     check_limits(limits, feeder)
     problem = elv_problem(series, limits, feeder, check=False)
     problem = apply_events(problem, events, minutes) if events else problem
+    for shortfall in feeder_shortfalls(problem, [minute] if minute else minutes):
+        progress.note(f"note: {shortfall}")
     return problem, series
 
 
@@ -355,6 +378,7 @@ def run_snapshot_vs_opf(
     check_voltage(problem, settings)
     check_x0(settings.x0, problem.generators)
     check_online(problem, [minute])
+    check_net_demand(problem, [minute])
     return snapshot_vs_opf(problem, minute, settings)
 
 
@@ -371,4 +395,5 @@ def run_day_vs_opf(
     check_voltage(problem, settings)
     check_x0(settings.x0, problem.generators)
     check_online(problem, minutes)
+    check_net_demand(problem, minutes)
     return day_vs_opf(problem, settings, minutes, progress)

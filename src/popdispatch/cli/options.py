@@ -216,20 +216,28 @@ LOADS_FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 class Series(NamedTuple):
     """Where a run's load time series comes from: an ELV profile ``folder`` (``--profiles``)
-    or a load ``table`` (``--loads``, CSV or Parquet); both ``None``: the feeder's own."""
+    or a load ``table`` (``--loads``, CSV or Parquet); both ``None``: the feeder's own, its
+    load shapes of kind ``kind`` (``--series``) where it has them."""
 
     folder: Path | None = None
     table: Path | None = None
+    kind: str | None = None
 
 
 def series_options(func):
-    """``--profiles`` and ``--loads``, handed to the command as one ``profiles``
+    """``--profiles``, ``--loads`` and ``--series``, handed to the command as one ``profiles``
     (:class:`Series`)."""
 
     @functools.wraps(func)
-    def command(*args, profiles, loads, **kwargs):
-        return func(*args, profiles=Series(profiles, loads), **kwargs)
+    def command(*args, profiles, loads, series, **kwargs):
+        return func(*args, profiles=Series(profiles, loads, series), **kwargs)
 
+    command = option(
+        "--series",
+        type=click.Choice(["daily", "yearly", "duty"]),
+        help="The network's own load shapes as the run's loads (OpenDSS daily=, yearly=, "
+        "duty=); default the kind its loads use.",
+    )(command)
     command = option(
         "--loads",
         type=LOADS_FILE,
@@ -282,7 +290,8 @@ def build(source, profiles: Series, minute, limits, progress, events=(), minutes
         )
     try:
         return load_run(
-            source, profiles.folder, minute, limits, progress, events, minutes, profiles.table
+            source, profiles.folder, minute, limits, progress, events, minutes, profiles.table,
+            profiles.kind,
         )
     except OptionError as exc:
         if exc.option != "--limit":

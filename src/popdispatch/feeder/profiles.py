@@ -181,6 +181,8 @@ class LoadProfiles:
         Names match exactly, else ignoring case (OpenDSS lower-cases the names that the
         official ``Loads.txt`` spells ``LOAD1``)."""
         columns = self.kw.columns
+        if columns.equals(load_names):
+            return self
         if not load_names.difference(columns).empty:
             folded = pd.Index([str(c).lower() for c in columns])
             if folded.has_duplicates:

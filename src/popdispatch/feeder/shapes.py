@@ -90,14 +90,19 @@ def shape_series(feeder, series: str | None = None) -> LoadProfiles | None:
     step = min(s.hours for s in shapes.values())
     steps = int(round(max(s.duration_hours for s in shapes.values()) / step))
     base = loads["p_kw"].to_numpy(float)
-    kw = np.tile(base, (steps, 1))
     k = np.arange(1, steps + 1)
-    for name, shape in shapes.items():
-        rows = np.flatnonzero(names == name)
+    # one column per shape (the multiplier at each step), a last one of ones for no shape
+    columns = np.ones((steps, len(used) + 1))
+    for j, shape in enumerate(shapes.values()):
         point = (np.rint(k * step / shape.hours).astype(np.int64) - 1) % len(shape.mult)
-        mult = shape.mult[point][:, None]
-        sign = np.where(base[rows] < 0, -1.0, 1.0)  # an injection's actual kW is produced
-        kw[:, rows] = mult * sign if shape.use_actual else mult * base[rows]
+        columns[:, j] = shape.mult[point]
+    which = pd.Index(used).get_indexer(names)
+    which[which < 0] = len(used)
+    actual = np.array([shapes[n].use_actual for n in used] + [False])[which]
+    # an actual shape gives kW itself (an injection's kW produced, hence its sign)
+    scale = np.where(actual, np.where(base < 0, -1.0, 1.0), base)
+    kw = np.take(columns, which, axis=1)
+    kw *= scale
     table = pd.DataFrame(kw, index=pd.RangeIndex(1, steps + 1, name="minute"), columns=loads.index)
     times = pd.to_timedelta(np.arange(steps) * step, unit="h")
     timeline = Timeline(times, np.full(steps, step))

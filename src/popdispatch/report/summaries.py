@@ -97,6 +97,20 @@ def _finite(value) -> float | None:
     return float(value) if value is not None and np.isfinite(value) else None
 
 
+def fixed_injection_kw(problem: DispatchProblem, minutes) -> list[float]:
+    """The fixed injections' total output (kW) at each 1-based step of ``minutes``: generators
+    without cost data following their profiles (0 where the network has none)."""
+    fixed = getattr(problem, "fixed_injection", np.zeros(0))
+    rows = np.asarray(minutes, dtype=np.int64) - 1
+    return (fixed[rows] * KW_PER_MW).tolist() if len(fixed) else [0.0] * len(rows)
+
+
+def _fixed_energy_kwh(problem: DispatchProblem, minutes, timeline: Timeline) -> float:
+    """Energy of the fixed injections over ``minutes`` (kWh; each step its own length)."""
+    kw = np.array(fixed_injection_kw(problem, minutes))
+    return float(_energy(kw, timeline.hours[np.asarray(minutes) - 1]))
+
+
 def generator_buses(problem: DispatchProblem) -> list[int | str]:
     """Original bus of every generator, in the problem's generator order, as the source format
     names it (:func:`source_bus_ids`)."""
@@ -125,6 +139,7 @@ def opf_summary(
         "minute": opf.minute,
         **_time_keys(_timeline(problem, timeline), opf.minute),
         "demand_kw": opf.demand_kw,
+        "fixed_injection_kw": fixed_injection_kw(problem, [opf.minute])[0],
         "capacity_kw": float(np.where(online, problem.pmax, 0.0).sum() * KW_PER_MW),
         "case": problem.feeder.original.name,
         "profile_source": problem.profile_source,
@@ -175,6 +190,7 @@ def snapshot_summary(
         "minute": run.minute,
         **_time_keys(_timeline(problem, timeline), run.minute),
         "demand_kw": run.demand_kw,
+        "fixed_injection_kw": fixed_injection_kw(problem, [run.minute])[0],
         "capacity_kw": float(setpoint_bounds_kw(problem, online)[1].sum()),
         "case": problem.feeder.original.name,
         "mode": settings.mode,
@@ -324,6 +340,7 @@ def day_summary(
         "step_minutes": timeline.step_minutes,
         "case": problem.feeder.original.name,
         "profile_source": run.profile_source,
+        "fixed_injection_kwh": _fixed_energy_kwh(problem, run.minutes, timeline),
         "mode": settings.mode,
         "dynamics": settings.dynamics,
         "x0": settings.x0_label(),
@@ -443,6 +460,8 @@ def day_table(
             "demand_kw": run.demand_kw,
         }
     )
+    if problem is not None:
+        table["fixed_injection_kw"] = fixed_injection_kw(problem, run.minutes)
     for k, name in enumerate(run.generators):
         table[f"{name}_setpoint_kw"] = run.setpoints_kw[:, k]
     for k, name in enumerate(run.generators):

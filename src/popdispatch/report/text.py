@@ -80,10 +80,17 @@ def outside_note(rows: list[dict], mode: str | None = None) -> str | None:
 
 
 def _inputs(s: dict) -> str:
-    """Feeder, profiles and limits lines shared by every minute and day text."""
+    """Feeder, profiles, fixed injections (where there are any) and limits lines shared by
+    every minute and day text."""
     case = s.get("case")
+    fixed = ""
+    if s.get("fixed_injection_kw"):
+        fixed = f"fixed injections (not dispatched): {s['fixed_injection_kw']:.3f} kW\n"
+    elif s.get("fixed_injection_kwh"):
+        fixed = (f"fixed injections (not dispatched): {s['fixed_injection_kwh']:.3f} kWh "
+                 "(per step: fixed_injection_kw in day.csv)\n")  # fmt: skip
     return (f"feeder: {case}\n" if case else "") + (
-        f"profiles: {s['profile_source']}\n{limits_text(s.get('limits', []))}"
+        f"profiles: {s['profile_source']}\n{fixed}{limits_text(s.get('limits', []))}"
     )
 
 
