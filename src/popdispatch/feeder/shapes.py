@@ -2,9 +2,9 @@
 
 An OpenDSS circuit names, for each load (and each generator or PV system the run does not
 dispatch, a fixed injection), a load shape per kind of simulation: ``daily``, ``yearly`` and
-``duty`` (the loads table's columns of those names; OpenDSS's own side effects included: a
-``daily`` shape is also the ``yearly`` one where none is given). :func:`shape_series` turns
-the shapes of one kind into :class:`~popdispatch.feeder.profiles.LoadProfiles`, OpenDSS's way:
+``duty`` (the loads table's columns of those names; OpenDSS's own defaults included: a
+``daily`` shape is also the ``yearly`` one where none is given, and the ``duty`` one).
+:func:`shape_series` turns the shapes of one kind into :class:`~popdispatch.feeder.profiles.LoadProfiles`, OpenDSS's way:
 
 - a row's kW at a step is its ``p_kw`` times the shape's multiplier, or the multiplier itself
   (kW, with the row's sign) for a shape with ``UseActual=yes``; a row without a shape of that
@@ -80,6 +80,9 @@ def shape_series(feeder, series: str | None = None) -> LoadProfiles | None:
     if series is None:
         return None
     names = loads[series].fillna("").astype(str).str.lower().to_numpy()
+    if series == "duty":  # OpenDSS runs a duty cycle on the daily shape where none is given
+        daily = loads["daily"].fillna("").astype(str).str.lower().to_numpy()
+        names = np.where(names == "", daily, names)
     used = sorted(set(names) - {""})
     if not used:
         return None
