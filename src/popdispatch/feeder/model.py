@@ -169,6 +169,8 @@ def bus_id(feeder: Feeder, label: int | str) -> int:
     """See :meth:`Feeder.bus_id`: a bus name (case ignored) where the buses have names, else
     (or when no bus has that name) the int id it spells."""
     index = feeder.buses.index
+    if not isinstance(label, str) and np.ndim(label) == 0 and float(label).is_integer():
+        label = int(label)  # 650, np.int64(650) and 650.0 name the same bus
     if "name" in feeder.buses.columns:
         key = str(label).strip().lower()
         found = np.flatnonzero(feeder.buses["name"].astype(str).str.lower().to_numpy() == key)

@@ -4,7 +4,8 @@ An OpenDSS circuit names, for each load (and each generator or PV system the run
 dispatch, a fixed injection), a load shape per kind of simulation: ``daily``, ``yearly`` and
 ``duty`` (the loads table's columns of those names; OpenDSS's own defaults included: a
 ``daily`` shape is also the ``yearly`` one where none is given, and the ``duty`` one).
-:func:`shape_series` turns the shapes of one kind into :class:`~popdispatch.feeder.profiles.LoadProfiles`, OpenDSS's way:
+:func:`shape_series` turns the shapes of one kind into
+:class:`~popdispatch.feeder.profiles.LoadProfiles`, OpenDSS's way:
 
 - a row's kW at a step is its ``p_kw`` times the shape's multiplier, or the multiplier itself
   (kW, with the row's sign) for a shape with ``UseActual=yes``; a row without a shape of that
