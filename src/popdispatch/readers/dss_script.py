@@ -98,16 +98,11 @@ class Script:
         return f"{found[0]}:{found[1]}" if found else str(self.path)
 
     def summary(self) -> str:
-        """The notes and the skipped commands in one line ('' when there are none)."""
+        """The notes in one line ('' when there are none). The skipped commands change nothing
+        that is read, so they are not among them (:attr:`skipped` lists them)."""
         parts = list(self.notes[:3])
         if len(self.notes) > 3:
             parts.append(f"and {len(self.notes) - 3} more like them")
-        if self.skipped:
-            counted = ", ".join(
-                f"{name}" + (f" x{count}" if count > 1 else "")
-                for name, count in self.skipped.items()
-            )
-            parts.append(f"not run (they solve, show, plot or export): {counted}")
         return "; ".join(parts)
 
 

@@ -85,7 +85,7 @@ import pandas as pd
 from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components, depth_first_order
 
-from popdispatch.errors import FeederError
+from popdispatch.errors import FeederError, OptionError
 from popdispatch.feeder.generators import as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.radial import join_feeders, merge_parallel
@@ -698,7 +698,7 @@ def read_matpower(
     else:
         sources = [_root_bus(root, path)]
         if sources[0] not in kept:
-            raise FeederError(f"{path}: root {root} is not a bus of the case")
+            raise OptionError(f"{path}: root {root} is not a bus of the case", "--root")
     source = sources[0]
 
     # keep the source's part of the network (and any other part with load unless root is given)
@@ -781,7 +781,9 @@ def _root_bus(root, path: Path) -> int:
     try:
         return int(str(root).strip())
     except ValueError:
-        raise FeederError(f"{path}: root {root!r} is not a MATPOWER bus number") from None
+        raise OptionError(
+            f"{path}: root {root!r} is not a MATPOWER bus number", "--root"
+        ) from None
 
 
 def _offsets(buses: pd.DataFrame, trees: list[pd.Index]) -> np.ndarray:

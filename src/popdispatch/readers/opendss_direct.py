@@ -87,7 +87,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from popdispatch.errors import FeederError, FleetError, MeshedError
+from popdispatch.errors import FeederError, FleetError, MeshedError, OptionError
 from popdispatch.feeder.generators import FLEET_COLUMNS, as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.radial import join_feeders, merge_parallel
@@ -288,7 +288,9 @@ def _sources(circuit: Circuit, root, ids: dict[str, int], path: Path) -> list[st
     if root is not None:
         key = str(root).strip().lower()
         if key not in ids:
-            raise FeederError(f"{path}: root bus {root!r} is not a bus of the OpenDSS circuit")
+            raise OptionError(
+                f"{path}: root bus {root!r} is not a bus of the OpenDSS circuit", "--root"
+            )
         return [key]
     if not circuit.sources:
         raise FeederError(f"{path}: the circuit has no enabled Vsource: name the source bus "

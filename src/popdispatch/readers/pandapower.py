@@ -71,7 +71,7 @@ import pandas as pd
 from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components
 
-from popdispatch.errors import FeederError, FleetError
+from popdispatch.errors import FeederError, FleetError, OptionError
 from popdispatch.feeder.generators import FLEET_COLUMNS, as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.radial import join_feeders, merge_parallel
@@ -147,7 +147,7 @@ def _read(net_or_path, fleet, root, ratings, name) -> Feeder:
     if root is not None:
         root = _root_index(root)
         if root not in position:
-            raise FeederError(f"root bus {root} is not a bus of the pandapower net")
+            raise OptionError(f"root bus {root} is not a bus of the pandapower net", "--root")
         root_pos = int(rep[position.get_loc(root)])
         if not bus_ok[position.get_loc(root)]:
             raise FeederError(f"root bus {root} is out of service")
@@ -233,7 +233,7 @@ def _root_index(root) -> int:
     try:
         return int(str(root).strip())
     except ValueError:
-        raise FeederError(f"root {root!r} is not a pandapower bus index") from None
+        raise OptionError(f"root {root!r} is not a pandapower bus index", "--root") from None
 
 
 # -- input ---------------------------------------------------------------------------------------
