@@ -94,6 +94,8 @@ def known_steps(
         return None
     if source.net is not None and source.net.suffix.lower() == ".dss":
         return None
+    if source.case is not None and source.case.startswith("opendss:"):
+        return None
     if profiles is not None or not source.own_loads:
         return MINUTES_PER_DAY
     if source.case is not None and source.case.startswith(SIMBENCH_PREFIX):

@@ -42,10 +42,16 @@ class FeederSource:
         if len(given) > 1:
             raise OptionError(f"give one of {', '.join(given)}, not several", given[0])
         if self.case is not None:
-            from popdispatch.feeder.cases import CASES, SIMBENCH_PREFIX
+            from popdispatch.feeder.cases import (
+                CASES,
+                MATPOWER_PREFIX,
+                OPENDSS_PREFIX,
+                SIMBENCH_PREFIX,
+            )
 
-            if self.case not in CASES and not self.case.startswith(SIMBENCH_PREFIX):
-                known = ", ".join(CASES)
+            prefixes = (SIMBENCH_PREFIX, MATPOWER_PREFIX, OPENDSS_PREFIX)
+            if self.case not in CASES and not self.case.startswith(prefixes):
+                known = ", ".join([*CASES, "simbench:CODE", "matpower:NAME", "opendss:NAME"])
                 raise OptionError(f"unknown case {self.case!r} (known: {known})", "--case")
         if self.net is not None and self.net.suffix.lower() not in NETWORK_READERS:
             known = ", ".join(NETWORK_READERS)
