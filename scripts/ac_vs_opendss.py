@@ -97,8 +97,9 @@ def main(folder: Path) -> None:
         cases = [("IEEE 13", opendss / "ieee13" / "IEEE13Nodeckt.dss"),
                  ("IEEE 8500", opendss / "ieee8500" / "Master.dss"),
                  ("ckt24 (radial)", ckt24)]  # fmt: skip
-        print(f"{'feeder':<16}{'model':<37}{'losses kW':>11}{'of which':>10}{'v min':>8}"
-              f"{'v max':>8}")
+        print(
+            f"{'feeder':<16}{'model':<37}{'losses kW':>11}{'of which':>10}{'v min':>8}{'v max':>8}"
+        )
         print(f"{'':<16}{'':<37}{'':>11}{'transf.':>10}")
         for label, master in cases:
             shipped = opendss_solution(master, SOLVE)
@@ -108,9 +109,11 @@ def main(folder: Path) -> None:
                                ("OpenDSS, the AC check's assumptions", same),
                                ("popdispatch AC check", mine)):  # fmt: skip
                 note = "" if row.get("converged", True) else "  (not converged)"
-                print(f"{label:<16}{model:<37}{row['losses_kw']:>11.2f}"
-                      f"{row['transformers_kw']:>10.2f}{row['v_min']:>8.4f}"
-                      f"{row['v_max']:>8.4f}{note}")
+                print(
+                    f"{label:<16}{model:<37}{row['losses_kw']:>11.2f}"
+                    f"{row['transformers_kw']:>10.2f}{row['v_min']:>8.4f}"
+                    f"{row['v_max']:>8.4f}{note}"
+                )
 
 
 if __name__ == "__main__":
