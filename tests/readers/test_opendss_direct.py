@@ -387,3 +387,17 @@ def test_ieee13_exact_snapshot_equals_dc_opf(fleet13, binding):
     assert (np.abs(opf.line_price) > 1e-6).any() == binding
     assert snapshot.status == "converged"
     np.testing.assert_allclose(snapshot.setpoints_kw, opf.p_kw, rtol=0, atol=1e-3)
+
+
+@needs_feeders
+def test_fleet_given_as_a_file_path(tmp_path):
+    path = tmp_path / "fleet13.csv"
+    path.write_text(
+        "bus,name,b_eur_per_mwh,c_eur_per_mw2h,pmin_kw,pmax_kw\n"
+        "sourcebus,grid,50,0.1,0,5000\nRG60,reg,10,0.1,0,1000\n675,pv,5,0.1,0,500\n"
+    )
+    for given in (str(path), path):
+        f = read_opendss_master(IEEE13, fleet=given)
+        assert f.generators.bus.to_dict() == {"grid": 693, "reg": 694, "pv": 675}
+    with pytest.raises(FleetError, match=r"a fleet is a table .* or the path of a CSV or TOML"):
+        read_opendss_master(IEEE13, fleet=42)
