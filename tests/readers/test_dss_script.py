@@ -214,3 +214,26 @@ def test_split_phase_transformer_loses_what_opendss_says(tmp_path, loads):
     loss_kw = ctx.CktElement.Losses()[0] / 1e3
     current_a = ctx.CktElement.CurrentsMagAng()[0]  # primary, A
     assert current_a**2 * branch.r_ohm / 1e3 == pytest.approx(loss_kw, rel=1e-3)
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        "New SwtControl.s1 SwitchedObj=Line.bd SwitchedTerm=1 Normal=open State=open",
+        "New Fuse.f1 MonitoredObj=Line.bd SwitchedObj=Line.bd\nFuse.f1.State=[open open open]",
+        "Disable Line.bd",
+        "Edit Line.bd enabled=no",
+    ],
+    ids=["switch-control", "blown-fuse", "disable", "enabled-no"],
+)
+def test_controls_and_disabled_elements_take_a_line_out(tmp_path, extra):
+    write_case(tmp_path)
+    master = tmp_path / "Master.dss"
+    master.write_text(MASTER + extra + "\n")
+    with warnings.catch_warnings():  # an opened line's far bus is dropped with a note
+        warnings.simplefilter("ignore", UserWarning)
+        feeder = read_opendss_master(master)
+    assert "bd" not in feeder.lines.index and "d" not in set(feeder.buses.name)
+    plain = tmp_path / "plain.dss"
+    plain.write_text(MASTER)
+    assert "bd" in read_opendss_master(plain).lines.index

@@ -33,8 +33,6 @@ ONE_BUS_CLASSES = frozenset({
     "expcontrol", "storagecontroller", "fuse", "recloser", "relay", "swtcontrol",
     "gencontroller", "upfccontrol", "esppvcontrol", "gicsource", "fmonitor", "vccs",
 })  # fmt: skip
-#: Control elements that open the element they switch when their state is open.
-SWITCHING_CONTROLS = ("Fuses", "Reclosers", "SwtControls", "Relays")
 
 
 @dataclass
@@ -111,12 +109,11 @@ def read_circuit(ctx, ratings: bool) -> Circuit:
     if not names:
         raise FeederError(f"the OpenDSS circuit {ctx.Circuit.Name()!r} has no bus")
     kv = _base_voltages(ctx, names)
-    opened = _switched_open(ctx)
     _check_other_series(ctx)
     branches = (
-        _lines(ctx, kv, ratings, opened)
-        + _transformers(ctx, kv, ratings, opened)
-        + _series_shunts(ctx, kv, ratings, opened)
+        _lines(ctx, kv, ratings)
+        + _transformers(ctx, kv, ratings)
+        + _series_shunts(ctx, kv, ratings)
     )
     coords = {}
     for bus in names:
@@ -172,30 +169,11 @@ def _open_terminal(ctx) -> bool:
     )
 
 
-def _switched_open(ctx) -> set[str]:
-    """Elements (``line.sw7``, lower case) that a fuse, recloser, relay or switch control holds
-    open (its state open on every phase)."""
-    opened = set()
-    for cls_name in SWITCHING_CONTROLS:
-        cls = getattr(ctx, cls_name, None)
-        if cls is None:  # pragma: no cover - old engines
-            continue
-        for name in elements(cls):
-            cls.Name(name)
-            if not ctx.CktElement.Enabled():
-                continue
-            state = cls.State()
-            states = [state] if isinstance(state, str | int) else list(state)
-            if states and all(str(s).lower() in ("open", "0") for s in states):
-                opened.add(str(cls.SwitchedObj()).lower())
-    return opened
-
-
-def _skipped(ctx, opened: set[str]) -> bool:
-    """Whether the active element is not part of the network: disabled, opened on a whole
-    terminal, or held open by a control."""
-    element = ctx.CktElement
-    return not element.Enabled() or _open_terminal(ctx) or element.Name().lower() in opened
+def _skipped(ctx) -> bool:
+    """Whether the active element is not part of the network: disabled, or open on a whole
+    terminal (``Open``, or a fuse, recloser, relay or switch control holding it open: OpenDSS
+    opens the terminals of the element they switch)."""
+    return not ctx.CktElement.Enabled() or _open_terminal(ctx)
 
 
 def _kron(z: np.ndarray, n: int) -> np.ndarray:
@@ -242,11 +220,11 @@ def _line_z1_of(ctx, n: int, r: np.ndarray, x: np.ndarray) -> complex:
     return _sequence_of(z)
 
 
-def _lines(ctx, kv: dict[str, float], ratings: bool, opened: set[str]) -> list[Branch]:
+def _lines(ctx, kv: dict[str, float], ratings: bool) -> list[Branch]:
     rows: list[Branch] = []
     cache: dict = {}
     for name in each(ctx.Lines):
-        if _skipped(ctx, opened):
+        if _skipped(ctx):
             continue
         bus1, bus2 = bus_of(ctx.Lines.Bus1()), bus_of(ctx.Lines.Bus2())
         units = ctx.Lines.Units()
@@ -290,7 +268,7 @@ def _series_z(ctx) -> complex:
     return _sequence_of(z[: ctx.CktElement.NumPhases(), : ctx.CktElement.NumPhases()])
 
 
-def _series_shunts(ctx, kv: dict[str, float], ratings: bool, opened: set[str]) -> list[Branch]:
+def _series_shunts(ctx, kv: dict[str, float], ratings: bool) -> list[Branch]:
     """Reactors and capacitors between two different buses (series elements); those on one
     bus (shunts) carry no active power and are left out."""
     rows = []
@@ -298,7 +276,7 @@ def _series_shunts(ctx, kv: dict[str, float], ratings: bool, opened: set[str]) -
         for name in elements(cls):
             cls.Name(name)
             buses = [bus_of(b) for b in ctx.CktElement.BusNames()]
-            if len(set(buses)) < 2 or _skipped(ctx, opened):
+            if len(set(buses)) < 2 or _skipped(ctx):
                 continue
             z = _series_z(ctx)
             limit = _rated_kw(ctx, f"{prefix}.{name}", kv[buses[0]], ratings)
@@ -327,7 +305,7 @@ def _winding_z(ctx) -> tuple[list[str], np.ndarray, np.ndarray, complex]:
     return buses, kva, r_pu + 1j * x, xhl
 
 
-def _transformers(ctx, kv: dict[str, float], ratings: bool, opened: set[str]) -> list[Branch]:
+def _transformers(ctx, kv: dict[str, float], ratings: bool) -> list[Branch]:
     """Transformers as branches (rules in :mod:`popdispatch.readers.opendss_direct`)."""
     regulated = set()
     for name in elements(ctx.RegControls):
@@ -336,7 +314,7 @@ def _transformers(ctx, kv: dict[str, float], ratings: bool, opened: set[str]) ->
     banks: dict[tuple, list[tuple]] = {}
     for name in elements(ctx.Transformers):
         ctx.Transformers.Name(name)
-        if _skipped(ctx, opened):
+        if _skipped(ctx):
             continue
         windings = ctx.Transformers.NumWindings()
         if windings not in (2, 3):
