@@ -1,7 +1,9 @@
 """Impedances on both sides of an in-feeder transformer: each reader states a branch's own ohms
-on its own voltage (``kv_base``), and the AC check refers them to one base. The yardstick is
-the format's own power flow of the same balanced network: OpenDSS's solution, pandapower's
-``runpp``; voltages (p.u.) and losses (kW) must agree on both sides of the transformer."""
+on its own voltage (``kv_base``), and the AC check refers them to one base. The transformers
+have windings of different kVA (OpenDSS states every winding's %R on winding 1's kVA). The
+yardstick is the format's own power flow of the same balanced network: OpenDSS's solution,
+pandapower's ``runpp``; voltages (p.u.) and losses (kW) must agree on both sides of the
+transformer."""
 
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ BALANCED = """Clear
 New Circuit.sides basekV=12.47 pu=1.0 bus1=src MVAsc3=1e12 MVAsc1=1e12
 New Line.mv bus1=src bus2=hv phases=3 r1=0.3 x1=0.6 r0=0.9 x0=1.8 c1=0 c0=0 length=2 units=km
 New Transformer.t phases=3 windings=2 buses=[hv lv] conns=[wye wye] kVs=[12.47 4.16]
-~ kVAs=[2000 2000] %Rs=[0.5 0.5] XHL=6 %noloadloss=0 %imag=0
+~ kVAs=[2000 1500] %Rs=[0.5 0.8] XHL=6 %noloadloss=0 %imag=0
 New Line.lv bus1=lv bus2=far phases=3 r1=0.2 x1=0.3 r0=0.6 x0=0.9 c1=0 c0=0 length=1 units=km
 New Load.hv bus1=hv phases=3 kV=12.47 kW=600 kvar=200 model=1 vminpu=0.5
 New Load.lv bus1=far phases=3 kV=4.16 kW=900 kvar=300 model=1 vminpu=0.5
@@ -91,3 +93,44 @@ def test_pandapower_reader_both_sides_of_a_transformer_against_runpp():
         assert ac.buses.v_pu[bus] == pytest.approx(net.res_bus.vm_pu[bus], abs=1e-5), bus
     theirs = float(net.res_line.pl_mw.sum() + net.res_trafo.pl_mw.sum()) * 1e3
     assert ac.summary()["losses_kw"] == pytest.approx(theirs, rel=1e-4)
+
+
+THREE_WINDING = """Clear
+New Circuit.star basekV=12.47 pu=1.0 bus1=src MVAsc3=1e12 MVAsc1=1e12
+New Transformer.t phases=3 windings=3 buses=[src a b] conns=[wye wye wye]
+~ kVs=[12.47 4.16 0.48] kVAs=[3000 2000 1000] %Rs=[0.4 0.6 0.8] XHL=7 XHT=9 XLT=5
+~ %noloadloss=0 %imag=0
+New Load.a bus1=a phases=3 kV=4.16 kW=1200 kvar=400 model=1 vminpu=0.5
+New Load.b bus1=b phases=3 kV=0.48 kW=600 kvar=150 model=1 vminpu=0.5
+Set voltagebases=[12.47 4.16 0.48]
+Calcvoltagebases
+"""
+
+
+def test_three_winding_star_against_opendss_power_flow(tmp_path):
+    """A three-winding transformer between three buses read as its star equivalent (a star
+    bus, one branch per winding) loses and drops what OpenDSS's own solution says."""
+    opendssdirect = pytest.importorskip("opendssdirect", reason="needs popdispatch[opendss]")
+    from popdispatch.readers.opendss_direct import read_opendss_master
+
+    path = tmp_path / "star.dss"
+    path.write_text(THREE_WINDING)
+    feeder = read_opendss_master(path, ratings=False)
+    assert "transformer.t.star" in set(feeder.buses.name)
+    ctx = opendssdirect.NewContext()
+    ctx.Basic.AllowChangeDir(False)
+    ctx.Text.Command(f'compile "{path}"')
+    ctx.Text.Command("set tolerance=1e-12 maxiterations=100")
+    ctx.Text.Command("solve")
+    theirs_v = {}
+    for bus in ("a", "b"):
+        ctx.Circuit.SetActiveBus(bus)
+        theirs_v[bus] = float(np.mean(ctx.Bus.puVmagAngle()[0::2]))
+    ctx.Circuit.SetActiveElement("Transformer.t")
+    theirs_loss = ctx.CktElement.Losses()[0] / 1e3
+    feeder = feeder.with_generators(make_fleet([(feeder.source_bus, 0, 1, 0, 0, 1e4)]))
+    ac = snapshot_of(check_setpoints(feeder, feeder.loads.p_kw.to_numpy()[None], np.zeros((1, 1))))
+    ours_v = ac.buses.v_pu.rename(dict(zip(feeder.buses.index, feeder.buses.name, strict=True)))
+    for bus, v in theirs_v.items():
+        assert ours_v[bus] == pytest.approx(v, abs=1e-6), bus
+    assert ac.summary()["losses_kw"] == pytest.approx(theirs_loss, rel=1e-5)

@@ -282,15 +282,15 @@ def test_open_switch_generators_and_unsupported(tmp_path):
     reactor = read_opendss_master(master("New Reactor.r1 Bus1=680 Bus2=x9 R=1 X=2"))
     assert reactor.lines.loc["Reactor.r1", ["r_ohm", "x_ohm", "kind"]].tolist() == [
         pytest.approx(1.0), pytest.approx(2.0), "reactor"]  # fmt: skip
-    # a three-winding transformer between three buses names itself, file and line
+    # a three-winding transformer between three buses: its star equivalent, a bus of its own
     three = (
         "New Transformer.t3 Phases=3 Windings=3 Buses=[680 x1 x2] kVs=[4.16 0.48 0.48] "
         "kVAs=[500 250 250]"
     )
-    bad = master(three)
-    with pytest.raises(FeederError, match=rf"^{bad}:2: Transformer.t3: three-winding transformer "
-                       "between three buses"):  # fmt: skip
-        read_opendss_master(bad)
+    star = read_opendss_master(master(three))
+    assert "transformer.t3.star" in set(star.buses.name)
+    assert {"Transformer.t3:w1", "Transformer.t3:w2", "Transformer.t3:w3"} <= set(star.lines.index)
+    assert len(star.lines) == len(star.buses) - 1
     with pytest.raises(OptionError, match="root bus .x. is not a bus of the OpenDSS circuit"):
         read_opendss_master(IEEE13, fleet=FLEET13, root="x")
 

@@ -115,8 +115,14 @@ def read_circuit(ctx, ratings: bool) -> Circuit:
         + _transformers(ctx, kv, ratings)
         + _series_shunts(ctx, kv, ratings)
     )
+    for branch in branches:  # three-winding transformers' star points: buses of their own
+        if branch.bus_b.endswith(".star") and branch.bus_b not in kv:
+            names.append(branch.bus_b)
+            kv[branch.bus_b] = branch.kv_base / SQRT3
     coords = {}
     for bus in names:
+        if bus.endswith(".star"):
+            continue
         ctx.Circuit.SetActiveBus(bus)
         if ctx.Bus.Coorddefined():
             coords[bus] = (float(ctx.Bus.X()), float(ctx.Bus.Y()))
@@ -288,7 +294,8 @@ def _series_shunts(ctx, kv: dict[str, float], ratings: bool) -> list[Branch]:
 
 def _winding_z(ctx) -> tuple[list[str], np.ndarray, np.ndarray, complex]:
     """The active transformer's buses per winding, kVA per winding, and its star impedances
-    per winding (p.u. on winding 1's kVA; two windings: all in winding 1's) with XHL."""
+    per winding (p.u. on winding 1's kVA, on which OpenDSS states ``%R`` of every winding
+    and ``XHL``, ``XHT``, ``XLT``; two windings: all in winding 1's) with XHL."""
     t = ctx.Transformers
     n = t.NumWindings()
     buses = [bus_of(b) for b in ctx.CktElement.BusNames()]
@@ -296,7 +303,7 @@ def _winding_z(ctx) -> tuple[list[str], np.ndarray, np.ndarray, complex]:
     for w in range(1, n + 1):
         t.Wdg(w)
         kva[w - 1], r[w - 1] = t.kVA(), t.R() / 100
-    r_pu = r * kva[0] / kva  # each winding's %R on its own kVA, to winding 1's
+    r_pu = r  # OpenDSS states every winding's %R on winding 1's kVA (its own power flow shows)
     xhl = t.Xhl() / 100
     if n == 2:
         return buses, kva, np.array([complex(r_pu[0] + r_pu[1], xhl), 0j]), xhl
@@ -330,9 +337,11 @@ def _transformers(ctx, kv: dict[str, float], ratings: bool) -> list[Branch]:
         # ohm on winding 1's base: z V_LL^2 / MVA (three-phase), z V_LN^2 / MVA (one-phase)
         ohm_per_pu = (kv_ll**2 if phases >= 3 else (kv_ll / SQRT3) ** 2) * 1e3 / kva[0]
         kind = "regulator" if name.lower() in regulated else "transformer"
-        for part, (a, b, z_ab, kva_ab) in enumerate(_winding_branches(name, buses, kva, z)):
+        parts = _winding_branches(name, buses, kva, z)
+        for part, (a, b, z_ab, kva_ab) in enumerate(parts):
             limit = kva_ab if ratings else math.inf
-            unit = (name, a, b, z_ab * ohm_per_pu, kv_ll, limit, kind)
+            unit_name = name if len(parts) == 1 else f"{name}:w{part + 1}"
+            unit = (unit_name, a, b, z_ab * ohm_per_pu, kv_ll, limit, kind)
             key = (frozenset((a, b)), part) if phases == 1 else (name, part)
             banks.setdefault(key, []).append(unit)
     rows = []
@@ -343,7 +352,7 @@ def _transformers(ctx, kv: dict[str, float], ratings: bool) -> list[Branch]:
             "Transformer." + "+".join(u[0] for u in units), a, b, 0.0, abs(z.real), abs(z.imag),
             kv_ll, float(sum(u[5] for u in units)),
             "regulator" if any(u[6] == "regulator" for u in units) else "transformer",
-            tuple(f"Transformer.{u[0]}" for u in units),
+            tuple(f"Transformer.{u[0].split(':')[0]}" for u in units),
         ))  # fmt: skip
     return rows
 
@@ -353,16 +362,28 @@ def _winding_branches(
 ) -> list[tuple[str, str, complex, float]]:
     """``(bus_a, bus_b, z p.u., kVA)`` branches of a transformer: one for two windings; for
     three, windings 2 and 3 on one bus (split-phase service) are in parallel behind winding
-    1's impedance: ``z1 + z2 z3 / (z2 + z3)``; three buses are refused."""
+    1's impedance: ``z1 + z2 z3 / (z2 + z3)``; on three buses, the star equivalent: a star
+    bus ``NAME.star`` (:func:`star_bus`) joined to each winding's bus by its impedance."""
     if len(buses) == 2:
         return [(buses[0], buses[1], complex(z[0]), float(kva[0]))]
     if buses[1] == buses[2] != buses[0]:
         z23 = z[1] * z[2] / (z[1] + z[2]) if abs(z[1] + z[2]) > 0 else 0j
         return [(buses[0], buses[1], complex(z[0] + z23), float(kva[0]))]
-    raise FeederError(
-        f"Transformer.{name}: three-winding transformer between three buses {buses} is not "
-        "supported (popdispatch reads split-phase units, windings 2 and 3 on one bus)"
-    )
+    if len(set(buses)) < 3:
+        raise FeederError(
+            f"Transformer.{name}: three-winding transformer with winding 1 and another on one "
+            f"bus {buses} is not supported"
+        )
+    star = star_bus(name)
+    return [(buses[0], star, complex(z[0]), float(kva[0]))] + [
+        (star, buses[w], complex(z[w]), float(kva[w])) for w in (1, 2)
+    ]
+
+
+def star_bus(transformer: str) -> str:
+    """The star point of a three-winding transformer between three buses, as a bus name (a
+    dot cannot be part of an OpenDSS bus name, so it is no other bus's)."""
+    return f"transformer.{transformer.lower()}.star"
 
 
 def _check_other_series(ctx) -> None:

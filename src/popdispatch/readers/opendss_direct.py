@@ -28,17 +28,20 @@ Conversion rules
   one-phase matrix line its self impedance), times ``Length``. Switches (``Switch=yes``) are
   lines with ``kind = "switch"``.
 - **Transformers and regulators**: branches with ``length_km = 0`` and the series impedance
-  ``z = (%R1 + %R2 kVA1/kVA2)/100 + j XHL/100`` per unit on winding 1's kVA, in ohm on winding
-  1's side: ``z V_LL^2 / MVA1`` for a three-phase unit, ``z V_LN^2 / MVA1`` (per phase) for a
-  one-phase unit. One-phase units between the same two buses (a regulator bank ``reg1a/b/c``)
-  are one branch ``Transformer.reg1a+reg1b+reg1c`` with the mean of their impedances.
+  ``z = (%R1 + %R2)/100 + j XHL/100`` per unit on winding 1's kVA (OpenDSS states every
+  winding's ``%R`` on it: its own power flow does not change with winding 2's kVA), in ohm on
+  winding 1's side: ``z V_LL^2 / MVA1`` for a three-phase unit, ``z V_LN^2 / MVA1`` (per
+  phase) for a one-phase unit. One-phase units between the same two buses (a regulator bank
+  ``reg1a/b/c``) are one branch ``Transformer.reg1a+reg1b+reg1c`` with the mean of their
+  impedances.
   ``kind`` is ``"regulator"`` when a ``RegControl`` acts on a unit. Taps are ignored.
 - **Three-winding transformers**: the split-phase (centre-tap) service transformer, windings
   2 and 3 on one bus, is one branch from winding 1's bus to the secondary bus. Its star
-  impedances come from ``XHL``, ``XHT``, ``XLT`` (on winding 1's kVA) and each winding's
-  ``%R`` (on its own kVA); the secondary's loads draw on both halves alike, so the halves are
-  in parallel behind the primary: ``z = z1 + z2 z3 / (z2 + z3)``; the loads stay on the
-  secondary bus. Three windings on three buses are refused.
+  impedances come from ``XHL``, ``XHT``, ``XLT`` and each winding's ``%R`` (all on winding 1's
+  kVA); the secondary's loads draw on both halves alike, so the halves are in parallel behind
+  the primary: ``z = z1 + z2 z3 / (z2 + z3)``; the loads stay on the secondary bus. Three
+  windings on three buses are the star equivalent: a bus ``transformer.NAME.star`` of its
+  own and one branch ``Transformer.NAME:wK`` per winding (limit the winding's kVA).
 - **Reactors and capacitors** between two different buses (the 8500-node feeder's source
   reactor, series capacitors) are branches with the impedance of their primitive admittance
   (``Z = -Y12^-1`` between the terminals, positive sequence); shunt ones (one bus) carry no
