@@ -19,15 +19,16 @@ class FeederSource:
     ``--root``, ``--no-ratings``).
 
     ``net``: a network file, read by its suffix (:data:`NETWORK_READERS`: ``.m`` MATPOWER,
-    ``.json`` pandapower, ``.dss`` OpenDSS master); it runs on its own loads (one time step,
-    repeated) with its own generators and costs, or ``fleet`` (a CSV or TOML fleet file, see
-    :func:`popdispatch.feeder.generators.read_fleet`; buses as the network numbers them) in
-    their place. ``case``: a built-in case by name (:func:`popdispatch.feeder.cases.
-    list_cases`); other than ieee-elv it runs on its own loads like a network. ``root``: the
-    source bus when the network has several. ``ratings``: line
-    limits from the network's own ratings. Without ``net``: the built-in ieee-elv case, or its
-    OpenDSS folder ``opendss``, with the paper's fleet (or ``fleet``) and the official or
-    default profiles.
+    ``.json`` pandapower, ``.dss`` OpenDSS master or run script); it runs on its own loads (one
+    time step, or an OpenDSS circuit's load shapes) with its own priced generators, or ``fleet``
+    (a CSV or TOML fleet file, see :func:`popdispatch.feeder.generators.read_fleet`; buses as
+    the network names them) in their place. ``case``: a built-in case by name
+    (:func:`popdispatch.feeder.cases. list_cases`; also ``simbench:CODE``, ``matpower:NAME``,
+    ``opendss:NAME``); other than ieee-elv it runs on its own loads like a network. ``root``:
+    the source bus, as the network names it (a MATPOWER number, a pandapower index, an OpenDSS
+    name), in place of its own source(s). ``ratings``: line limits from the network's own
+    ratings. Without ``net``: the built-in ieee-elv case, or its OpenDSS folder ``opendss``,
+    with the paper's fleet (or ``fleet``) and the official or default profiles.
     """
 
     opendss: Path | None = None
