@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from popdispatch.feeder.generators import make_fleet
 from popdispatch.feeder.profiles import single_minute_profiles
@@ -199,3 +201,30 @@ def test_case533mt_hi_exact_mode_with_fixed_injections_equals_the_dc_opf():
     assert opf.status == "optimal" and snapshot.status == "converged"
     np.testing.assert_allclose(snapshot.setpoints_kw, opf.p_kw, atol=max(1e-6 * opf.demand_kw,
                                                                           1e-3))  # fmt: skip
+
+
+@settings(max_examples=100, deadline=None)
+@given(data=st.data(), n=st.integers(2, 12))
+def test_merged_parallel_branches_keep_admittance_and_capacity(data, n):
+    """Any radial feeder with any branches doubled or tripled: merging leaves one branch per
+    bus pair, whose admittance is the sum of theirs and whose limit the sum of theirs."""
+    parent = [data.draw(st.integers(0, i - 1)) for i in range(1, n)]
+    rows = []
+    for child, par in enumerate(parent, start=1):
+        for _ in range(data.draw(st.integers(1, 3))):
+            flip = data.draw(st.booleans())
+            r = data.draw(st.floats(1e-3, 10.0))
+            x = data.draw(st.floats(1e-3, 10.0))
+            limit = data.draw(st.one_of(st.just(np.inf), st.floats(1.0, 1e4)))
+            a, b = (child, par) if flip else (par, child)
+            rows.append((a, b, r, x, limit))
+    lines = pd.DataFrame(rows, columns=["from_bus", "to_bus", "r_ohm", "x_ohm", "limit_kw"])
+    lines.insert(2, "length_km", 1.0)
+    lines.index = pd.Index([f"l{k}" for k in range(len(lines))], name="line")
+    merged, members = merge_parallel(lines)
+    assert len(merged) == n - 1
+    for name, row in merged.iterrows():
+        parts = lines.loc[members.get(name, [name])]
+        y = (1 / (parts.r_ohm + 1j * parts.x_ohm)).sum()
+        assert complex(row.r_ohm, row.x_ohm) == pytest.approx(1 / y, rel=1e-9)
+        assert row.limit_kw == pytest.approx(parts.limit_kw.sum())
