@@ -439,6 +439,7 @@ def test_list_cases_counts_and_totals(monkeypatch):
     subset = {n: cases.CASES[n] for n in ("kerber-landnetz-freileitung-1", "case33bw")}
     monkeypatch.setattr(cases, "CASES", subset)
     monkeypatch.setattr(cases, "simbench_available", lambda: False)
+    monkeypatch.setattr(cases, "available_big_cases", lambda: [])
     table = cases.list_cases()
     assert table.index.tolist() == ["kerber-landnetz-freileitung-1", "case33bw"]
     assert table.loc["case33bw", ["buses", "lines", "loads"]].tolist() == [33, 32, 32]

@@ -110,13 +110,12 @@ def _times(column: pd.Series, path: Path, name) -> pd.DatetimeIndex:
 def _numbers(values: pd.DataFrame, path: Path) -> pd.DataFrame:
     """The load columns as floats; the first non-numeric cell named."""
     numeric = values.apply(pd.to_numeric, errors="coerce")
-    bad = numeric.isna().to_numpy() & values.notna().to_numpy()
-    bad |= values.isna().to_numpy()
+    bad = ~np.isfinite(numeric.to_numpy(float))  # text, missing cells, inf
     if bad.any():
         row, col = np.argwhere(bad)[0]
         raise ProfileError(
             f"{path}: column {values.columns[col]!r}, row {row + 1}: "
-            f"{values.iat[row, col]!r} is not a number (kW)"
+            f"{values.iat[row, col]!r} is not a finite number (kW)"
         )
     return numeric.astype(float)
 
