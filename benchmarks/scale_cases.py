@@ -146,7 +146,7 @@ def synthetic(n_buses: int, n_generators: int, factor: float = 1.0) -> DispatchP
 def _case_feeder(name: str) -> Feeder:
     from popdispatch.feeder import cases
 
-    feeder = cases.CASES[name].loader(None, placeholder=True)
+    feeder = cases.CASES[name].loader(None)  # no fleet of its own: described
     return cases.load_case(name, fleet=test_fleet(feeder))
 
 

@@ -24,6 +24,23 @@ MISSING_OFFICIAL = (
 )
 
 
+#: Environment variable naming the test feeders folder (``matpower/``, ``opendss/``).
+FEEDERS_ENV = "POPDISPATCH_FEEDERS"
+#: Why a test that needs the big OpenDSS feeders is skipped.
+FEEDERS_REASON = (
+    "OpenDSS test feeders (ieee8500, ckt24) not found: set POPDISPATCH_FEEDERS to the folder "
+    "holding opendss/ieee8500 and opendss/ckt24, or place it at ../shared/feeders"
+)
+#: Where ckt24's two loops open (least loaded in OpenDSS's own solution: the reader's hint).
+CKT24_OPEN_POINTS = ("Line.05410_107831ug", "Line.05410_115682ug")
+
+
+def feeders_folder() -> Path:
+    """The test feeders: ``$POPDISPATCH_FEEDERS``, else ``../shared/feeders``."""
+    env = os.environ.get(FEEDERS_ENV, "").strip()
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "feeders"
+
+
 def find_official_folder() -> Path | None:
     """The official IEEE ELV folder: ``$POPDISPATCH_PROFILES``, else ``../shared/ieee-elv``."""
     env = os.environ.get("POPDISPATCH_PROFILES", "").strip()

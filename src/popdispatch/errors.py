@@ -9,6 +9,15 @@ class FeederError(PopdispatchError, ValueError):
     """The feeder is not a valid radial network (meshed, disconnected, bad element)."""
 
 
+class MeshedError(FeederError):
+    """The network has a loop: ``loop_lines`` names its lines (the feeder's line names), the
+    first of them the one that closes it."""
+
+    def __init__(self, message: str, loop_lines: list[str] | None = None):
+        super().__init__(message)
+        self.loop_lines = list(loop_lines or [])
+
+
 class FleetError(PopdispatchError, ValueError):
     """A generator table is invalid (unknown bus, bad cost or limit)."""
 

@@ -7,11 +7,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from popdispatch.errors import OptionError
+from popdispatch.errors import FeederError, OptionError
 from popdispatch.game.problem import DispatchProblem, check_online
 
-#: One event: (generator bus as the feeder numbers it, ``"off"`` or ``"on"``, 1-based minute).
-Event = tuple[int, str, int]
+#: One event: (generator bus as the source format names it: a number, or an OpenDSS name;
+#: ``"off"`` or ``"on"``; 1-based minute).
+Event = tuple[int | str, str, int]
 
 
 def event_label(event: Event) -> str:
@@ -33,14 +34,19 @@ def apply_events(
     is infeasible (:func:`popdispatch.game.problem.check_capacity` is the strict check).
     """
     buses = dict(zip(problem.feeder.generators.bus.astype(int), problem.generators, strict=True))
+    original = problem.feeder.original
     off_since: dict[str, int] = {}
     for event in sorted(events, key=lambda e: e[2]):
-        bus, state, minute = event
+        given, state, minute = event
         text = event_label(event)
+        try:
+            bus = original.bus_id(given)  # a number, or a name where the network names buses
+        except FeederError:
+            bus = None
         if bus not in buses:
-            known = ", ".join(str(b) for b in buses)
+            known = ", ".join(str(b) for b in original.bus_labels(list(buses)))
             raise OptionError(
-                f"no generator at bus {bus} in {text} (generator buses: {known})", "--event"
+                f"no generator at bus {given} in {text} (generator buses: {known})", "--event"
             )
         name = buses[bus]
         if minute > len(problem.online):

@@ -3,8 +3,11 @@
 The exported case is the *reduced* feeder (key nodes, merged lines) with its generators, their
 Table I costs, the loads of the chosen minute and the line limits. Buses keep their original
 numbers (bus 1 = source). Units in the files are the tools' own: MW, MVA, p.u. on
-``baseMVA = 1`` and ``baseKV = 0.416`` (the feeder's line-to-line voltage). Costs are
-polynomial in MW, EUR/h: ``a + b P + c P^2`` exactly as in the paper (eq. 2).
+``baseMVA = 1`` and ``baseKV`` the source bus's nominal line-to-line voltage (the reduced
+feeder's ohms are on it; 0.416 kV for the ieee-elv case, or where a network states none).
+Costs are polynomial in MW, EUR/h: ``a + b P + c P^2`` exactly as in the paper (eq. 2).
+Fixed injections are the negative part of the buses' loads. The pandapower net's slack
+generator marks its source, so popdispatch reads the file back as it wrote it.
 
 - MATPOWER (``.m``): ``mpc.bus``, ``mpc.gen``, ``mpc.branch`` (``rateA`` = limit in MVA, 0 =
   unlimited) and ``mpc.gencost`` (model 2); ``rundcopf('file.m')`` solves the same DC-OPF.
@@ -30,6 +33,11 @@ from popdispatch.report.output import atomic_write, atomic_write_text
 BASE_MVA = 1.0
 BASE_KV = 0.416
 FORMATS = ("matpower", "pandapower")
+
+
+def base_kv(problem: DispatchProblem) -> float:
+    """The exported case's voltage base, kV (see the module docstring)."""
+    return problem.feeder.original.base_kv or BASE_KV
 
 
 def case_tables(problem: DispatchProblem, minute: int, load_kw: np.ndarray) -> dict:
@@ -67,7 +75,8 @@ def _num(value) -> str:
 def matpower_text(problem: DispatchProblem, minute: int, load_kw: np.ndarray, name: str) -> str:
     """A MATPOWER case file (version 2) of the reduced feeder at ``minute``."""
     t = case_tables(problem, minute, load_kw)
-    zbase = BASE_KV**2 / BASE_MVA
+    kv = base_kv(problem)
+    zbase = kv**2 / BASE_MVA
     gen_buses = set(t["generators"].bus.astype(int))
     bus_rows = [
         (
@@ -80,7 +89,7 @@ def matpower_text(problem: DispatchProblem, minute: int, load_kw: np.ndarray, na
             1,
             1.0,
             0.0,
-            BASE_KV,
+            kv,
             1,
             1.1,
             0.9,
@@ -128,7 +137,7 @@ def matpower_text(problem: DispatchProblem, minute: int, load_kw: np.ndarray, na
 %{name.upper()}  Reduced {problem.feeder.original.name} feeder at minute {minute}.
 %   Written by popdispatch: {problem.feeder.n_nodes} key nodes, {problem.feeder.n_lines} lines.
 %   Loads: {problem.profile_source}.
-%   Powers in MW, impedances in p.u. (baseMVA {BASE_MVA:g}, baseKV {BASE_KV:g}),
+%   Powers in MW, impedances in p.u. (baseMVA {BASE_MVA:g}, baseKV {kv:g}),
 %   branch rateA = line limit in MVA (0 = unlimited), costs in EUR/h with P in MW.
 %   Cross-check: rundcopf('{name}').
 
@@ -180,7 +189,7 @@ def pandapower_net(problem: DispatchProblem, minute: int, load_kw: np.ndarray):
     lines = t["lines"].rename(index=lambda number: f"line {number}")
     loads = t["loads"].assign(q_kvar=0.0)
     net, _ = pandapower_network(
-        t["buses"].bus, lines, loads, t["generators"], t["source"], BASE_KV,
+        t["buses"].bus, lines, loads, t["generators"], t["source"], base_kv(problem),
         dispatchable="gen", name=f"{problem.feeder.original.name} minute {minute}",
     )  # fmt: skip
     return net

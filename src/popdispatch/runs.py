@@ -21,7 +21,21 @@ from popdispatch.errors import OptionError
 from popdispatch.events import Event, apply_events
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.profiles import LoadProfiles
-from popdispatch.game.problem import DispatchProblem, check_online
+from popdispatch.feeder.sources import (  # noqa: F401  (re-exported: the runs' feeders)
+    FLEET_RANGES,
+    NETWORK_READERS,
+    FeederSource,
+    check_fleet_ranges,
+    load_feeder,
+    read_network,
+    require_fleet,
+)
+from popdispatch.game.problem import (
+    DispatchProblem,
+    check_net_demand,
+    check_online,
+    feeder_shortfalls,
+)
 from popdispatch.online import RunSettings
 from popdispatch.report.progress import Progress
 from popdispatch.scenarios import (
@@ -34,8 +48,9 @@ from popdispatch.scenarios import (
     snapshot_vs_opf,
 )
 
-#: A path limit: every line between original buses A and B limited to KW kW.
-Limit = tuple[int, int, float]
+#: A path limit: every line between original buses A and B (as the source format names them)
+#: limited to KW kW.
+Limit = tuple[int | str, int | str, float]
 
 
 def load_profiles(
@@ -57,135 +72,6 @@ def load_profiles(
     return profiles
 
 
-@dataclass(frozen=True)
-class FeederSource:
-    """Where a run's feeder comes from (the CLI's ``--opendss``, ``--net``, ``--fleet``,
-    ``--root``, ``--no-ratings``).
-
-    ``net``: a network file, read by its suffix (:data:`NETWORK_READERS`: ``.m`` MATPOWER,
-    ``.json`` pandapower, ``.dss`` OpenDSS master); it runs on its own loads (one time step,
-    repeated) with its own generators and costs, or ``fleet`` (a CSV or TOML fleet file, see
-    :func:`popdispatch.feeder.generators.read_fleet`; buses as the network numbers them) in
-    their place. ``case``: a built-in case by name (:func:`popdispatch.feeder.cases.
-    list_cases`); other than ieee-elv it runs on its own loads like a network. ``root``: the
-    source bus when the network has several. ``ratings``: line
-    limits from the network's own ratings. Without ``net``: the built-in ieee-elv case, or its
-    OpenDSS folder ``opendss``, with the paper's fleet (or ``fleet``) and the official or
-    default profiles.
-    """
-
-    opendss: Path | None = None
-    net: Path | None = None
-    fleet: Path | None = None
-    root: int | None = None
-    ratings: bool = True
-    case: str | None = None
-
-    def __post_init__(self) -> None:
-        given = [name for name, value in self._inputs() if value is not None]
-        if len(given) > 1:
-            raise OptionError(f"give one of {', '.join(given)}, not several", given[0])
-        if self.case is not None:
-            from popdispatch.feeder.cases import CASES, SIMBENCH_PREFIX
-
-            if self.case not in CASES and not self.case.startswith(SIMBENCH_PREFIX):
-                known = ", ".join(CASES)
-                raise OptionError(f"unknown case {self.case!r} (known: {known})", "--case")
-        if self.net is not None and self.net.suffix.lower() not in NETWORK_READERS:
-            known = ", ".join(NETWORK_READERS)
-            raise OptionError(f"{self.net}: unknown network format (known: {known})", "--net")
-        if self.net is None and (self.root is not None or not self.ratings):
-            raise OptionError("--root and --no-ratings apply to a --net network", "--root")
-
-    def _inputs(self) -> list[tuple[str, object]]:
-        return [("--opendss", self.opendss), ("--net", self.net), ("--case", self.case)]
-
-    @property
-    def own_loads(self) -> bool:
-        """Whether the run uses the network's own loads (not the ieee-elv profiles)."""
-        return self.net is not None or self.case not in (None, "ieee-elv")
-
-    @property
-    def label(self) -> str:
-        """What is read, for progress lines."""
-        where = self.net or self.opendss
-        return f"the feeder in {where}" if where else f"the {self.case or 'ieee-elv'} feeder"
-
-
-#: The numbers a fleet may give, inclusive, with the file's column names and units: a number
-#: outside is a typo or a placeholder (``1e30`` for "unlimited") that no solver handles.
-#: Powers up to 10 GW, costs far beyond any market's price cap.
-FLEET_RANGES = {
-    "a": ("a_eur_per_h", 1e9, "EUR/h"),
-    "b": ("b_eur_per_mwh", 1e6, "EUR/MWh"),
-    "c": ("c_eur_per_mw2h", 1e8, "EUR/(MW^2 h)"),
-    "pmin_kw": ("pmin_kw", 1e7, "kW"),
-    "pmax_kw": ("pmax_kw", 1e7, "kW"),
-}
-
-
-def check_fleet_ranges(fleet: pd.DataFrame, path: Path | None = None) -> None:
-    """:class:`~popdispatch.errors.FleetError` naming the file ``path``, the row (1-based, in
-    the file's order) and the column of the first number outside :data:`FLEET_RANGES` (or the
-    generator, for a network's own fleet)."""
-    from popdispatch.errors import FleetError
-
-    for row, (name, values) in enumerate(fleet.iterrows(), start=1):
-        for column, (label, upper, unit) in FLEET_RANGES.items():
-            value = float(values[column])
-            if not 0.0 <= value <= upper:
-                where = f"{path}: row {row} ({name})" if path is not None else f"generator {name!r}"
-                raise FleetError(f"{where}: {label} = {value:g} is outside 0..{upper:g} {unit}")
-
-
-#: Network file suffix -> reader in :mod:`popdispatch.readers`.
-NETWORK_READERS = {".m": "read_matpower", ".json": "read_pandapower", ".dss": "read_opendss_master"}
-
-
-def read_network(path: Path, fleet=None, root: int | None = None, ratings: bool = True) -> Feeder:
-    """A network file as a feeder, by its suffix (:data:`NETWORK_READERS`)."""
-    import popdispatch.readers as readers
-
-    suffix = path.suffix.lower()
-    if suffix == ".dss" and root is not None:
-        root = str(root)  # OpenDSS names its buses; numbered ones keep their number
-    return getattr(readers, NETWORK_READERS[suffix])(path, fleet=fleet, root=root, ratings=ratings)
-
-
-def load_feeder(source: FeederSource | Path | None = None) -> Feeder:
-    """The feeder of ``source`` (a :class:`FeederSource`; a folder means its OpenDSS files;
-    ``None`` the built-in ieee-elv case)."""
-    if not isinstance(source, FeederSource):
-        source = FeederSource(opendss=source)
-    from popdispatch.feeder.generators import read_fleet
-
-    fleet = read_fleet(source.fleet) if source.fleet is not None else None
-    if fleet is not None:
-        check_fleet_ranges(fleet, source.fleet)
-    feeder = _read_feeder(source, fleet)
-    if fleet is None:
-        check_fleet_ranges(feeder.generators)
-    return feeder
-
-
-def _read_feeder(source: FeederSource, fleet: pd.DataFrame | None) -> Feeder:
-    if source.net is not None:
-        return read_network(source.net, fleet, source.root, source.ratings)
-    if source.case is not None:
-        from popdispatch.feeder.cases import load_case
-
-        return load_case(source.case, fleet=fleet)
-    if source.opendss is not None:
-        from popdispatch.readers import read_opendss_feeder
-
-        feeder = read_opendss_feeder(source.opendss)
-    else:
-        from popdispatch.feeder.cases import ieee_elv
-
-        feeder = ieee_elv()
-    return feeder if fleet is None else feeder.with_generators(fleet)
-
-
 def network_profiles(feeder: Feeder) -> LoadProfiles:
     """A network without profiles runs on its own loads (column ``p_kw``, kW): one time step."""
     from popdispatch.errors import ProfileError
@@ -201,12 +87,16 @@ def known_steps(
     source: FeederSource, profiles: Path | None = None, loads: Path | None = None
 ) -> int | None:
     """How many steps a run's series has when that is known before any data is read: the
-    ELV day (1440 minutes) or a network on its own loads (1); ``None`` for a load table or a
-    SimBench year."""
+    ELV day (1440 minutes) or a network on its own loads (1); ``None`` for a load table, a
+    SimBench year or an OpenDSS circuit (its load shapes, :mod:`popdispatch.feeder.shapes`)."""
     from popdispatch.constants import MINUTES_PER_DAY
     from popdispatch.feeder.cases import SIMBENCH_PREFIX
 
     if loads is not None:
+        return None
+    if source.net is not None and source.net.suffix.lower() == ".dss":
+        return None
+    if source.case is not None and source.case.startswith("opendss:"):
         return None
     if profiles is not None or not source.own_loads:
         return MINUTES_PER_DAY
@@ -222,15 +112,22 @@ def series_for(
     loads: Path | None = None,
     minute: int | None = None,
     progress: Progress | None = None,
+    series_kind: str | None = None,
 ) -> LoadProfiles:
     """The load time series of a run on ``feeder``: the table ``loads`` (CSV or Parquet, see
     :mod:`popdispatch.readers.series`), else the ELV profile folder ``profiles`` (also for a
     network read from the ELV's own files: loads match by name, case ignored), else the
-    network's own: a SimBench case's bundled year, a network's or case's own loads (one step),
-    or ieee-elv's official or default profiles (:func:`load_profiles`)."""
+    network's own: a SimBench case's bundled year, an OpenDSS circuit's load shapes of kind
+    ``series_kind`` (``daily``, ``yearly``, ``duty``; default the one its loads use,
+    :func:`popdispatch.feeder.shapes.shape_series`), a network's or case's own loads (one
+    step), or ieee-elv's official or default profiles (:func:`load_profiles`)."""
     progress = progress or Progress(quiet=True)
     if loads is not None and profiles is not None:
         raise OptionError("give --loads or --profiles, not both", "--loads")
+    if series_kind is not None and (loads is not None or profiles is not None):
+        given = "--loads" if loads is not None else "--profiles"
+        raise OptionError(f"--series runs the network's own load shapes; {given} replaces "
+                          "them: give one", "--series")  # fmt: skip
     if loads is not None:
         from popdispatch.readers.series import read_load_table
 
@@ -245,7 +142,10 @@ def series_for(
 
         with progress.step("reading SimBench's year profiles"):
             return simbench_profiles(source.case[len(SIMBENCH_PREFIX) :], feeder)
-    return network_profiles(feeder)
+    from popdispatch.feeder.shapes import shape_series
+
+    shaped = shape_series(feeder, series_kind)
+    return shaped if shaped is not None else network_profiles(feeder)
 
 
 def select_steps(
@@ -304,16 +204,26 @@ def check_step(minute: int | None, profiles: LoadProfiles) -> None:
 
 
 def check_limits(limits: Sequence[Limit], feeder: Feeder) -> None:
-    """:class:`OptionError` (``--limit``) for a limit naming a bus ``feeder`` lacks."""
+    """:class:`OptionError` (``--limit``) for a limit naming a bus ``feeder`` lacks (buses as
+    the source format names them: numbers, or OpenDSS names)."""
+    from popdispatch.errors import FeederError
+
     buses = feeder.buses.index
     for a, b, kw in limits:
         for bus in (a, b):
-            if bus not in buses:
-                raise OptionError(
-                    f"unknown bus {bus} in {a}:{b}={kw:g} (feeder {feeder.name} has buses "
-                    f"{buses.min()}..{buses.max()})",
-                    "--limit",
+            try:
+                feeder.bus_id(bus)
+            except FeederError:
+                named = "name" in feeder.buses.columns
+                known = (
+                    f"buses named e.g. {', '.join(feeder.bus_labels(buses[:3]))}"
+                    if named
+                    else f"buses {buses.min()}..{buses.max()}"
                 )
+                raise OptionError(
+                    f"unknown bus {bus} in {a}:{b}={kw:g} (feeder {feeder.name} has {known})",
+                    "--limit",
+                ) from None
 
 
 def load_problem(
@@ -346,6 +256,7 @@ def load_run(
     events: Sequence[Event] = (),
     minutes=None,
     loads: Path | None = None,
+    series_kind: str | None = None,
 ) -> tuple[DispatchProblem, LoadProfiles]:
     """``(problem, profiles)`` of a run as the commands make it: the feeder of ``source`` with
     the time series :func:`series_for` picks (``profiles``: an ELV profile folder; ``loads``:
@@ -356,9 +267,12 @@ def load_run(
         raise OptionError("give --loads or --profiles, not both", "--loads")
     if source.own_loads or loads is not None:
         with progress.step(f"loading {source.label}"):
-            feeder = load_feeder(source)
-        series = series_for(source, feeder, profiles, loads, minute, progress)
+            feeder = require_fleet(load_feeder(source))
+        series = series_for(source, feeder, profiles, loads, minute, progress, series_kind)
     else:  # ieee-elv: the profiles (and their note) first, as before
+        if series_kind is not None:
+            raise OptionError("--series runs a network's own load shapes (an OpenDSS circuit "
+                              "given with --net)", "--series")  # fmt: skip
         series = load_profiles(profiles, minute, progress)
         problem = _elv_run_problem(source, series, limits, progress)
         series = series.for_loads(problem.feeder.original.loads.index)
@@ -373,6 +287,8 @@ def load_run(
     check_limits(limits, feeder)
     problem = elv_problem(series, limits, feeder, check=False)
     problem = apply_events(problem, events, minutes) if events else problem
+    for shortfall in feeder_shortfalls(problem, [minute] if minute else minutes):
+        progress.note(f"note: {shortfall}")
     return problem, series
 
 
@@ -466,6 +382,7 @@ def run_snapshot_vs_opf(
     check_voltage(problem, settings)
     check_x0(settings.x0, problem.generators)
     check_online(problem, [minute])
+    check_net_demand(problem, [minute])
     return snapshot_vs_opf(problem, minute, settings)
 
 
@@ -482,4 +399,5 @@ def run_day_vs_opf(
     check_voltage(problem, settings)
     check_x0(settings.x0, problem.generators)
     check_online(problem, minutes)
+    check_net_demand(problem, minutes)
     return day_vs_opf(problem, settings, minutes, progress)

@@ -228,9 +228,8 @@ def test_duplicate_generator_names():
     assert "'TWINGEN'" in str(exc.value)
 
 
-def test_empty_fleet_and_missing_column():
-    with pytest.raises(FleetError, match="no generator"):
-        Feeder(*parts(fleet=make_fleet([])))
+def test_empty_fleet_is_a_described_network_and_a_missing_column_an_error():
+    assert Feeder(*parts(fleet=make_fleet([]))).generators.empty
     with pytest.raises(FleetError, match="'pmax_kw'"):
         Feeder(*parts(fleet=paper_fleet().drop(columns="pmax_kw")))
 

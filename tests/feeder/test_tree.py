@@ -15,6 +15,7 @@ from popdispatch.feeder.tree import (
     line_flows,
     path_lines,
     path_sums,
+    selected_line_flows,
     subtree_sums,
 )
 
@@ -98,6 +99,25 @@ def test_line_flows_match_brute_force(data, case):
     assert flows.shape == (n - 1,)
     sides = _child_sides(n, ends_a, ends_b, root)
     expected = np.array([-injections[sorted(side)].sum() for side in sides])
+    np.testing.assert_allclose(flows, expected, rtol=1e-12, atol=1e-9)
+
+
+@SETTINGS
+@given(data=st.data(), case=random_trees(min_nodes=2))
+def test_selected_line_flows_match_brute_force(data, case):
+    """The node-major flows of chosen lines, over several steps, equal the brute-force
+    subtree sums of each step."""
+    n, ends_a, ends_b, root = case
+    steps = data.draw(st.integers(1, 5))
+    injections = data.draw(arrays(np.float64, (steps, n), elements=FINITE))
+    chosen = np.array(data.draw(st.lists(st.integers(0, n - 2), max_size=n)), dtype=np.int64)
+    tree = build_tree(n, ends_a, ends_b, root)
+    flows = selected_line_flows(tree, injections, chosen)
+    assert flows.shape == (steps, len(chosen))
+    sides = _child_sides(n, ends_a, ends_b, root)
+    expected = np.array(
+        [[-row[sorted(sides[k])].sum() for k in chosen] for row in injections]
+    ).reshape(steps, len(chosen))
     np.testing.assert_allclose(flows, expected, rtol=1e-12, atol=1e-9)
 
 

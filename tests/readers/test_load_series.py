@@ -115,7 +115,7 @@ def _write(tmp_path, frame: pd.DataFrame):
         (lambda f: f.assign(barn=1.0), ["'barn'", "neither a load nor a bus"]),
         (lambda f: f.drop(columns="farm"), ["no column for load 'farm'", "1 of 3"]),
         (lambda f: f.assign(**{"2": 1.0}), ["'home'", "two columns"]),
-        (lambda f: f.assign(shop=-1.0), ["'shop'", "negative"]),
+        (lambda f: f.assign(shop=float("inf")), ["'shop'", "row 1", "finite number"]),
     ],
 )
 def test_bad_tables_name_the_cell(tmp_path, values, change, words):
@@ -143,12 +143,17 @@ def test_simbench_year_totals_equal_simbench_absolute_values():
 
     net = simbench.get_simbench_net(CODE)
     expected = simbench.get_absolute_values(net, profiles_instead_of_study_cases=True)
-    expected_kw = expected[("load", "p_mw")].to_numpy().sum(axis=1) * 1000.0
+    loads_kw = expected[("load", "p_mw")].to_numpy().sum(axis=1) * 1000.0
+    sgen_kw = expected[("sgen", "p_mw")].to_numpy().sum(axis=1) * 1000.0  # PV: fixed injection
+    expected_kw = loads_kw - sgen_kw
     fleet = make_fleet([(3, 0, 60.0, 0.5, 0, 200)])
     feeder = load_case(f"simbench:{CODE}", fleet=fleet)
     profiles = simbench_profiles(CODE, feeder)
     assert profiles.steps == 35136 == len(expected_kw)
-    np.testing.assert_allclose(profiles.total_kw().to_numpy(), expected_kw, rtol=1e-12)
+    np.testing.assert_allclose(profiles.total_kw().to_numpy(), expected_kw, rtol=1e-9,
+                               atol=1e-9)  # fmt: skip
+    injected = profiles.kw[[c for c in profiles.kw.columns if c.startswith("sgen")]]
+    np.testing.assert_allclose(-injected.sum(axis=1).to_numpy(), sgen_kw, rtol=1e-12)
     first = net.load.index[0]
     np.testing.assert_allclose(
         profiles.kw[f"load{first}"], expected[("load", "p_mw")][first] * 1000.0, rtol=1e-12

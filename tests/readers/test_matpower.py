@@ -23,7 +23,7 @@ from popdispatch.errors import FeederError, FleetError
 from popdispatch.feeder.generators import make_fleet
 from popdispatch.feeder.profiles import single_minute_profiles
 from popdispatch.feeder.reduction import reduce_feeder
-from popdispatch.game.problem import build_problem
+from popdispatch.game.problem import build_problem, build_problem_from_loads
 from popdispatch.opf import solve_opf
 from popdispatch.readers import read_matpower
 from popdispatch.readers.matpower import IDX_FUNCTIONS, parse_matpower
@@ -71,7 +71,10 @@ def test_case33bw_reads_with_published_totals():
         assert tie not in feeder.lines.index
     assert feeder.lines.loc["L1-2", ["r_ohm", "x_ohm"]].tolist() == pytest.approx([0.0922, 0.047])
     assert (feeder.lines.length_km == 0).all() and np.isinf(feeder.lines.limit_kw).all()
-    assert feeder.loads.loc["load18"].tolist() == pytest.approx([18, 90.0, 40.0])
+    assert feeder.loads.loc["load18", ["bus", "p_kw", "q_kvar"]].tolist() == pytest.approx(
+        [18, 90.0, 40.0]
+    )
+    assert (feeder.loads.kind == "load").all()
     assert (feeder.buses.vn_kv == 12.66).all()  # the file's BASE_KV (the AC check's base)
     g = feeder.generators.loc["G1"]
     assert (g.bus, g.a, g.b, g.c, g.pmin_kw, g.pmax_kw) == (1, 0.0, 20.0, 0.0, 0.0, 10000.0)
@@ -224,20 +227,25 @@ def test_tie_line_switched_in_gives_the_loop_error(tmp_path):
 
 
 @needs_cases
-def test_two_reference_buses_are_named(tmp_path):
+def test_two_reference_buses_in_one_tree_are_named(tmp_path):
     path = with_lines(tmp_path, "case33bw", "\nmpc.bus(5, BUS_TYPE) = REF;\n")
-    with pytest.raises(FeederError, match=r"reference buses \[1, 5\]: give root="):
+    with pytest.raises(FeederError, match=r"reference buses \[1, 5\] feed one connected network"
+                       r".*pick one \(--root BUS\)$"):  # fmt: skip
         read_matpower(path)
     assert read_matpower(path, root=5).source_bus == 5
 
 
 @needs_cases
-def test_generator_without_cost_asks_for_a_fleet(tmp_path):
+def test_generator_without_cost_is_left_out_and_a_dispatch_asks_for_a_fleet(tmp_path):
     text = case_path("case33bw").read_text()
     path = tmp_path / "nocost.m"
     path.write_text(re.sub(r"mpc\.gencost\s*=\s*\[.*?\];", "", text, flags=re.S))
-    with pytest.raises(FleetError, match=r"generator 1 at bus 1 has no cost data.*give a fleet"):
-        read_matpower(path)
+    with pytest.warns(UserWarning, match=r"left out of the fleet: generator 1 at bus 1 has no "
+                      r"cost data .*--fleet FILE"):  # fmt: skip
+        described = read_matpower(path)
+    assert described.generators.empty and len(described.buses) == 33
+    with pytest.raises(FleetError, match=r"no generator to dispatch: give a fleet"):
+        build_problem_from_loads(reduce_feeder(described), [described.loads.p_kw], "own")
     fleet = make_fleet([(1, 0.0, 10.0, 0.0, 0.0, 5000.0), (18, 0.0, 5.0, 1.0, 0.0, 100.0)])
     feeder = read_matpower(path, fleet=fleet)
     assert feeder.generators.index.tolist() == ["G1", "G18"]
@@ -337,8 +345,8 @@ def test_root_picks_one_tree_and_load_free_islands_are_dropped(tmp_path):
     # branch 1 (1-2) opened and bus 2 made a reference bus: two separate feeders
     split = "\nmpc.branch(1, BR_STATUS) = 0;\nmpc.bus(2, BUS_TYPE) = REF;\n"
     path = with_lines(tmp_path, "case33bw", split)
-    with pytest.raises(FeederError, match=r"reference buses \[1, 2\]"):
-        read_matpower(path)
+    joined = read_matpower(path, fleet=make_fleet([(1, 0, 10, 0, 0, 1), (2, 0, 10, 0, 0, 5000)]))
+    assert joined.lines.loc[["balance:1", "balance:2"], "limit_kw"].tolist() == [0.0, 0.0]
     fleet = make_fleet([(2, 0.0, 10.0, 0.0, 0.0, 5000.0)])
     feeder = read_matpower(path, root=2, fleet=fleet)
     assert feeder.source_bus == 2 and len(feeder.buses) == 32 and len(feeder.lines) == 31

@@ -42,20 +42,26 @@ def own_totals(net) -> tuple[int, float, float]:
     )
 
 
-def dc_problem(feeder):
-    profiles = single_minute_profiles(1, feeder.loads.p_kw, feeder.name)
+def dc_problem(feeder, injections: bool = True):
+    """The one-step problem of the feeder's own loads (``injections=False``: its fixed
+    injections at 0 kW, e.g. SimBench's PV at its installed capacity)."""
+    kw = feeder.loads.p_kw
+    if not injections:
+        kw = kw.where(feeder.loads.kind == "load", 0.0)
+    profiles = single_minute_profiles(1, kw, feeder.name)
     return build_problem(reduce_feeder(feeder), profiles)
 
 
-def small_fleet(feeder) -> pd.DataFrame:
-    """A priced source and one DG at the bus farthest from it; costs scaled with the demand so
-    the optimum is interior (DG share 0.35 without limits) on any feeder size."""
+def small_fleet(feeder, rows=None) -> pd.DataFrame:
+    """A priced source and one DG at the bus farthest from it; costs scaled with the demand
+    (of the load ``rows``, default all) so the optimum is interior (DG share 0.35 without
+    limits) on any feeder size."""
     tree = feeder.bus_tree()
     depth = np.zeros(tree.n_nodes)
     for node in tree.preorder[1:]:
         depth[node] = depth[tree.parent[node]] + 1
     far = int(feeder.buses.index[np.argmax(depth)])
-    total = float(feeder.loads.p_kw.sum())
+    total = float(feeder.loads.p_kw[rows if rows is not None else slice(None)].sum())
     mw = total / 1000.0
     return make_fleet(
         [
@@ -101,11 +107,13 @@ def test_lv_grids_read_with_pandapowers_totals(factory, kwargs):
     assert reduce_feeder(feeder).n_nodes >= 2
 
 
-def test_kerber_needs_a_fleet():
-    with pytest.raises(FleetError, match=r"no priced generator .*give a fleet"):
-        read_pandapower(pn.create_kerber_landnetz_freileitung_1())
+def test_kerber_without_a_fleet_is_described_and_a_dispatch_asks_for_one():
+    described = read_pandapower(pn.create_kerber_landnetz_freileitung_1())
+    assert described.generators.empty and len(described.buses) == 14
+    with pytest.raises(FleetError, match=r"no generator to dispatch: give a fleet \(--fleet"):
+        dc_problem(described)
     with pytest.raises(FleetError, match="give a fleet"):
-        cases.load_case("kerber-landnetz-freileitung-1")
+        dc_problem(cases.load_case("kerber-landnetz-freileitung-1"))
     feeder = cases.load_case("kerber-landnetz-freileitung-1", fleet=one_gen(1))
     assert len(feeder.buses) == 14 and feeder.loads.p_kw.sum() == pytest.approx(104.0)
 
@@ -221,11 +229,19 @@ def test_bus_bus_switches_merge_or_separate():
         read_pandapower(net, fleet=one_gen(1))
 
 
-def test_closed_switch_across_a_line_is_a_loop():
+def test_closed_switch_across_two_lines_makes_them_parallel_and_merged():
     net = tiny_net()
     pp.create_switch(net, 3, 4, et="b", closed=True)  # 3 and 4 both hang below 2
-    with pytest.raises(FeederError, match=r"^line 'line2' is parallel .*: feeder is meshed"):
-        read_pandapower(net, fleet=one_gen(1))
+    feeder = read_pandapower(net, fleet=one_gen(1))
+    merged = feeder.lines.loc["line1+line2"]
+    z1 = complex(*net.line.loc[1, ["r_ohm_per_km", "x_ohm_per_km"]]) * net.line.length_km[1]
+    z2 = complex(*net.line.loc[2, ["r_ohm_per_km", "x_ohm_per_km"]]) * net.line.length_km[2]
+    z = z1 * z2 / (z1 + z2)  # parallel impedance, summed ratings
+    assert (merged.r_ohm, merged.x_ohm) == pytest.approx((z.real, z.imag), rel=1e-12)
+    assert merged.limit_kw == pytest.approx(
+        SQRT3 * 0.4 * 1e3 * (net.line.max_i_ka[1] + net.line.max_i_ka[2]), rel=1e-12
+    )
+    assert len(feeder.lines) == len(feeder.buses) - 1
     net = tiny_net()
     pp.create_switch(net, 2, 3, et="b", closed=True)  # bridges line1's own ends
     with pytest.raises(FeederError, match=r"^'line1' joins buses merged by a closed bus-bus "):
@@ -245,18 +261,22 @@ def test_asymmetric_load_is_the_sum_of_its_phases():
     )
 
 
-def test_root_keeps_the_substation_transformer_with_impedances_on_the_source_base():
+def test_root_keeps_the_substation_transformer_with_each_branch_on_its_own_base():
     net = tiny_net()
     feeder = read_pandapower(net, fleet=one_gen(0), root=0)
     assert feeder.source_bus == 0 and "trafo0" in feeder.lines.index
     t = net.trafo.loc[0]
-    z = t.vk_percent / 100 * 20.0**2 / t.sn_mva
-    r = t.vkr_percent / 100 * 20.0**2 / t.sn_mva
+    z = t.vk_percent / 100 * 0.4**2 / t.sn_mva  # on its LV side, 0.4 kV
+    r = t.vkr_percent / 100 * 0.4**2 / t.sn_mva
     trafo = feeder.lines.loc["trafo0"]
     assert (trafo.r_ohm, math.hypot(trafo.r_ohm, trafo.x_ohm)) == pytest.approx((r, z))
-    assert trafo.limit_kw == pytest.approx(t.sn_mva * 1e3)
-    # LV line impedances referred to the 20 kV source: x (20 / 0.4)^2
-    assert feeder.lines.loc["line0", "r_ohm"] == pytest.approx(0.02 * (20 / 0.4) ** 2)
+    assert trafo.kv_base == 0.4 and trafo.limit_kw == pytest.approx(t.sn_mva * 1e3)
+    # the LV line keeps its own ohms; referred to the 20 kV source they are x (20 / 0.4)^2
+    assert feeder.lines.loc["line0", ["r_ohm", "kv_base"]].tolist() == pytest.approx([0.02, 0.4])
+    on_source = feeder.lines_on_base()
+    assert feeder.base_kv == 20.0
+    assert on_source.loc["line0", "r_ohm"] == pytest.approx(0.02 * (20 / 0.4) ** 2)
+    assert on_source.loc["trafo0", "r_ohm"] == pytest.approx(r * (20 / 0.4) ** 2)
 
 
 def test_json_file_reads_like_the_net(tmp_path):
@@ -275,11 +295,13 @@ def test_json_file_reads_like_the_net(tmp_path):
 
 def test_mv_oberrhein_sources_and_loops():
     net = pn.mv_oberrhein()
-    # as shipped its open ring switches make two radial trees, one per HV/MV substation
-    with pytest.raises(FeederError, match=r"^several sources feed separate trees \(ext_grid 0 "
-                       r"via trafo114 at bus 39, ext_grid 1 via trafo142 at bus 319\): name one "
-                       "source bus with root$"):  # fmt: skip
-        read_pandapower(net)
+    # as shipped its open ring switches make two radial trees, one per HV/MV substation: two
+    # feeders, joined at a virtual bus by 0 kW balance lines
+    joined = read_pandapower(net, fleet=make_fleet([(39, 0, 10, 0.1, 0, 1e5),
+                                                    (319, 0, 12, 0.1, 0, 1e5)]))  # fmt: skip
+    assert joined.lines.loc[["balance:39", "balance:319"], "limit_kw"].tolist() == [0.0, 0.0]
+    assert joined.source_bus not in net.bus.index
+    assert len(joined.lines) == len(joined.buses) - 1
     feeder = read_pandapower(net, root=39, fleet=one_gen(39))
     assert feeder.source_bus == 39 and len(feeder.lines) == len(feeder.buses) - 1
     net.switch.closed = True  # close the rings: one meshed network with both substations
@@ -320,14 +342,23 @@ def test_unsupported_elements_name_themselves():
         read_pandapower(net, fleet=one_gen(1))
 
 
-def test_generators_without_costs_ask_for_a_fleet():
+def test_generators_without_costs_are_fixed_injections():
     net = tiny_net()
-    pp.create_sgen(net, 3, p_mw=0.01)
-    with pytest.raises(FleetError, match=r"^sgen 0 at bus 3 has no poly_cost: give a fleet"):
-        read_pandapower(net)
+    pp.create_sgen(net, 3, p_mw=0.01, scaling=0.5)
+    feeder = read_pandapower(net)
+    assert feeder.generators.empty  # nothing priced: described, not dispatched
+    injection = feeder.loads.loc["sgen0"]
+    assert (injection.bus, injection.p_kw, injection.kind) == (3, pytest.approx(-5.0), "sgen")
+    with_fleet = read_pandapower(net, fleet=one_gen(1))
+    assert with_fleet.loads.loc["sgen0", "p_kw"] == pytest.approx(-5.0)
+    problem = dc_problem(with_fleet)
+    gross = float(feeder.loads.p_kw[feeder.loads.p_kw > 0].sum())
+    assert problem.fixed_injection[0] * 1e3 == pytest.approx(5.0)
+    assert problem.demand[0] * 1e3 == pytest.approx(gross - 5.0)
     pp.create_poly_cost(net, 0, "sgen", cp1_eur_per_mw=1.0, cp2_eur_per_mw2=0.5)
     fleet = read_pandapower(net).generators
     assert fleet.loc["sgen0"].tolist() == [3, 0.0, 1.0, 0.5, 0.0, 10.0]  # pmax from p_mw
+    assert "sgen0" not in read_pandapower(net).loads.index  # priced: dispatched, not fixed
 
 
 def test_storage_and_ext_grid_fleet_rules():
@@ -395,8 +426,7 @@ def test_exact_mode_on_kerber_with_a_binding_limit_converges():
 
 @pytest.mark.parametrize("name", [n for n in cases.CASES if n != "ieee-elv"])
 def test_every_pandapower_case_runs_an_exact_snapshot(name):
-    feeder = cases.CASES[name].loader(None, placeholder=True)
-    feeder = cases.load_case(name, fleet=small_fleet(feeder))
+    feeder = cases.load_case(name, fleet=small_fleet(cases.CASES[name].loader(None)))
     problem = dc_problem(feeder)
     opf = solve_opf(problem, 1)
     snap = run_snapshot(problem, 1, RunSettings(mode="exact"))
@@ -409,6 +439,7 @@ def test_list_cases_counts_and_totals(monkeypatch):
     subset = {n: cases.CASES[n] for n in ("kerber-landnetz-freileitung-1", "case33bw")}
     monkeypatch.setattr(cases, "CASES", subset)
     monkeypatch.setattr(cases, "simbench_available", lambda: False)
+    monkeypatch.setattr(cases, "available_big_cases", lambda: [])
     table = cases.list_cases()
     assert table.index.tolist() == ["kerber-landnetz-freileitung-1", "case33bw"]
     assert table.loc["case33bw", ["buses", "lines", "loads"]].tolist() == [33, 32, 32]
@@ -426,15 +457,21 @@ def test_list_cases_counts_and_totals(monkeypatch):
 def test_simbench_grids_read_when_installed(code, n_buses):
     sb = pytest.importorskip("simbench", reason="the optional simbench extra is not installed")
     net = sb.get_simbench_net(code)
-    with pytest.raises(FleetError, match=r"^sgen \d+ at bus \d+ has no poly_cost: give a fleet"):
-        cases.load_case(f"simbench:{code}")
+    described = cases.load_case(f"simbench:{code}")
+    assert described.generators.empty  # its PV and wind have no cost data: fixed injections
+    sgens = net.sgen[net.sgen.in_service]
+    injected = described.loads[described.loads.kind == "sgen"]
+    assert len(injected) == len(sgens)
+    assert injected.p_kw.sum() == pytest.approx(-(sgens.p_mw * sgens.scaling).sum() * 1e3)
     lv = int(net.trafo.lv_bus.min())
     feeder = read_pandapower(net, fleet=one_gen(lv))
     n_loads, p_kw, _ = own_totals(net)
     assert (len(feeder.buses), len(feeder.lines)) == (n_buses, n_buses - 1)
-    assert (len(feeder.loads), feeder.loads.p_kw.sum()) == (n_loads, pytest.approx(p_kw))
-    feeder = cases.load_case(f"simbench:{code}", fleet=small_fleet(feeder))
-    problem = dc_problem(feeder)
+    loads = feeder.loads[feeder.loads.kind == "load"]
+    assert (len(loads), loads.p_kw.sum()) == (n_loads, pytest.approx(p_kw))
+    loads_only = feeder.loads.kind == "load"
+    feeder = cases.load_case(f"simbench:{code}", fleet=small_fleet(feeder, loads_only))
+    problem = dc_problem(feeder, injections=False)
     opf = solve_opf(problem, 1)
     snap = run_snapshot(problem, 1, RunSettings(mode="exact"))
     assert snap.status == "converged"

@@ -63,8 +63,9 @@ class Chains:
         return len(self.branch_top)
 
 
-def find_chains(feeder: Feeder) -> Chains:
-    """The series chains of ``feeder`` (see the module docstring)."""
+def find_chains(feeder: Feeder, vn_kv: float | None = None) -> Chains:
+    """The series chains of ``feeder`` (see the module docstring); impedances referred to the
+    voltage base ``vn_kv`` (kV; default the source's, :meth:`Feeder.lines_on_base`)."""
     tree = feeder.bus_tree()
     buses, lines = feeder.buses.index, feeder.lines
     n = len(buses)
@@ -74,7 +75,8 @@ def find_chains(feeder: Feeder) -> Chains:
     kept[buses.get_indexer(feeder.loads["bus"])] = True
     kept[buses.get_indexer(feeder.generators["bus"])] = True
     kept[tree.root] = True
-    z_line = lines["r_ohm"].to_numpy(float) + 1j * lines["x_ohm"].to_numpy(float)
+    on_base = feeder.lines_on_base(vn_kv)
+    z_line = on_base["r_ohm"].to_numpy(float) + 1j * on_base["x_ohm"].to_numpy(float)
     depth_z, top, bottom = _walk(tree, kept, z_line)
     node = np.full(n, -1, dtype=np.int64)
     node[kept] = np.arange(kept.sum())

@@ -37,14 +37,19 @@ from popdispatch.game.problem import DispatchProblem
 
 
 def shared_path_ohm(
-    feeder: Feeder, buses_i: Sequence[int], buses_j: Sequence[int], column: str = "r_ohm"
+    feeder: Feeder,
+    buses_i: Sequence[int],
+    buses_j: Sequence[int],
+    column: str = "r_ohm",
+    vn_kv: float | None = None,
 ) -> np.ndarray:
-    """``(len(buses_i), len(buses_j))``: the sum of ``column`` (``r_ohm`` or ``x_ohm``, ohm) over
-    the lines on both the path source -> ``i`` and the path source -> ``j``."""
+    """``(len(buses_i), len(buses_j))``: the sum of ``column`` (``r_ohm`` or ``x_ohm``, ohm on
+    the voltage base ``vn_kv``, default the source's) over the lines on both the path source ->
+    ``i`` and the path source -> ``j``."""
     tree = feeder.bus_tree()
     down_i = downstream(tree, _positions(feeder, buses_i))  # (lines, i): line above bus i?
     down_j = downstream(tree, _positions(feeder, buses_j))
-    values = feeder.lines[column].to_numpy(float)
+    values = feeder.lines_on_base(vn_kv)[column].to_numpy(float)
     return (down_i.T * values) @ down_j.astype(float)
 
 
@@ -63,9 +68,10 @@ def voltage_sensitivity(
     :func:`popdispatch.ac.network.nominal_kv`).
     """
     observed = list(feeder.buses.index if observed_buses is None else observed_buses)
-    z_base_ohm = nominal_kv(feeder, vn_kv) ** 2 * 1e3
+    kv = nominal_kv(feeder, vn_kv)
+    z_base_ohm = kv**2 * 1e3
     column = "x_ohm" if reactive else "r_ohm"
-    shared = shared_path_ohm(feeder, observed, injection_buses, column)
+    shared = shared_path_ohm(feeder, observed, injection_buses, column, kv)
     return pd.DataFrame(
         2.0 * shared / z_base_ohm,
         index=pd.Index(observed, name="bus"),

@@ -7,11 +7,12 @@ branches that are exact series sums of the lines between them, and every other b
 is recovered exactly from its chain's current (:mod:`popdispatch.ac.chains`). A branch with
 zero impedance (a switch or busbar coupler) is a power-grid-model ``link``. Rules (docs/ac.md):
 
-- **Nominal voltage** ``vn_kv`` (line-to-line, kV) of every bus: the impedances of a feeder
-  are in ohm referred to the source bus's voltage (the readers do so), so one voltage base
-  serves the whole network. It comes from, in order: the ``vn_kv`` argument; a ``vn_kv`` column
-  of the buses table (value at the source bus); a ``kv_ln_base`` column (OpenDSS reader,
-  line-to-neutral, times sqrt(3)); the known built-in cases (:data:`KNOWN_VN_KV`: ieee-elv
+- **Nominal voltage** ``vn_kv`` (line-to-line, kV) of every bus: every branch's ohms are
+  referred to it (:meth:`~popdispatch.feeder.Feeder.lines_on_base`: ``ohm (vn_kv /
+  kv_base)^2`` where the feeder states each branch's own base), so one voltage base serves
+  the whole network, transformers included. It comes from, in order: the ``vn_kv``
+  argument; a ``vn_kv`` column of the buses table (value at the source bus); a ``kv_ln_base``
+  column (line-to-neutral, times sqrt(3)); the known built-in cases (:data:`KNOWN_VN_KV`: ieee-elv
   0.416 kV). Otherwise :class:`~popdispatch.errors.FeederError` asks for it.
 - **Source**: an ideal voltage source at the source bus, ``source_pu`` (default 1.0 p.u. of
   ``vn_kv``, angle 0) behind a short-circuit power of :data:`SOURCE_SK_VA` (an internal
@@ -213,7 +214,7 @@ def _assemble(feeder: Feeder, model: ACModel) -> ACNetwork:
     pgm = power_grid_model()
     init, input_type = pgm.initialize_array, pgm.DatasetType.input
     buses = feeder.buses.index
-    chains = find_chains(feeder)
+    chains = find_chains(feeder, model.vn_kv)
     n_node = int(chains.kept.sum())
     node = init(input_type, "node", n_node)
     node["id"] = np.arange(n_node)

@@ -90,9 +90,10 @@ def _network(feeder, load_kw, vmin_pu, vmax_pu, source_pu, load_pf, vn_kv):
     """The pandapower net and, per generator, its element ``(kind, index)``
     (:func:`popdispatch.ac.pandapower_net.pandapower_network`, ``sgen`` form)."""
     ratio, _ = load_q_per_kw(feeder, load_pf)
+    kv = nominal_kv(feeder, vn_kv)
     return pandapower_network(
-        feeder.buses.index, feeder.lines, with_q(feeder.loads, load_kw, ratio),
-        feeder.generators, int(feeder.source_bus), nominal_kv(feeder, vn_kv),
+        feeder.buses.index, feeder.lines_on_base(kv), with_q(feeder.loads, load_kw, ratio),
+        feeder.generators, int(feeder.source_bus), kv,
         dispatchable="sgen", voltage_limits_pu=(vmin_pu, vmax_pu), source_pu=source_pu,
         name=feeder.name,
     )  # fmt: skip

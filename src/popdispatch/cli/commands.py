@@ -6,6 +6,7 @@ imported inside the commands that use them.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import click
@@ -48,7 +49,6 @@ from popdispatch.report.text import (
     cases_summary,
     cases_text,
     day_text,
-    feeder_text,
     infeasible_day_message,
     infeasible_minute_message,
     opf_text,
@@ -64,6 +64,12 @@ def cli(ctx: click.Context) -> None:
     """Online, distributed, network-constrained dispatch of distributed generators
     with population dynamics, compared with an exact DC-OPF (IEEE European LV feeder)."""
     start_clock(ctx)
+    warnings.showwarning = _note  # a reader's remark: one line, no source location
+
+
+def _note(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as the CLI prints it: ``popdispatch: note: ...`` on one line of stderr."""
+    click.echo(f"popdispatch: note: {' '.join(str(message).split())}", err=True)
 
 
 @cli.command(short_help="The built-in cases: size and source.")
@@ -78,19 +84,21 @@ def cases(as_json: bool, quiet: bool) -> None:
     emit(cases_summary(table), as_json, cases_text(table))
 
 
-@cli.command(short_help="The feeder: buses, key nodes, lines, loads, generators.")
+@cli.command(short_help="Any network: buses, source, loads, lines, ratings, fleet.")
 @feeder_options
 @json_option
 @quiet_option
 def feeder(source, as_json: bool, quiet: bool) -> None:
-    """What the feeder is: buses, key nodes, lines, loads, generators, capacity."""
+    """What the feeder is: buses, the source, key nodes, loads (names, kW), fixed injections,
+    lines (ratings, impedances), load shapes, generators. Any network, with or without a
+    fleet (a dispatch needs one)."""
     from popdispatch.feeder import reduce_feeder
-    from popdispatch.report.summaries import feeder_summary
-    from popdispatch.runs import load_feeder
+    from popdispatch.feeder.sources import load_feeder
+    from popdispatch.report.describe import feeder_summary, feeder_text
 
     with Progress(quiet).step(f"loading {source.label}"):
         net = load_feeder(source)
-        summary = feeder_summary(net, reduce_feeder(net))
+        summary = feeder_summary(net, reduce_feeder(net), source.ratings)
     emit(summary, as_json, feeder_text(summary))
 
 

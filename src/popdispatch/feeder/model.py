@@ -1,19 +1,21 @@
 """The original radial feeder as plain tables, in the spirit of a pandapower net.
 
 Units: lengths in km, impedances in ohm, powers and limits in kW (people's unit; the engine
-converts to MW). Buses are identified by integer ids (the IEEE numbers for ``ieee-elv``).
+converts to MW). Buses are identified by integer ids (the IEEE numbers for ``ieee-elv``); a
+format that names its buses (OpenDSS) keeps the names in the buses' ``name`` column, and
+people see those names (:func:`bus_labels`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 from scipy.sparse import csr_array
 
-from popdispatch.errors import FeederError
+from popdispatch.errors import FeederError, MeshedError
 from popdispatch.feeder.tree import Tree, build_tree
 from popdispatch.feeder.tree import path_lines as tree_path_lines
 
@@ -33,14 +35,23 @@ class Feeder:
     ----------
     name : case name, e.g. ``"ieee-elv"``.
     buses : index ``bus`` (int id); columns ``x``, ``y`` (plot coordinates, m); optional
-        ``vn_kv`` (nominal line-to-line voltage, kV: the AC check's base at the source bus).
+        ``vn_kv`` (nominal line-to-line voltage, kV: the AC check's base at the source bus)
+        and ``name`` (the source format's name of the bus, where it names them).
     lines : index line name; columns ``from_bus``, ``to_bus``, ``length_km``, ``r_ohm``,
         ``x_ohm`` (series impedance of the whole line, ohm) and ``limit_kw`` (flow limit in kW,
-        ``inf`` for no limit).
-    loads : index load name; column ``bus``. Other columns (e.g. ``peak_kw`` of the synthetic
+        ``inf`` for no limit). Optional ``kv_base``: the line-to-line voltage (kV) on which
+        the line's ohms are stated (its own side of any transformer); without it every line's
+        ohms are on one base, the source's (:meth:`lines_on_base` refers them to one).
+    loads : index load name; column ``bus``. Optional ``p_kw`` (kW of the network's own
+        snapshot; a negative value is a fixed injection, e.g. a generator without cost data),
+        ``kind`` (``load`` or what injects) and the names of the load shapes of each series
+        (``daily``, ``yearly``, ``duty``). Other columns (e.g. ``peak_kw`` of the synthetic
         feeders, kW) are carried along unchecked and ignored by the engine.
     source_bus : the bus fed by the substation (the root of the tree).
-    generators : the fleet (see :mod:`popdispatch.feeder.generators`), index generator name.
+    generators : the fleet (see :mod:`popdispatch.feeder.generators`), index generator name;
+        may be empty (a network described without a fleet: nothing to dispatch).
+    shapes : load shapes by name (:class:`popdispatch.feeder.shapes.LoadShape`) for the
+        loads' series columns; empty when the network has none.
     """
 
     name: str
@@ -49,6 +60,7 @@ class Feeder:
     loads: pd.DataFrame
     source_bus: int
     generators: pd.DataFrame
+    shapes: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         validate_feeder(self)
@@ -69,6 +81,39 @@ class Feeder:
         current = lines.loc[limits_kw.index, "limit_kw"].to_numpy()
         lines.loc[limits_kw.index, "limit_kw"] = np.minimum(current, limits_kw.to_numpy(float))
         return replace(self, lines=lines)
+
+    @property
+    def base_kv(self) -> float | None:
+        """The source bus's nominal line-to-line voltage (kV) where the buses table states it
+        (``vn_kv``), else ``None``."""
+        if "vn_kv" not in self.buses.columns:
+            return None
+        value = float(self.buses.at[self.source_bus, "vn_kv"])
+        return value if np.isfinite(value) and value > 0 else None
+
+    def lines_on_base(self, kv: float | None = None) -> pd.DataFrame:
+        """The lines with ``r_ohm``/``x_ohm`` referred to one voltage base: ohm x (``kv`` /
+        ``kv_base``)^2 (``kv``: line-to-line kV, default :attr:`base_kv`). Unchanged where the
+        table has no ``kv_base`` (its ohms already share one base) or no base is known."""
+        kv = self.base_kv if kv is None else kv
+        if "kv_base" not in self.lines.columns or kv is None:
+            return self.lines
+        own = self.lines["kv_base"].to_numpy(float)
+        scale = np.where(own > 0, (kv / np.where(own > 0, own, 1.0)) ** 2, 1.0)
+        return self.lines.assign(
+            r_ohm=self.lines["r_ohm"].to_numpy(float) * scale,
+            x_ohm=self.lines["x_ohm"].to_numpy(float) * scale,
+        )
+
+    def bus_labels(self, buses) -> list[int | str]:
+        """The source format's names of ``buses`` (int ids): the ``name`` column where the
+        buses table has one (every bus then a string, ``"650"`` too), else the ids."""
+        return bus_labels(self, buses)
+
+    def bus_id(self, label: int | str) -> int:
+        """The int id of a bus the user names as the source format does (an OpenDSS name, case
+        ignored; a number); :class:`FeederError` naming it when the feeder has no such bus."""
+        return bus_id(self, label)
 
     def graph(self) -> nx.Graph:
         """The feeder as an undirected networkx graph; edges carry the line name as ``line``."""
@@ -96,13 +141,45 @@ class Feeder:
         root = self.buses.index.get_loc(self.source_bus)
         return build_tree(len(self.buses), ends_a, ends_b, int(root))
 
-    def path_lines(self, bus_a: int, bus_b: int) -> list[str]:
-        """Names of the original lines on the (unique) path between two buses, from ``bus_a``."""
+    def path_lines(self, bus_a: int | str, bus_b: int | str) -> list[str]:
+        """Names of the original lines on the (unique) path between two buses, from ``bus_a``
+        (ids, or names as :meth:`bus_id` reads them)."""
+        ends = []
         for bus in (bus_a, bus_b):
-            if bus not in self.buses.index:
-                raise FeederError(f"unknown bus {bus} in path query on feeder {self.name!r}")
-        a, b = self.buses.index.get_indexer([bus_a, bus_b])
+            try:
+                ends.append(self.bus_id(bus))
+            except FeederError:
+                raise FeederError(
+                    f"unknown bus {bus} in path query on feeder {self.name!r}"
+                ) from None
+        a, b = self.buses.index.get_indexer(ends)
         return self.lines.index[tree_path_lines(self.bus_tree(), a, b)].tolist()
+
+
+def bus_labels(feeder: Feeder, buses) -> list[int | str]:
+    """See :meth:`Feeder.bus_labels`."""
+    numbers = [int(b) for b in buses]
+    if "name" not in feeder.buses.columns:
+        return numbers
+    names = feeder.buses["name"]
+    return [str(names.get(b, b)) for b in numbers]
+
+
+def bus_id(feeder: Feeder, label: int | str) -> int:
+    """See :meth:`Feeder.bus_id`: a bus name (case ignored) where the buses have names, else
+    (or when no bus has that name) the int id it spells."""
+    index = feeder.buses.index
+    if not isinstance(label, str) and np.ndim(label) == 0 and float(label).is_integer():
+        label = int(label)  # 650, np.int64(650) and 650.0 name the same bus
+    if "name" in feeder.buses.columns:
+        key = str(label).strip().lower()
+        found = np.flatnonzero(feeder.buses["name"].astype(str).str.lower().to_numpy() == key)
+        if len(found):
+            return int(index[found[0]])
+    text = str(label).strip()
+    if text.lstrip("-").isdigit() and int(text) in index:
+        return int(text)
+    raise FeederError(f"feeder {feeder.name!r} has no bus {label!r}")
 
 
 def validate_feeder(feeder: Feeder) -> None:
@@ -179,17 +256,18 @@ def _check_radial(feeder: Feeder) -> None:
     source = buses.index.get_loc(feeder.source_bus)
     reached = component == component[source]
     if not reached.all():
-        lonely = buses.index[~reached][0]
+        lonely, source_label = bus_labels(feeder, [buses.index[~reached][0], feeder.source_bus])
         raise FeederError(
-            f"bus {lonely} is not connected to source bus {feeder.source_bus}: feeder is "
+            f"bus {lonely} is not connected to source bus {source_label}: feeder is "
             "disconnected (popdispatch supports connected radial feeders only)"
         )
     if len(lines) != n - 1:
-        raise FeederError(_loop_message(feeder, ends_a, ends_b, int(source)))
+        raise _loop_error(feeder, ends_a, ends_b, int(source))
 
 
-def _loop_message(feeder: Feeder, ends_a: np.ndarray, ends_b: np.ndarray, source: int) -> str:
-    """Name the first line, in table order, that closes a loop, and the buses of that loop.
+def _loop_error(feeder: Feeder, ends_a: np.ndarray, ends_b: np.ndarray, source: int) -> MeshedError:
+    """The error naming the first line, in table order, that closes a loop, and the buses of
+    that loop (``loop_lines``: that line, then the loop's other lines).
 
     Kruskal's algorithm with the table order as weights keeps a line iff it joins two parts not
     yet connected by earlier lines: the first line it rejects closes a loop with earlier lines
@@ -209,8 +287,11 @@ def _loop_message(feeder: Feeder, ends_a: np.ndarray, ends_b: np.ndarray, source
     loop = [int(ends_a[closing])]
     for k in tree_lines[path]:
         loop.append(int(ends_b[k] if ends_a[k] == loop[-1] else ends_a[k]))
-    buses = feeder.buses.index[loop].tolist()
-    return (
-        f"line {feeder.lines.index[closing]!r} closes a loop through buses {buses}: "
-        "feeder is meshed (popdispatch supports radial feeders only)"
+    buses = bus_labels(feeder, feeder.buses.index[loop])
+    shown = "[" + ", ".join(repr(b) for b in buses) + "]"
+    names = [feeder.lines.index[closing], *feeder.lines.index[tree_lines[path]]]
+    return MeshedError(
+        f"line {feeder.lines.index[closing]!r} closes a loop through buses {shown}: "
+        "feeder is meshed (popdispatch supports radial feeders only)",
+        [str(n) for n in names],
     )

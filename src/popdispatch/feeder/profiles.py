@@ -7,7 +7,11 @@ and its outputs call a step a "minute" where the key was documented so (``--minu
 ``first_minute``), and every output also carries the step's time (:class:`Timeline`).
 
 A step's time is the *start* of its interval. The official day is undated: its times are times
-of day (minute 1 starts at 00:00, minute 566 at 09:25).
+of day (minute 1 starts at 00:00, minute 566 at 09:25); a longer undated series (an OpenDSS
+year of load shapes) counts days too (``217 days 05:00:00``).
+
+Values are net loads: a negative value is a fixed injection (a generator without cost data
+following its own profile), which the dispatch does not move.
 """
 
 from __future__ import annotations
@@ -67,16 +71,21 @@ class Timeline:
         return None
 
     def label(self, step: int) -> str:
-        """ISO 8601 time of a 1-based step: ``2016-01-01T00:15:00`` (dated) or ``09:25:00``
-        (time of day)."""
+        """ISO 8601 time of a 1-based step: ``2016-01-01T00:15:00`` (dated), ``09:25:00``
+        (time of day of an undated day) or ``217 days 05:00:00`` (an undated series longer
+        than a day)."""
         return self.labels([step])[0]
 
     def labels(self, steps) -> list[str]:
         """ISO 8601 times of 1-based ``steps`` (see :meth:`label`)."""
         chosen = self.times[np.asarray(steps, dtype=np.int64) - 1]
         if isinstance(chosen, pd.TimedeltaIndex):
-            seconds = chosen.total_seconds().astype(np.int64) % 86400
-            return [f"{s // 3600:02d}:{s // 60 % 60:02d}:{s % 60:02d}" for s in seconds]
+            total = chosen.total_seconds().astype(np.int64)
+            seconds = total % 86400
+            clock = [f"{s // 3600:02d}:{s // 60 % 60:02d}:{s % 60:02d}" for s in seconds]
+            if self.times[-1] < pd.Timedelta(days=1):
+                return clock
+            return [f"{d} days {c}" for d, c in zip(total // 86400, clock, strict=True)]
         return [t.isoformat() for t in chosen]
 
     def step_at(self, text: str, option: str = "--start") -> int:
@@ -181,6 +190,8 @@ class LoadProfiles:
         Names match exactly, else ignoring case (OpenDSS lower-cases the names that the
         official ``Loads.txt`` spells ``LOAD1``)."""
         columns = self.kw.columns
+        if columns.equals(load_names):
+            return self
         if not load_names.difference(columns).empty:
             folded = pd.Index([str(c).lower() for c in columns])
             if folded.has_duplicates:
@@ -213,11 +224,12 @@ def check_minute(minute: int, steps: int = MINUTES_PER_DAY) -> None:
 
 
 def validate_profiles(kw: pd.DataFrame, source: str) -> None:
-    """Raise :class:`ProfileError` naming the first bad load: no steps, NaN or negative."""
+    """Raise :class:`ProfileError` naming the first bad load: no steps, NaN or infinite
+    (a negative value is a fixed injection)."""
     if len(kw) == 0:
         raise ProfileError(f"{source}: profiles have no time step")
     values = kw.to_numpy(dtype=float)
-    for bad, what in ((np.isnan(values), "NaN"), (values < 0, "negative value")):
+    for bad, what in ((np.isnan(values), "NaN"), (np.isinf(values), "infinite value")):
         if bad.any():
             row, col = np.argwhere(bad)[0]
             raise ProfileError(

@@ -33,7 +33,8 @@ class ReducedFeeder:
     original : the feeder it was reduced from.
     nodes : index node number (0 = source); columns ``bus`` (original id), ``x``, ``y``.
     lines : index reduced line number; columns ``from_node`` (parent side), ``to_node`` (child
-        side), ``from_bus``, ``to_bus``, ``length_km``, ``r_ohm``, ``x_ohm``, ``limit_kw`` and
+        side), ``from_bus``, ``to_bus``, ``length_km``, ``r_ohm``, ``x_ohm`` (ohm on the source
+        bus's voltage base, :meth:`~popdispatch.feeder.Feeder.lines_on_base`), ``limit_kw`` and
         ``n_original`` (how many original lines it replaces).
     loads : the original loads with a ``node`` column.
     generators : the fleet with a ``node`` column.
@@ -169,12 +170,13 @@ def _merge_lines(
     n_lines = n_nodes - 1
     kept = reduced_line >= 0
     group = reduced_line[kept]
+    on_base = feeder.lines_on_base()  # ohms summed on one base: the source's
     # Series lines merge: impedances and lengths add, the tightest limit holds (numpy rather
     # than a pandas groupby, which cost about 25 ms of every command's start-up).
     merged = pd.DataFrame(
         {
             column: np.bincount(
-                group, weights=feeder.lines[column].to_numpy(float)[kept], minlength=n_lines
+                group, weights=on_base[column].to_numpy(float)[kept], minlength=n_lines
             )
             for column in ("length_km", "r_ohm", "x_ohm")
         },

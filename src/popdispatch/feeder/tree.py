@@ -146,6 +146,27 @@ def line_flows(tree: Tree, injections: np.ndarray) -> np.ndarray:
     return -np.take(subtree_sums(tree, injections), tree.line_child, axis=-1)
 
 
+def selected_line_flows(tree: Tree, injections: np.ndarray, lines: np.ndarray) -> np.ndarray:
+    """``(steps, len(lines))``: the DC flows of the lines ``lines`` only, from nodal injections
+    ``(steps, nodes)`` (as :func:`line_flows`, same sign convention and unit).
+
+    Node-major inside (one transposed copy, rows gathered in pre-order, one cumulative sum
+    down the nodes): a year of hourly steps on a feeder of thousands of nodes takes a fraction
+    of a second, where gathering columns of the step-major array takes seconds.
+    """
+    injections = np.atleast_2d(np.asarray(injections, dtype=float))
+    lines = np.asarray(lines, dtype=np.int64)
+    if not len(lines):
+        return np.zeros((injections.shape[0], 0))
+    ordered = np.ascontiguousarray(injections.T)[tree.preorder]  # (nodes, steps)
+    cumulative = np.empty((ordered.shape[0] + 1, ordered.shape[1]))
+    cumulative[0] = 0.0
+    np.cumsum(ordered, axis=0, out=cumulative[1:])
+    child = tree.line_child[lines]
+    below = cumulative[tree.start[child] + tree.size[child]] - cumulative[tree.start[child]]
+    return np.ascontiguousarray(-below.T)
+
+
 def downstream(tree: Tree, nodes: np.ndarray) -> np.ndarray:
     """Boolean matrix ``(lines, len(nodes))``: is ``nodes[j]`` below line ``k`` (child side)?
 

@@ -16,10 +16,10 @@ import numpy as np
 import pandas as pd
 
 from popdispatch.constants import KW_PER_MW
-from popdispatch.errors import InfeasibleError, ProfileError
+from popdispatch.errors import FleetError, InfeasibleError, ProfileError
 from popdispatch.feeder.profiles import LoadProfiles, check_minute
 from popdispatch.feeder.reduction import ReducedFeeder
-from popdispatch.feeder.tree import downstream, line_flows
+from popdispatch.feeder.tree import downstream, line_flows, selected_line_flows
 from popdispatch.game.flows import limited_ancestors
 
 
@@ -56,6 +56,9 @@ class DispatchProblem:
     voltage_base : per minute and voltage row, the loads-only squared voltage ``v0_j^2``,
         p.u.^2 (LinDistFlow, loads at their reactive power).
     vmin_pu, vmax_pu : the voltage limits, p.u. (NaN without).
+    fixed_injection : per minute, the fixed injections' total output, MW (the negative parts
+        of the per-load series: generators without cost data following their profiles;
+        ``demand`` is net of it). Zeros where there are none.
     """
 
     feeder: ReducedFeeder
@@ -80,6 +83,7 @@ class DispatchProblem:
     voltage_base: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     vmin_pu: float = float("nan")
     vmax_pu: float = float("nan")
+    fixed_injection: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n_generators(self) -> int:
@@ -164,9 +168,14 @@ def build_problem_from_loads(
     of ``feeder.original.loads``); any number of minutes (1440 for a day, 1 for a snapshot).
     ``check`` as in :func:`build_problem`."""
     gens = feeder.generators
+    if not len(gens):
+        raise FleetError(
+            f"feeder {feeder.original.name!r} has no generator to dispatch: give a fleet "
+            "(--fleet FILE)"
+        )
     load_kw = np.atleast_2d(np.asarray(load_kw, dtype=float))
-    flows_kw = line_flows(feeder.tree, -feeder.load_injection_kw(load_kw))
     limited = np.flatnonzero(np.isfinite(feeder.lines.limit_kw.to_numpy(float)))
+    flows_kw = selected_line_flows(feeder.tree, -feeder.load_injection_kw(load_kw), limited)
     line_up, line_preorder, generator_line = limited_line_tree(feeder, limited)
     problem = DispatchProblem(
         feeder=feeder,
@@ -182,13 +191,20 @@ def build_problem_from_loads(
         line_preorder=line_preorder,
         generator_line=generator_line,
         demand=load_kw.sum(axis=1) / KW_PER_MW,
-        load_flow=np.ascontiguousarray(flows_kw[:, limited]) / KW_PER_MW,
+        load_flow=flows_kw / KW_PER_MW,
         online=np.ones((len(load_kw), len(gens)), dtype=bool),
         profile_source=source,
+        fixed_injection=fixed_injection_kw(load_kw) / KW_PER_MW,
     )
     if check:
         check_capacity(problem)
     return problem
+
+
+def fixed_injection_kw(load_kw: np.ndarray) -> np.ndarray:
+    """Per step, the fixed injections' output (kW): minus the negative per-load values."""
+    negative = np.flatnonzero((load_kw < 0).any(axis=0))
+    return -np.minimum(load_kw[:, negative], 0.0).sum(axis=1)
 
 
 def limited_line_tree(
@@ -239,6 +255,60 @@ def check_capacity(problem: DispatchProblem, minutes=None) -> None:
                 f"{bound[bad[0]] * KW_PER_MW:.3f} kW at that minute"
                 f"{_offline_note(problem, row)}{more}"
             )
+
+
+def feeder_shortfalls(problem: DispatchProblem, minutes=None) -> list[str]:
+    """Where several feeders joined by 0 kW balance lines
+    (:mod:`popdispatch.feeder.radial`) cannot each balance themselves: one sentence per feeder
+    whose demand exceeds its own online generators' capacity (or falls below their minimum
+    outputs) at some of ``minutes`` (1-based, default all), with the first such minute."""
+    from popdispatch.feeder.radial import balance_lines
+
+    reduced = problem.feeder
+    names = balance_lines(reduced.original.lines)
+    if not len(names):
+        return []
+    rows = _minute_rows(problem, minutes)
+    position = {int(line): k for k, line in enumerate(problem.lines)}
+    out = []
+    for name in names:
+        k = position.get(int(reduced.line_map[name]))
+        if k is None:
+            continue
+        demand = problem.line_load_flow[rows, k]  # the feeder's own net demand, MW
+        online = problem.online[rows] * problem.down[k]
+        for bound, sign, words in (
+            (online @ problem.pmax, 1, "exceeds its generators' capacity"),
+            (online @ problem.pmin, -1, "is below their minimum outputs"),
+        ):
+            bad = np.flatnonzero(sign * (demand - bound) > 1e-9 * np.maximum(np.abs(bound), 1))
+            if len(bad):
+                j = bad[0]
+                out.append(
+                    f"the feeder of {name.removeprefix('balance:')} (balanced by its own "
+                    f"generators): demand {demand[j] * KW_PER_MW:.3f} kW {words} "
+                    f"{bound[j] * KW_PER_MW:.3f} kW at minute {rows[j] + 1}"
+                    + (f" and {len(bad) - 1} more" if len(bad) > 1 else "")
+                )
+    return out
+
+
+def check_net_demand(problem: DispatchProblem, minutes=None) -> None:
+    """Raise :class:`InfeasibleError` at the first of ``minutes`` (1-based; default every
+    minute) whose net demand is not positive: fixed injections (negative loads) that cover the
+    loads leave the fleet nothing to supply (its outputs are >= 0), and shares of a non-positive
+    demand are undefined."""
+    rows = _minute_rows(problem, minutes)
+    bad = np.flatnonzero(problem.demand[rows] <= 0)
+    if len(bad):
+        row = int(rows[bad[0]])
+        fixed = problem.fixed_injection[row] * KW_PER_MW if len(problem.fixed_injection) else 0.0
+        more = f"; {len(bad) - 1} more of the minutes asked for" if len(bad) > 1 else ""
+        raise InfeasibleError(
+            f"net demand {problem.demand[row] * KW_PER_MW:.3f} kW at minute {row + 1}: the fixed "
+            f"injections ({fixed:.3f} kW) cover the loads, and the fleet cannot absorb power "
+            f"(its outputs are >= 0): nothing to dispatch{more}"
+        )
 
 
 def check_online(problem: DispatchProblem, minutes=None) -> None:

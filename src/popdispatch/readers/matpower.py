@@ -30,44 +30,53 @@ statement, in order, with a tiny evaluator (no Python ``eval`` of file text). It
 
 Comments (``%``, ``%{ ... %}`` blocks), ``...`` continuations and ``;`` are handled. Any other
 statement raises :class:`~popdispatch.errors.FeederError` naming the file, the line and the
-statement; so do unsupported elements (phase shifters, shunt conductance, negative demand).
+statement; so do unsupported elements (phase shifters, shunt conductance).
 
 Conversion to the :class:`Feeder` (kW, ohm, km):
 
 - buses: the non-isolated buses by their MATPOWER numbers (an isolated bus, ``BUS_TYPE`` 4, is
   dropped with its load and generators, as MATPOWER does; an in-service branch to one is an
-  error). Shunt conductance ``GS`` (a constant demand in MATPOWER's DC model) and negative
-  ``PD`` are refused. MATPOWER
-  has no coordinates: ``x``/``y`` are a schematic layout of the tree (``x`` = hops from the
-  source, ``y`` = number of leaves before the bus in depth-first order), not geography.
-- source bus: the reference bus (``BUS_TYPE`` 3), or ``root``. Several reference buses are an
-  error naming them unless ``root`` picks one; with ``root`` given, the parts of the network not
-  connected to it are dropped (another source's feeder). Without ``root``, a part not connected
-  to the source is dropped only when it has no load (else the feeder's disconnected error).
+  error). Shunt conductance ``GS`` (a constant demand in MATPOWER's DC model) is refused.
+  MATPOWER has no coordinates: ``x``/``y`` are a schematic layout of the tree (``x`` = hops
+  from the source, ``y`` = number of leaves before the bus in depth-first order), not
+  geography. ``vn_kv`` is the bus's ``baseKV``.
+- source bus: the reference bus (``BUS_TYPE`` 3), or ``root``. Several reference buses in
+  separate trees are several feeders (MATPOWER's ``case16ci``: three feeders, ties open),
+  joined for one run at a virtual bus by balance lines of 0 kW, so that each is balanced by
+  its own generators (:mod:`popdispatch.feeder.radial`); ``root`` picks one of them instead
+  (the parts not connected to it are dropped). Several reference buses in one tree are refused.
+  Without ``root``, a part connected to no source is dropped only when it has no load (else
+  the feeder's disconnected error).
 - lines: the in-service branches (``BR_STATUS`` not 0; tie lines are out of service and are
   not part of the feeder), named ``L<from>-<to>`` (``#<row>`` appended on a repeated pair).
   ``r_ohm``/``x_ohm`` = p.u. value x ``Z_base`` with ``Z_base = baseKV^2 / baseMVA`` (ohm),
   ``baseKV`` of the branch's *to* bus (the side of MATPOWER's series impedance; both ends share
-  it on a line). ``length_km`` is 0: MATPOWER has no lengths. Off-nominal taps are accepted (a
-  DC flow on a radial feeder does not depend on them); phase shifters are refused.
+  it on a line), stated in ``kv_base``. ``length_km`` is 0: MATPOWER has no lengths.
+  Off-nominal taps are accepted (a DC flow on a radial feeder does not depend on them); phase
+  shifters are refused. Parallel branches are merged (parallel impedance, summed ratings).
 - ``limit_kw``: ``RATE_A`` (MVA) x 1000, i.e. 1 MVA -> 1000 kW: the DC model's flows are active
   power at unity power factor; ``RATE_A`` 0 means unlimited (``inf``); ``ratings=False`` ignores
   the ratings (every limit ``inf``).
-- loads: one per bus with ``PD > 0``, named ``load<bus>``, columns ``bus``, ``p_kw`` (``PD`` x
-  1000) and ``q_kvar`` (``QD`` x 1000; carried along, unused by the active-power dispatch).
-- fleet: the in-service generators (``GEN_STATUS`` > 0), named ``G<bus>`` (``G<bus>_2``, ... for
-  more on one bus), ``pmin_kw``/``pmax_kw`` = ``PMIN``/``PMAX`` (MW) x 1000, and the polynomial
-  ``gencost`` rows (model 2, at most quadratic): MATPOWER's cost is ``c2 P^2 + c1 P + c0`` per
-  hour with ``P`` in MW, the fleet's ``a + b P + c P^2`` in the same units, so ``c = c2``,
-  ``b = c1``, ``a = c0`` (the currency is taken as EUR; start-up/shut-down costs are ignored).
-  ``fleet`` (a fleet table, see :mod:`popdispatch.feeder.generators`) replaces it; a generator
-  without (polynomial) cost data raises :class:`~popdispatch.errors.FleetError` asking for one.
+- loads: one per bus with ``PD`` other than 0, named ``load<bus>``, columns ``bus``, ``p_kw``
+  (``PD`` x 1000), ``q_kvar`` (``QD`` x 1000; carried along, unused by the active-power
+  dispatch) and ``kind``: ``load``, or ``injection`` for a negative ``PD`` (distributed
+  generation stated as negative demand, as in ``case533mt_hi``/``_lo``): a fixed injection
+  that the dispatch does not move.
+- fleet: the in-service generators (``GEN_STATUS`` > 0) with polynomial ``gencost`` rows
+  (model 2, at most quadratic), named ``G<bus>`` (``G<bus>_2``, ... for more on one bus),
+  ``pmin_kw``/``pmax_kw`` = ``PMIN``/``PMAX`` (MW) x 1000: MATPOWER's cost is ``c2 P^2 + c1 P +
+  c0`` per hour with ``P`` in MW, the fleet's ``a + b P + c P^2`` in the same units, so ``c =
+  c2``, ``b = c1``, ``a = c0`` (the currency is taken as EUR; start-up/shut-down costs are
+  ignored). A generator without usable cost data is left out, named in a
+  :class:`UserWarning`. ``fleet`` (a fleet table or the path of a fleet file, see
+  :mod:`popdispatch.feeder.generators`) replaces the case's generators.
 """
 
 from __future__ import annotations
 
 import io
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -76,9 +85,10 @@ import pandas as pd
 from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components, depth_first_order
 
-from popdispatch.errors import FeederError, FleetError
-from popdispatch.feeder.generators import FLEET_COLUMNS
+from popdispatch.errors import FeederError, OptionError
+from popdispatch.feeder.generators import as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
+from popdispatch.feeder.radial import join_feeders, merge_parallel
 
 KW_PER_MW = 1000.0
 KW_PER_MVA = 1000.0  # DC flows are active power at unity power factor: 1 MVA of RATE_A = 1000 kW
@@ -121,7 +131,6 @@ _FUNCTIONS = {
     "atan": np.arctan,
 }  # fmt: skip
 _BUILTINS = {"Inf": np.inf, "inf": np.inf, "pi": np.pi}
-_GIVE_FLEET = "give a fleet (fleet=, --fleet FILE)"
 
 
 class _Refused(Exception):
@@ -643,6 +652,7 @@ def read_matpower(
     See the module docstring for the statements understood and the unit conversions.
     """
     path = Path(path)
+    fleet = as_fleet(fleet)
     base_mva, mpc = parse_matpower(path)
     bus, branch = mpc["bus"], mpc["branch"]
     ids = _bus_ids(_col(bus, "BUS_I"), "bus", path)
@@ -650,16 +660,13 @@ def read_matpower(
         twice = pd.Index(ids)[pd.Index(ids).duplicated()][0]
         raise FeederError(f"{path}: bus {twice} is defined twice in mpc.bus")
     isolated = _col(bus, "BUS_TYPE") == 4
-    for column, what in (("GS", "shunt conductance GS"), ("PD", "demand PD")):
-        values = _col(bus, column)
-        bad = (values != 0) if column == "GS" else (values < 0)
-        bad &= ~isolated
-        if bad.any():
-            k = int(np.flatnonzero(bad)[0])
-            hint = " (give it as a generator)" if column == "PD" else ""
-            raise FeederError(
-                f"{path}: bus {ids[k]} has {what} = {values[k]:g} MW: not supported{hint}"
-            )
+    shunt = (_col(bus, "GS") != 0) & ~isolated
+    if shunt.any():
+        k = int(np.flatnonzero(shunt)[0])
+        raise FeederError(
+            f"{path}: bus {ids[k]} has shunt conductance GS = {_col(bus, 'GS')[k]:g} MW: not "
+            "supported"
+        )
 
     on = _col(branch, "BR_STATUS") != 0
     rows = np.flatnonzero(on)
@@ -684,14 +691,15 @@ def read_matpower(
 
     refs = ids[(_col(bus, "BUS_TYPE") == 3) & ~isolated].tolist()
     if root is None:
-        if len(refs) != 1:
-            problem = "no reference bus (BUS_TYPE 3)" if not refs else f"reference buses {refs}"
-            raise FeederError(f"{path}: {problem}: give root= (--root BUS) to pick the source")
-        source = int(refs[0])
+        if not refs:
+            raise FeederError(f"{path}: no reference bus (BUS_TYPE 3): name the source bus "
+                              "(--root BUS)")  # fmt: skip
+        sources = [int(r) for r in refs]
     else:
-        source = int(root)
-        if source not in kept:
-            raise FeederError(f"{path}: root {root} is not a bus of the case")
+        sources = [_root_bus(root, path)]
+        if sources[0] not in kept:
+            raise OptionError(f"{path}: root {root} is not a bus of the case", "--root")
+    source = sources[0]
 
     # keep the source's part of the network (and any other part with load unless root is given)
     n = len(kept)
@@ -699,9 +707,14 @@ def read_matpower(
     graph = csr_array((np.ones(len(rows)), (ends_a, ends_b)), shape=(n, n))
     _, component = connected_components(graph, directed=False)
     pd_mw = pd.Series(_col(bus, "PD"), index=ids).loc[kept].to_numpy()
-    loaded = np.bincount(component, weights=(pd_mw > 0).astype(float))
-    source_pos = kept.get_loc(source)
-    keep = component == component[source_pos]
+    loaded = np.bincount(component, weights=(pd_mw != 0).astype(float))
+    trees = [int(component[kept.get_loc(s)]) for s in sources]
+    if len(set(trees)) < len(trees):
+        raise FeederError(
+            f"{path}: reference buses {sources} feed one connected network: popdispatch "
+            "supports one source per radial feeder; pick one (--root BUS)"
+        )
+    keep = np.isin(component, trees)
     if root is None:
         keep |= loaded[component] > 0
     keep_bus = kept[keep]
@@ -732,36 +745,73 @@ def read_matpower(
             "r_ohm": _col(branch, "BR_R")[rows] * z_base,
             "x_ohm": _col(branch, "BR_X")[rows] * z_base,
             "limit_kw": limit,
+            "kv_base": kv,
         },
         index=pd.Index(names.tolist(), name="line"),
     )
+    lines, _ = merge_parallel(lines)
 
     loads_at = bus_table.loc[keep_bus]
-    loaded_bus = loads_at[_COL["PD"] - 1] > 0
-    loads_at = loads_at[loaded_bus]
+    loads_at = loads_at[loads_at[_COL["PD"] - 1] != 0]
+    p_kw = loads_at[_COL["PD"] - 1].to_numpy(float) * KW_PER_MW
     loads = pd.DataFrame(
         {
             "bus": loads_at.index.to_numpy(np.int64),
-            "p_kw": loads_at[_COL["PD"] - 1].to_numpy(float) * KW_PER_MW,
+            "p_kw": p_kw,
             "q_kvar": loads_at[_COL["QD"] - 1].to_numpy(float) * KW_PER_MW,
+            "kind": np.where(p_kw < 0, "injection", "load"),
         },
         index=pd.Index([f"load{b}" for b in loads_at.index], name="load"),
     )
-    buses = _layout(keep_bus, from_bus, to_bus, source)
+    trees_buses = [keep_bus[component[keep] == t] for t in trees]
+    buses = pd.concat(
+        [_layout(part, from_bus, to_bus, s) for part, s in zip(trees_buses, sources, strict=True)]
+        + [_layout(keep_bus.difference(np.concatenate(trees_buses)), from_bus, to_bus, None)]
+    ).loc[keep_bus]
     buses["vn_kv"] = bus_table.loc[buses.index, _COL["BASE_KV"] - 1].to_numpy(float)
+    if len(sources) > 1:
+        buses["y"] = buses["y"] + _offsets(buses, trees_buses)
+        buses, lines, source = join_feeders(buses, lines, sources)
     generators = _fleet(path, mpc, set(keep_bus.tolist())) if fleet is None else fleet
     return Feeder(path.stem, buses, lines, loads, source, generators)
 
 
-def _layout(buses: pd.Index, from_bus: np.ndarray, to_bus: np.ndarray, source: int) -> pd.DataFrame:
-    """Schematic coordinates: ``x`` = hops from the source, ``y`` = leaves before the bus in
-    depth-first order (unreachable buses at 0, 0; the feeder then reports them)."""
+def _root_bus(root, path: Path) -> int:
+    """The MATPOWER bus number ``root`` spells; :class:`FeederError` otherwise."""
+    try:
+        return int(str(root).strip())
+    except ValueError:
+        raise OptionError(
+            f"{path}: root {root!r} is not a MATPOWER bus number", "--root"
+        ) from None
+
+
+def _offsets(buses: pd.DataFrame, trees: list[pd.Index]) -> np.ndarray:
+    """Schematic ``y`` offsets that stack separate feeders one above the other."""
+    offset = pd.Series(0.0, index=buses.index)
+    shift = 0.0
+    for part in trees:
+        offset[part] = shift
+        shift += float(buses.loc[part, "y"].max()) + 2.0
+    return offset.to_numpy()
+
+
+def _layout(
+    buses: pd.Index, from_bus: np.ndarray, to_bus: np.ndarray, source: int | None
+) -> pd.DataFrame:
+    """Schematic coordinates of ``buses``: ``x`` = hops from the source, ``y`` = leaves before
+    the bus in depth-first order (unreachable buses, and all without a source, at 0, 0; the
+    feeder then reports them)."""
     n = len(buses)
-    a, b = buses.get_indexer(from_bus), buses.get_indexer(to_bus)
-    graph = csr_array((np.ones(len(a)), (a, b)), shape=(n, n))
-    order, parent = depth_first_order(graph, buses.get_loc(source), directed=False)
     x = np.zeros(n)
     y = np.zeros(n)
+    index = pd.Index(buses.to_numpy(np.int64), name="bus")
+    if source is None or n == 0:
+        return pd.DataFrame({"x": x, "y": y}, index=index)
+    a, b = buses.get_indexer(from_bus), buses.get_indexer(to_bus)
+    inside = (a >= 0) & (b >= 0)
+    graph = csr_array((np.ones(int(inside.sum())), (a[inside], b[inside])), shape=(n, n))
+    order, parent = depth_first_order(graph, buses.get_loc(source), directed=False)
     children = np.bincount(parent[parent >= 0], minlength=n)
     leaves = 0
     for node in order[1:]:
@@ -769,44 +819,54 @@ def _layout(buses: pd.Index, from_bus: np.ndarray, to_bus: np.ndarray, source: i
     for node in order:
         y[node] = leaves
         leaves += children[node] == 0
-    return pd.DataFrame({"x": x, "y": y}, index=pd.Index(buses.to_numpy(np.int64), name="bus"))
+    return pd.DataFrame({"x": x, "y": y}, index=index)
 
 
 def _fleet(path: Path, mpc: dict[str, np.ndarray], buses: set[int]) -> pd.DataFrame:
-    """The case's in-service generators with their polynomial costs, as a fleet table."""
+    """The case's in-service generators with usable polynomial costs, as a fleet table; the
+    others are left out with a :class:`UserWarning` naming them (a case without any priced
+    generator has an empty fleet: it can be described, a dispatch needs a fleet)."""
     gen = mpc.get("gen")
     if gen is None or not gen.size:
-        raise FleetError(f"{path}: the case has no generator (mpc.gen): {_GIVE_FLEET}")
+        return make_fleet([])
     cost = mpc.get("gencost")
     on = np.flatnonzero(_col(gen, "GEN_STATUS") > 0)
-    rows = []
-    names: list[str] = []
+    rows, names, unpriced = [], [], []
     for k in on:
         at = _bus_ids(gen[k : k + 1, 0], "generator bus", path)[0]
         if at not in buses:
             continue  # in a part of the network that is not this feeder
-        where = f"{path}: generator {k + 1} at bus {at}"
-        if cost is None or cost.shape[0] <= k:
-            raise FleetError(f"{where} has no cost data (mpc.gencost): {_GIVE_FLEET}")
-        model, ncost = cost[k, 0], cost[k, 3]
-        if model != 2:
-            raise FleetError(f"{where} has a non-polynomial cost (model {model:g}): {_GIVE_FLEET}")
-        coefficients = cost[k, 4 : 4 + int(ncost)]
-        if ncost != int(ncost) or len(coefficients) != ncost:
-            raise FleetError(f"{where}: gencost row {k + 1} has a bad NCOST = {ncost:g}")
-        coefficients = np.trim_zeros(coefficients, "f")
-        if len(coefficients) > 3:
-            raise FleetError(
-                f"{where} has a cost polynomial of degree {len(coefficients) - 1} (at most 2): "
-                "give a fleet (fleet=, --fleet FILE)"
-            )
-        c0, c1, c2 = np.concatenate([coefficients[::-1], np.zeros(3)])[:3]
+        coefficients, why = _polynomial(cost, k)
+        if why:
+            unpriced.append(f"generator {k + 1} at bus {at} {why}")
+            continue
+        c0, c1, c2 = coefficients
         rows.append((at, c0, c1, c2, gen[k, _COL["PMIN"] - 1] * KW_PER_MW,
                      gen[k, _COL["PMAX"] - 1] * KW_PER_MW))  # fmt: skip
         count = sum(name == f"G{at}" or name.startswith(f"G{at}_") for name in names)
         names.append(f"G{at}" if count == 0 else f"G{at}_{count + 1}")
-    if not rows:
-        raise FleetError(f"{path}: no in-service generator on the feeder: {_GIVE_FLEET}")
-    table = pd.DataFrame(rows, columns=FLEET_COLUMNS, index=pd.Index(names, name="generator"))
-    table["bus"] = table["bus"].astype(np.int64)
-    return table
+    if unpriced:
+        warnings.warn(
+            f"{path}: left out of the fleet: {'; '.join(unpriced)} (a dispatch of these needs a "
+            "fleet: --fleet FILE)",
+            UserWarning,
+            stacklevel=3,
+        )
+    return make_fleet(rows, names)
+
+
+def _polynomial(cost: np.ndarray | None, k: int) -> tuple[tuple[float, float, float], str]:
+    """``((c0, c1, c2), "")`` of gencost row ``k``, or ``(None, why)`` when it has none usable."""
+    if cost is None or cost.shape[0] <= k:
+        return None, "has no cost data (mpc.gencost)"
+    model, ncost = cost[k, 0], cost[k, 3]
+    if model != 2:
+        return None, f"has a non-polynomial cost (model {model:g})"
+    coefficients = cost[k, 4 : 4 + int(ncost)]
+    if ncost != int(ncost) or len(coefficients) != ncost:
+        return None, f"has a bad NCOST = {ncost:g} in gencost row {k + 1}"
+    coefficients = np.trim_zeros(coefficients, "f")
+    if len(coefficients) > 3:
+        return None, f"has a cost polynomial of degree {len(coefficients) - 1} (at most 2)"
+    c0, c1, c2 = np.concatenate([coefficients[::-1], np.zeros(3)])[:3]
+    return (float(c0), float(c1), float(c2)), ""

@@ -1,285 +1,115 @@
 """Any radial OpenDSS circuit, read through OpenDSSDirect.py (the optional ``opendss`` extra).
 
-:func:`read_opendss_master` compiles a master file with OpenDSS itself and turns the circuit into
-the plain-table :class:`~popdispatch.feeder.Feeder`: a positive-sequence single-line model.
+:func:`read_opendss_master` compiles a master file or a run script with OpenDSS itself, in
+place (:mod:`popdispatch.readers.dss_script`: Windows file names, the script's edits after
+the compile honoured, commands that solve, show, plot or export skipped) and turns the circuit
+into the plain-table :class:`~popdispatch.feeder.Feeder`: a positive-sequence single-line
+model.
 
 Conversion rules
 ----------------
-- **Buses**: one per OpenDSS bus (``Circuit.AllBusNames`` after ``MakeBusList``). A bus whose
-  name is a canonical non-negative integer (``"1"``, ``"650"``; not ``"007"``) keeps that number
-  as its id; the others (``sourcebus``, ``rg60``, ``814r``) get the next ids above the largest
-  such number, in OpenDSS's bus order. The ``name`` column keeps the OpenDSS name,
-  ``kv_ln_base`` its base voltage (kV line-to-neutral, 0 if the master sets none). A bus cut
-  off from the source by an open switch is dropped (with a :class:`UserWarning` naming it) if
-  nothing is connected to it; with a load or generator it is an error.
-- **Lines** (``Line`` elements, enabled): ``length_km`` = ``Length`` x its ``Units`` in km
-  (``none`` taken as km); ``r_ohm + j x_ohm`` = positive-sequence impedance per unit length x
-  ``Length`` (ohm, whole line, then referred to the source: see *Impedance base*). The
-  per-length value comes from OpenDSS's own phase matrices
-  (``Lines.RMatrix``/``XMatrix``, ohm per line unit, whatever defined them: sequence values,
-  line code matrices or a line geometry): Kron-reduced to the phase conductors, then
-  ``Z1 = mean(diagonal) - mean(off-diagonal)`` (exactly ``R1 + j X1`` for sequence-defined
-  lines); a line with fewer than three phases whose matrix is the one its ``R1/X1/R0/X0`` give
-  uses ``R1 + j X1``, a one-phase matrix line its self impedance. (``Lines.R1`` alone is not
-  used: OpenDSS leaves it at its default for matrix-defined lines.)
-- **Switches** (``Switch=yes`` lines) are lines with ``kind = "switch"``. A line or switch with a
-  terminal open on every phase (``open Line.X 1``) is removed; a partly open one is kept.
-- **Transformers and regulators** are branches with ``length_km = 0`` and the series impedance
-  ``z = (%R1 + %R2 kVA1/kVA2)/100 + j XHL/100`` per unit on the unit's own winding-1 rating,
-  in ohm on the source's base: ``z V_LL^2 / MVA1`` for a three-phase unit and ``z V_LN^2 /
-  MVA1`` (per phase) for a one-phase unit, with ``V`` the source bus's base voltage. One-phase
-  units between the same two buses (a regulator bank such as ``reg1a/b/c``) are one branch named
-  ``Transformer.reg1a+reg1b+reg1c`` with the mean of their impedances (a bank of equal units:
-  the unit's). ``kind`` is ``"regulator"`` when a ``RegControl`` acts on a unit, else
-  ``"transformer"``. Taps and off-nominal ratios are ignored. Three-winding transformers are
-  refused.
-- **Impedance base**: as in the pandapower reader, every ``r_ohm``/``x_ohm`` is in ohm referred
-  to the base voltage of the source bus (its ``kv_ln_base``): a line whose from-bus base is
-  ``V`` has its own ohmic impedance times ``(V_source / V)^2``; on a single-voltage feeder
-  (the ELV rooted at bus 1) they are the lines' own ohms. Nominal ratios only; the engine's
-  lossless DC flows use the topology and the limits, the impedances are for AC work.
-- Any other series element (a two-terminal ``Reactor``, ``Capacitor``, ``AutoTrans``, ...)
-  is refused with an error naming it; shunt capacitors and reactors are ignored (no active power).
-- **Loads** (``Load`` elements, enabled): one row per OpenDSS load, index its name (OpenDSS
-  lower-cases names), ``bus`` (int id), ``p_kw`` = ``Loads.kW`` (the load's total over its
-  phases) and ``q_kvar`` = ``Loads.kvar``; load shapes and ``LoadMult`` are not applied.
-- **Ratings** (``ratings=True``): a line's ``limit_kw`` = ``phases x V_LN x NormAmps`` with
-  ``V_LN`` the from-bus base voltage (kV), i.e. ``sqrt(3) x V_LL x I`` for a three-phase line,
-  at unity power factor. OpenDSS gives every line ``NormAmps = 400`` unless told otherwise and
-  this reader cannot tell that default from a stated rating: pass ``ratings=False`` (all limits
-  ``inf``) when the master states none. A transformer branch's limit is its winding-1 kVA
-  (summed over a bank's units) in kW.
-- **Base voltages**: OpenDSS's own (``Bus.kVBase``); when a bus has none, ``CalcVoltageBases``
-  is run once (OpenDSS's default ``VoltageBases`` list applies if the master sets none).
-- **Coordinates**: the circuit's bus coordinates (``BusCoords`` in the master) where present; a
-  bus without any takes its nearest placed neighbour's towards the source. A circuit with none
-  gets a schematic layout: ``y = -100 x depth`` from the source and ``x = 100 x`` leaf order.
+- **Buses**: one per OpenDSS bus (``Circuit.AllBusNames``). The ``name`` column keeps the
+  OpenDSS name (lower case), which is how every output and option names the bus; the int id
+  behind it is the name's number where it is a canonical non-negative integer (``"650"``; not
+  ``"007"``), else the next id above the largest such number, in OpenDSS's bus order.
+  ``vn_kv``: the bus's base voltage, line-to-line kV (OpenDSS's ``kVBase`` x sqrt(3);
+  ``CalcVoltageBases`` is run once when a bus has none). A bus cut off from every source by an
+  open element is dropped (a :class:`UserWarning` names it) if nothing is connected to it;
+  with a load or generator it is an error.
+- **Impedances** are each branch's own ohms, stated on the line-to-line voltage ``kv_base``
+  of its first bus (a 4.16 kV line's ohms are 4.16 kV ohms, a transformer's are on its
+  winding 1's side); :meth:`~popdispatch.feeder.Feeder.lines_on_base` refers them to one
+  base for the AC check and the reduction.
+- **Lines** (enabled, not open on a whole terminal, not held open by a fuse, recloser, relay
+  or switch control): ``length_km`` = ``Length`` x its ``Units``; ``r_ohm + j x_ohm`` = the
+  positive-sequence impedance of OpenDSS's own phase matrices (``Lines.RMatrix``/
+  ``XMatrix``, whatever defined them) Kron-reduced to the phase conductors, ``Z1 =
+  mean(diagonal) - mean(off-diagonal)`` (exactly ``R1 + j X1`` for sequence-defined lines; a
+  one-phase matrix line its self impedance), times ``Length``. Switches (``Switch=yes``) are
+  lines with ``kind = "switch"``.
+- **Transformers and regulators**: branches with ``length_km = 0`` and the series impedance
+  ``z = (%R1 + %R2)/100 + j XHL/100`` per unit on winding 1's kVA (OpenDSS states every
+  winding's ``%R`` on it: its own power flow does not change with winding 2's kVA), in ohm on
+  winding 1's side: ``z V_LL^2 / MVA1`` for a three-phase unit, ``z V_LN^2 / MVA1`` (per
+  phase) for a one-phase unit. One-phase units between the same two buses (a regulator bank
+  ``reg1a/b/c``) are one branch ``Transformer.reg1a+reg1b+reg1c`` with the mean of their
+  impedances.
+  ``kind`` is ``"regulator"`` when a ``RegControl`` acts on a unit. Taps are ignored.
+- **Three-winding transformers**: the split-phase (centre-tap) service transformer, windings
+  2 and 3 on one bus, is one branch from winding 1's bus to the secondary bus. Its star
+  impedances come from ``XHL``, ``XHT``, ``XLT`` and each winding's ``%R`` (all on winding 1's
+  kVA); the secondary's loads draw on both halves alike, so the halves are in parallel behind
+  the primary: ``z = z1 + z2 z3 / (z2 + z3)``; the loads stay on the secondary bus. Three
+  windings on three buses are the star equivalent: a bus ``transformer.NAME.star`` of its
+  own and one branch ``Transformer.NAME:wK`` per winding (limit the winding's kVA).
+- **Reactors and capacitors** between two different buses (the 8500-node feeder's source
+  reactor, series capacitors) are branches with the impedance of their primitive admittance
+  (``Z = -Y12^-1`` between the terminals, positive sequence); shunt ones (one bus) carry no
+  active power and are left out, as capacitors and regulators' controls are: topology only.
+- **Parallel branches** (parallel conductors, lines of different phases between the same
+  buses) are merged (:mod:`popdispatch.feeder.radial`: parallel impedance, summed ratings).
+- Any other series element (``AutoTrans``, ``GICTransformer``, ``UPFC``, a fault between two
+  buses, ...) is refused with one line naming it and the file and line defining it.
+- **Loads** (enabled): one row per OpenDSS load, index its name (OpenDSS lower-cases names),
+  ``bus``, ``p_kw`` = ``Loads.kW`` (the total over its phases), ``q_kvar`` = ``Loads.kvar``,
+  ``kind = "load"`` and the names of its ``daily``, ``yearly`` and ``duty`` shapes
+  (:mod:`popdispatch.feeder.shapes` runs them: ``--series``); a ``status=fixed`` load none.
+- **Fixed injections**: OpenDSS ``Generator`` and ``PVSystem`` elements have no cost data.
+  Those the ``fleet`` does not dispatch are fixed injections following their own shapes:
+  rows of the loads table named ``Generator.g1``/``PVSystem.pv1`` with ``p_kw`` = minus their
+  output (``kW``; PV ``Pmpp x Irradiance``, temperature and efficiency curves not applied) and
+  ``kind`` ``generator``/``pvsystem``. ``Storage`` elements outside the fleet are left idle.
+- **Ratings** (``ratings=True``): a branch's ``limit_kw`` = ``phases x V_LN x NormAmps`` at its
+  first bus's base voltage, i.e. ``sqrt(3) x V_LL x I`` for a three-phase line, at unity power
+  factor; a transformer's its winding-1 kVA (summed over a bank). OpenDSS gives every line
+  ``NormAmps = 400`` unless told otherwise and this reader cannot tell that default from a
+  stated rating: ``ratings=False`` (``--no-ratings``) leaves every limit ``inf``.
+- **Coordinates**: the circuit's bus coordinates (``BusCoords``) where present; a bus without
+  any takes its nearest placed neighbour's towards the source. A circuit with none gets a
+  schematic layout: ``y = -100 x depth`` from the source and ``x = 100 x`` leaf order.
 - **Source**: the ``Vsource``'s bus (``sourcebus`` in most masters) unless ``root`` names
-  another bus; the tree is then rooted there (the part between the two stays, as a branch).
-- **Fleet**: OpenDSS ``Generator``, ``PVSystem`` and ``Storage`` elements have no cost data, so
-  ``fleet`` is required: a DataFrame with the columns of
-  :data:`~popdispatch.feeder.generators.FLEET_COLUMNS` whose ``bus`` holds OpenDSS bus names
-  (an integer is read as the name it spells). A row whose ``bus`` is missing (NaN/None) and whose
-  name is an OpenDSS generator (``g1`` or ``Generator.g1``) takes that element's bus; missing
-  ``pmax_kw`` takes its rating (``kW``, PV ``Pmpp``, storage ``kWrated``) and ``pmin_kw`` 0.
-
-Compiling
----------
-The master is compiled as it is, in a private OpenDSS context (the process's working directory
-and any circuit of the default OpenDSSDirect.py engine are untouched). It is compiled from a
-temporary copy of the master and the files it redirects to only (a) when it contains commands
-that write files into OpenDSS's data folder, i.e. the master's own folder (``Show``, ``Export``,
-``Plot``, ``CloseDI``, ``Set Demand=true``, ...: they then write into the temporary folder,
-which is deleted), or (b) when compiling it as it is fails. In the copy, file references are
-made portable: ``\\`` separators and a file name differing only in case from an
-existing file (``Daily_1min_100profiles\\Load_profile_1.txt`` for ``load_profile_1.txt``) are
-replaced by the file's absolute path, and a ``Redirect``/``Compile`` of a file that does not exist
-(the ELV's ``Monitors.txt``) is commented out. Every such change is listed in a
-:class:`UserWarning`. The copy's own outputs (e.g. the ELV master's demand-interval files) go to the
-temporary folder.
+  another bus (the tree is then rooted there). Several Vsources feeding separate trees are
+  several feeders, joined for one run at a virtual bus by balance lines of 0 kW
+  (:mod:`popdispatch.feeder.radial`: each balanced by its own generators), unless ``root``
+  picks one; several Vsources in one tree are refused.
+- **Fleet**: a table with the columns of :data:`~popdispatch.feeder.generators.FLEET_COLUMNS`
+  (or the path of a CSV/TOML fleet file) whose ``bus`` holds OpenDSS bus names (an integer is
+  read as the name it spells). A row whose ``bus`` is missing (NaN/None) and whose name is an
+  OpenDSS generator, PV system or storage element (``g1`` or ``Generator.g1``) takes that
+  element's bus, and a missing ``pmax_kw`` its rating (``kW``, PV ``Pmpp``, storage
+  ``kWrated``), ``pmin_kw`` 0. Without a fleet the feeder has none: it can be described
+  (``popdispatch feeder``), a dispatch asks for one.
 """
 
 from __future__ import annotations
 
-import math
-import os
 import re
-import tempfile
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from popdispatch.errors import FeederError, FleetError
-from popdispatch.feeder.generators import FLEET_COLUMNS
+from popdispatch.errors import FeederError, FleetError, MeshedError, OptionError
+from popdispatch.feeder.generators import FLEET_COLUMNS, as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
-from popdispatch.readers.opendss import find_file
-
-#: OpenDSS length unit codes (``Lines.Units``) as km per unit; 0 (``none``) is taken as km.
-KM_PER_DSS_UNIT = {
-    0: 1.0, 1: 1.609344, 2: 0.3048, 3: 1.0, 4: 1e-3, 5: 0.3048e-3, 6: 0.0254e-3, 7: 1e-5, 8: 1e-6,
-}  # fmt: skip
+from popdispatch.feeder.radial import join_feeders, merge_parallel
+from popdispatch.feeder.shapes import LoadShape
+from popdispatch.readers.dss_circuit import SQRT3, Circuit, read_circuit
+from popdispatch.readers.dss_script import compiled_script, opendss
 
 #: The rows of :func:`fleet_candidates`.
 CANDIDATE_COLUMNS = ["element", "bus_name", "rating_kw"]
+#: Shape columns of the loads table, one per OpenDSS series.
+SERIES = ("daily", "yearly", "duty")
 
-_EXTRA = "pip install popdispatch[opendss]"
 _CANONICAL_INT = re.compile(r"0|[1-9][0-9]*")
+_ELEMENT = re.compile(r"^([A-Za-z]\w*\.[^\s:]+): ")
 
 
 def _opendss():
     """The ``opendssdirect`` module, or a clear error naming the extra."""
-    try:
-        import opendssdirect
-    except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError(
-            f"reading OpenDSS master files needs OpenDSSDirect.py: {_EXTRA} ({exc})"
-        ) from exc
-    return opendssdirect
-
-
-# --------------------------------------------------------------------------------------------
-# Compiling
-
-
-def compile_master(master_path: str | Path):
-    """Compile ``master_path`` in a new OpenDSS context; returns ``(context, notes)``.
-
-    ``notes`` lists the file references a temporary copy had to change (see the module
-    docstring; empty when none). Raises :class:`FeederError` when OpenDSS cannot compile it.
-    """
-    path = Path(master_path)
-    if not path.is_file():
-        raise FeederError(f"OpenDSS master file {path} does not exist")
-    dss = _opendss()
-    with tempfile.TemporaryDirectory(prefix="popdispatch-dss-") as tmp:
-        notes: list[str] = []
-        writes: list[str] = []
-        copy = _portable_copy(path.resolve(), Path(tmp), notes, {}, writes)
-        first = None
-        if not writes:
-            ctx = _new_context(dss)
-            try:
-                ctx.Text.Command(f'compile "{path.resolve()}"')
-                return ctx, []
-            except Exception as exc:  # DSSException; its class lives in dss-python
-                first = _one_line(exc)
-            if not notes:
-                raise FeederError(f"OpenDSS cannot compile {path}: {first}")
-        ctx = _new_context(dss)
-        cwd = os.getcwd()
-        try:
-            ctx.Text.Command(f'compile "{copy}"')
-        except Exception as exc:
-            before = f"{first}; nor its portable copy ({_summary(notes)})" if first else "its copy"
-            raise FeederError(
-                f"OpenDSS cannot compile {path}: {before}: {_one_line(exc)}"
-            ) from None
-        finally:
-            os.chdir(cwd)
-    return ctx, notes
-
-
-def _summary(notes: list[str]) -> str:
-    """The notes of a portable copy in one line: each kind of change once, with its count."""
-    kinds: dict[str, list[str]] = {}
-    for note in notes:
-        kind = "commented out" if note.endswith("(no such file)") else note.split(":")[0]
-        kinds.setdefault(kind, []).append(note)
-    parts = []
-    for group in kinds.values():
-        more = f" (and {len(group) - 1} more like it)" if len(group) > 1 else ""
-        parts.append(group[0] + more)
-    return "; ".join(parts)
-
-
-def _new_context(dss):
-    ctx = dss.NewContext()
-    ctx.Basic.AllowChangeDir(False)  # keep the process's working directory
-    ctx.Basic.AllowForms(False)
-    ctx.Basic.AllowEditor(False)
-    return ctx
-
-
-def _one_line(exc: Exception) -> str:
-    return " ".join(str(exc).split())
-
-
-_FILE_COMMAND = re.compile(
-    r"^(\s*)(redirect|compile|buscoords|latlongcoords)(\s+)(\S.*?)\s*$", re.I
-)
-_FILE_KEY = re.compile(
-    r"""((?:file|csvfile|sngfile|dblfile)\s*=\s*)("[^"]*"|'[^']*'|[^\s)\]]+)""", re.I
-)
-_COMMENT = re.compile(r"!|//")
-#: Commands that write report or result files into OpenDSS's data folder.
-_WRITES = re.compile(
-    r"\s*(show|export|plot|closedi|save|dump|visualize|fileedit|sample)\b"
-    r"|\s*set\b.*\b(demand|overloadreport|voltexcept|diverbose|keeplist)\s*=\s*[yt]",
-    re.I,
-)
-
-
-def _resolve(folder: Path, raw: str) -> Path | None:
-    name = raw.strip().strip("\"'")
-    try:
-        found = find_file(folder, name)
-    except FeederError:
-        return None
-    return found if found is not None and found.is_file() else None
-
-
-def _portable_copy(
-    source: Path, tmp: Path, notes: list[str], done: dict[Path, Path], writes: list[str]
-) -> Path:
-    """Copy ``source`` (and the files it redirects to) into ``tmp`` with portable references;
-    ``notes`` gets the changes, ``writes`` the commands that write output files."""
-    if source in done:
-        return done[source]
-    target = tmp / f"{len(done)}_{source.name}"
-    done[source] = target
-    folder = source.parent
-    out: list[str] = []
-    in_block = False
-    text = source.read_text(encoding="utf-8-sig", errors="replace")
-    for number, line in enumerate(text.splitlines(), start=1):
-        stripped = line.strip()
-        if in_block or stripped.startswith("/*"):
-            in_block = "*/" not in stripped
-            out.append(line)
-            continue
-        code = _COMMENT.split(line, maxsplit=1)[0]
-        where = f"{source.name}:{number}"
-        if _WRITES.match(code):
-            writes.append(f"{where}: {stripped!r}")
-        match = _FILE_COMMAND.match(code)
-        if match:
-            indent, command, _, raw = match.groups()
-            found = _resolve(folder, raw)
-            if found is None:
-                if command.lower() in ("redirect", "compile"):
-                    out.append(f"! popdispatch: file not found, neutralised: {line}")
-                    notes.append(f"{where}: {stripped!r} commented out (no such file)")
-                    continue
-                out.append(line)
-                continue
-            if command.lower() in ("redirect", "compile"):
-                new = _portable_copy(found, tmp, notes, done, writes)
-                # Redirect, not compile: a nested compile would clear the circuit the same way.
-                out.append(f'{indent}{command} "{new}"')
-                if found != folder / raw.strip().strip("\"'"):
-                    notes.append(f"{where}: {raw.strip()!r} read as {found}")
-            else:
-                out.append(f'{indent}{command} "{found}"')
-                if found != folder / raw.strip().strip("\"'"):
-                    notes.append(f"{where}: {raw.strip()!r} read as {found}")
-            continue
-
-        def portable(m: re.Match, where: str = where) -> str:
-            raw = m.group(2)
-            plain = raw.strip("\"'")
-            if (folder / plain).is_file():
-                return m.group(0)
-            found = _resolve(folder, plain)
-            if found is None:
-                return m.group(0)
-            notes.append(f"{where}: {plain!r} read as {found}")
-            return f'{m.group(1)}"{found}"'
-
-        if _FILE_KEY.search(code):
-            line = _FILE_KEY.sub(portable, code) + line[len(code) :]
-        out.append(line)
-    target.write_text("\n".join(out) + "\n")
-    return target
-
-
-# --------------------------------------------------------------------------------------------
-# Reading the circuit
-
-
-def _bus(name: str) -> str:
-    return name.split(".")[0].lower()
+    return opendss()
 
 
 def bus_ids(names: list[str]) -> dict[str, int]:
@@ -297,176 +127,242 @@ def bus_ids(names: list[str]) -> dict[str, int]:
     return ids
 
 
-def _kron(z: np.ndarray, n: int) -> np.ndarray:
-    """Eliminate conductors beyond the first ``n`` (neutrals) from a series impedance matrix."""
-    if z.shape[0] <= n:
-        return z
-    a, b, c, d = z[:n, :n], z[:n, n:], z[n:, :n], z[n:, n:]
-    return a - b @ np.linalg.solve(d, c)
+def read_opendss_master(
+    master_path: str | Path,
+    *,
+    fleet: pd.DataFrame | str | Path | None = None,
+    root: str | int | None = None,
+    ratings: bool = True,
+    name: str | None = None,
+) -> Feeder:
+    """Read the radial circuit of an OpenDSS master file or run script as a :class:`Feeder`.
+
+    Parameters
+    ----------
+    master_path : the ``.dss`` file (compiled in place: see the module docstring).
+    fleet : the generators to dispatch (a table with ``bus, a, b, c, pmin_kw, pmax_kw``, ``bus``
+        = OpenDSS bus name, or the path of a CSV/TOML fleet file); ``None``: none (the feeder
+        can be described; a dispatch needs a fleet, OpenDSS has no cost data).
+    root : the source bus (OpenDSS bus name, or an int spelling it); default the Vsource's bus.
+    ratings : line limits from ``NormAmps`` and transformer limits from kVA (else ``inf``).
+    name : the feeder's case name; default the OpenDSS circuit's name.
+
+    Conversion rules: see :mod:`popdispatch.readers.opendss_direct`.
+    """
+    fleet = as_fleet(fleet)
+    path = Path(master_path)
+    with compiled_script(path) as script:
+        try:
+            circuit = read_circuit(script.ctx, ratings)
+        except FeederError as exc:
+            raise _located(exc, script) from None
+        try:
+            feeder = _feeder(circuit, path, fleet, root, name)
+        except MeshedError as exc:
+            raise MeshedError(f"{path}: {exc}{_open_point(script.ctx, circuit, exc)}",
+                              exc.loop_lines) from None  # fmt: skip
+    summary = script.summary()
+    if summary:
+        warnings.warn(f"{path}: {summary}", UserWarning, stacklevel=2)
+    return feeder
 
 
-def _positive_sequence(ctx) -> complex:
-    """Positive-sequence series impedance of the active line, ohm per line unit length."""
-    lines = ctx.Lines
-    n = lines.Phases()
-    r, x = np.asarray(lines.RMatrix(), float), np.asarray(lines.XMatrix(), float)
-    m = int(round(math.sqrt(len(r))))
-    z = _kron((r + 1j * x).reshape(m, m), n)
-    z1 = complex(lines.R1(), lines.X1())
-    z0 = complex(lines.R0(), lines.X0())
-    zs, zm = (2 * z1 + z0) / 3, (z0 - z1) / 3
-    if n < 3:
-        from_sequence = np.full((n, n), zm) + np.eye(n) * (zs - zm)
-        if np.allclose(z, from_sequence, rtol=1e-6, atol=1e-12):
-            return z1
-    if n == 1:
-        return complex(z[0, 0])
-    diagonal = np.trace(z) / n
-    off = (z.sum() - np.trace(z)) / (n * (n - 1))
-    return complex(diagonal - off)
-
-
-def _elements(ctx, cls) -> list[str]:
-    names = cls.AllNames()
-    return [] if names in ([], ["NONE"], ["none"]) else list(names)
-
-
-def _open_terminal(ctx) -> bool:
-    """True when a terminal of the active element is open on every phase."""
-    element = ctx.CktElement
-    phases = element.NumPhases()
-    return any(
-        all(element.IsOpen(term, phase) for phase in range(1, phases + 1))
-        for term in range(1, element.NumTerminals() + 1)
+def _open_point(ctx, circuit: Circuit, exc: MeshedError) -> str:
+    """Where to open a loop: the element of the loop that OpenDSS's own solution loads least
+    (one sentence), or a plain hint when the circuit does not solve."""
+    members = {b.name: b.elements for b in circuit.branches}
+    elements = [e for line in exc.loop_lines for part in circuit.merged.get(line, [line])
+                for e in members.get(part, ())]  # fmt: skip
+    hint = (
+        "; open one element of the loop in a run script after the Compile (e.g. "
+        "`Open Line.NAME 1`), as OpenDSS would read it"
+    )
+    try:
+        ctx.Text.Command("solve")
+        if not ctx.Solution.Converged():
+            return hint
+        flows = []
+        for element in elements:
+            ctx.Circuit.SetActiveElement(element)
+            powers = ctx.CktElement.Powers()
+            conductors = ctx.CktElement.NumConductors()
+            flows.append((abs(sum(powers[0 : 2 * conductors : 2])), element))
+    except Exception:  # a circuit OpenDSS cannot solve: the plain hint
+        return hint
+    if not flows:
+        return hint
+    kw, element = min(flows)
+    return (
+        f"; OpenDSS's own solution carries the least power of the loop, {kw:.2f} kW, on "
+        f"{element}: open it in a run script after the Compile (`Open {element} 1`)"
     )
 
 
-def _read_lines(ctx, ids: dict[str, int], kv: dict[str, float], ratings: bool) -> list[dict]:
-    rows = []
-    for name in _elements(ctx, ctx.Lines):
-        ctx.Lines.Name(name)
-        if not ctx.CktElement.Enabled() or _open_terminal(ctx):
-            continue
-        bus1, bus2 = _bus(ctx.Lines.Bus1()), _bus(ctx.Lines.Bus2())
-        units = ctx.Lines.Units()
-        if units not in KM_PER_DSS_UNIT:
-            raise FeederError(f"Line.{name}: unsupported length unit code {units}")
-        length = ctx.Lines.Length()
-        z1 = _positive_sequence(ctx) * length
-        phases = ctx.Lines.Phases()
-        limit = phases * kv.get(bus1, 0.0) * ctx.Lines.NormAmps() if ratings else math.inf
-        if ratings and not limit > 0:
-            raise FeederError(
-                f"Line.{name}: cannot convert NormAmps = {ctx.Lines.NormAmps()} A to kW: bus "
-                f"{bus1!r} has no base voltage (set voltagebases, or ratings=False)"
+def _located(exc: FeederError, script) -> FeederError:
+    """``exc`` prefixed with the file and line that defined the element it names."""
+    message = str(exc)
+    match = _ELEMENT.match(message)
+    where = script.where(match.group(1)) if match else str(script.path)
+    return FeederError(f"{where}: {message}")
+
+
+def fleet_candidates(circuit: Circuit) -> pd.DataFrame:
+    """The circuit's generators, PV systems and storage (no cost data): index element name
+    (``Generator.g1``), columns ``bus_name`` and ``rating_kw``."""
+    rows = [(name, bus, kw) for name, bus, kw, *_ in circuit.injections]
+    rows += [(name, bus, rating) for name, bus, rating in circuit.storage]
+    return pd.DataFrame(rows, columns=CANDIDATE_COLUMNS).set_index("element")
+
+
+def _feeder(circuit: Circuit, path: Path, fleet, root, name) -> Feeder:
+    names = circuit.buses
+    ids = bus_ids(names)
+    name_of = {v: k for k, v in ids.items()}
+    if not circuit.branches:
+        raise FeederError(f"{path}: the OpenDSS circuit {circuit.name!r} has no line")
+    lines = pd.DataFrame(
+        {
+            "from_bus": [ids[b.bus_a] for b in circuit.branches],
+            "to_bus": [ids[b.bus_b] for b in circuit.branches],
+            "length_km": [b.length_km for b in circuit.branches],
+            "r_ohm": [b.r_ohm for b in circuit.branches],
+            "x_ohm": [b.x_ohm for b in circuit.branches],
+            "limit_kw": [b.limit_kw for b in circuit.branches],
+            "kv_base": [b.kv_base for b in circuit.branches],
+            "kind": [b.kind for b in circuit.branches],
+        },
+        index=pd.Index([b.name for b in circuit.branches], name="line"),
+    ).astype({"from_bus": np.int64, "to_bus": np.int64})
+    self_loops = lines.from_bus == lines.to_bus
+    lines, circuit.merged = merge_parallel(lines[~self_loops])
+
+    candidates = fleet_candidates(circuit)
+    generators = _map_fleet(fleet, ids, candidates, path) if fleet is not None else _no_fleet()
+    dispatched = {str(e).lower() for e in _dispatched_elements(fleet, candidates)}
+    injections = [row for row in circuit.injections if row[0].lower() not in dispatched]
+    loads = _load_table(circuit.loads, injections, ids)
+
+    sources = _sources(circuit, root, ids, path)
+    components = _components(lines, names, ids)
+    occupied = set(loads.bus) | set(generators.bus.tolist())
+    keep, dropped = _feeder_buses(components, sources, occupied, root, name_of, path)
+    if dropped:
+        warnings.warn(
+            f"{path}: dropped {len(dropped)} bus(es) cut off from the source, with nothing "
+            f"connected: {dropped[:10]}",
+            UserWarning,
+            stacklevel=3,
+        )
+    lines = lines[lines.from_bus.isin(keep) & lines.to_bus.isin(keep)]
+    loads = loads[loads.bus.isin(keep)]
+    kept = [b for b in names if ids[b] in keep]
+    buses = pd.DataFrame(
+        {"name": kept, "vn_kv": [circuit.kv[b] * SQRT3 for b in kept]},
+        index=pd.Index([ids[b] for b in kept], name="bus", dtype=np.int64),
+    )
+    source_ids = [ids[s] for s in sources]
+    if len(source_ids) > 1:
+        buses = buses.assign(x=0.0, y=0.0)
+        buses, lines, source = join_feeders(buses, lines, source_ids)
+    else:
+        source = source_ids[0]
+    xy = _layout(buses, lines, source, {ids[b]: xy for b, xy in circuit.coords.items()})
+    buses["x"], buses["y"] = xy[:, 0], xy[:, 1]
+    buses = buses[["x", "y", "name", "vn_kv"]]
+    shapes = {k: LoadShape(s.mult, s.hours, s.use_actual) for k, s in circuit.shapes.items()}
+    return Feeder(name or circuit.name, buses, lines, loads, source, generators, shapes)
+
+
+def _no_fleet() -> pd.DataFrame:
+    return make_fleet([])
+
+
+def _load_table(loads: list[tuple], injections: list[tuple], ids: dict[str, int]) -> pd.DataFrame:
+    """Loads and fixed injections (``p_kw`` negative) with their kind and shape names."""
+    rows = [(n, ids[b], kw, kvar, kind, *shapes) for n, b, kw, kvar, kind, *shapes in loads]
+    rows += [(n, ids[b], -kw, -kvar, kind, *sh) for n, b, kw, kvar, kind, *sh in injections]
+    columns = ["load", "bus", "p_kw", "q_kvar", "kind", *SERIES]
+    table = pd.DataFrame(rows, columns=columns).set_index("load")
+    return table.astype({"bus": np.int64, "p_kw": float, "q_kvar": float, "kind": object})
+
+
+def _sources(circuit: Circuit, root, ids: dict[str, int], path: Path) -> list[str]:
+    """The source buses: ``root``, else every Vsource's bus."""
+    if root is not None:
+        key = str(root).strip().lower()
+        if key not in ids:
+            raise OptionError(
+                f"{path}: root bus {root!r} is not a bus of the OpenDSS circuit", "--root"
             )
-        rows.append({
-            "line": name, "from_bus": ids[bus1], "to_bus": ids[bus2],
-            "length_km": length * KM_PER_DSS_UNIT[units], "r_ohm": abs(z1.real),
-            "x_ohm": abs(z1.imag), "limit_kw": limit,
-            "kind": "switch" if ctx.Lines.IsSwitch() else "line",
-            "_kv": kv.get(bus1, 0.0),  # ohm at this voltage: referred to the source's later
-        })  # fmt: skip
-    return rows
+        return [key]
+    if not circuit.sources:
+        raise FeederError(f"{path}: the circuit has no enabled Vsource: name the source bus "
+                          "(--root BUS)")  # fmt: skip
+    return list(circuit.sources)
 
 
-def _read_transformers(ctx, ids: dict[str, int], ratings: bool) -> list[dict]:
-    regulated = set()
-    for name in _elements(ctx, ctx.RegControls):
-        ctx.RegControls.Name(name)
-        regulated.add(ctx.RegControls.Transformer().lower())
-    units: dict[tuple, list[dict]] = {}
-    for name in _elements(ctx, ctx.Transformers):
-        ctx.Transformers.Name(name)
-        if not ctx.CktElement.Enabled() or _open_terminal(ctx):
-            continue
-        if ctx.Transformers.NumWindings() != 2:
+def _components(lines: pd.DataFrame, names: list[str], ids: dict[str, int]) -> dict[int, int]:
+    """Connected component of every bus id."""
+    from scipy.sparse import csr_array
+    from scipy.sparse.csgraph import connected_components
+
+    index = pd.Index([ids[b] for b in names])
+    a, b = index.get_indexer(lines.from_bus), index.get_indexer(lines.to_bus)
+    graph = csr_array((np.ones(len(a)), (a, b)), shape=(len(index), len(index)))
+    _, component = connected_components(graph, directed=False)
+    return dict(zip(index.tolist(), component.tolist(), strict=True))
+
+
+def _feeder_buses(
+    components: dict[int, int], sources: list[str], occupied: set, root, name_of, path
+) -> tuple[set[int], list[str]]:
+    """``(bus ids kept, names of empty buses dropped)``: the sources' trees; another tree is an
+    error if it has a load or generator (unless ``root`` picked a feeder and the tree has a
+    Vsource of its own: another feeder, left out)."""
+    ids_of = {v: k for k, v in name_of.items()}
+    source_trees = [components[ids_of[s]] for s in sources]
+    if len(set(source_trees)) < len(source_trees):
+        shared = [s for s, t in zip(sources, source_trees, strict=True)
+                  if source_trees.count(t) > 1]  # fmt: skip
+        raise FeederError(
+            f"{path}: several sources feed one connected network ({', '.join(shared)}): "
+            "popdispatch supports one source per radial feeder; pick one (--root BUS) or "
+            "disable the others"
+        )
+    keep = {bus for bus, tree in components.items() if tree in source_trees}
+    outside = [bus for bus in components if bus not in keep]
+    for bus in outside:
+        if bus in occupied and root is None:
             raise FeederError(
-                f"Transformer.{name}: unsupported {ctx.Transformers.NumWindings()}-winding "
-                "transformer (popdispatch reads two-winding transformers)"
+                f"{path}: bus {name_of[bus]!r} is not connected to source bus "
+                f"{', '.join(sources)} but has a load or generator: feeder is disconnected"
             )
-        buses = [_bus(b) for b in ctx.CktElement.BusNames()]
-        xhl = ctx.Transformers.Xhl()
-        ctx.Transformers.Wdg(1)
-        kva1, r1 = ctx.Transformers.kVA(), ctx.Transformers.R()
-        ctx.Transformers.Wdg(2)
-        kva2, r2 = ctx.Transformers.kVA(), ctx.Transformers.R()
-        one_phase = ctx.CktElement.NumPhases() == 1
-        # ohm per (kV line-to-neutral)^2 of the voltage they are referred to: z_pu V_LL^2 / MVA
-        # for a three-phase unit, z_pu V_LN^2 / MVA for a one-phase one (per phase)
-        per_kv2 = (1.0 if one_phase else 3.0) * 1e3 / kva1
-        unit = {
-            "name": name, "buses": buses, "r": (r1 + r2 * kva1 / kva2) / 100 * per_kv2,
-            "x": xhl / 100 * per_kv2, "kva": kva1, "reg": name.lower() in regulated,
-        }  # fmt: skip
-        key = (frozenset(buses),) if one_phase else (name,)
-        units.setdefault(key, []).append(unit)
-    rows = []
-    for group in units.values():
-        first = group[0]
-        rows.append({
-            "line": "Transformer." + "+".join(u["name"] for u in group),
-            "from_bus": ids[first["buses"][0]], "to_bus": ids[first["buses"][1]],
-            "length_km": 0.0, "r_ohm": float(np.mean([u["r"] for u in group])),
-            "x_ohm": float(np.mean([u["x"] for u in group])),
-            "limit_kw": float(sum(u["kva"] for u in group)) if ratings else math.inf,
-            "kind": "regulator" if any(u["reg"] for u in group) else "transformer",
-            "_kv": math.nan,  # r_ohm, x_ohm: ohm / kV^2 of the source's base, see the caller
-        })  # fmt: skip
-    return rows
+    dropped = [name_of[bus] for bus in outside if bus not in occupied]
+    return keep, dropped
 
 
-def _check_other_series(ctx) -> None:
-    """Refuse two-terminal power-delivery elements other than lines and transformers."""
-    if not ctx.PDElements.First():
-        return
-    while True:
-        element = ctx.CktElement.Name()
-        cls = element.split(".")[0].lower()
-        if cls not in ("line", "transformer") and ctx.CktElement.Enabled():
-            buses = {_bus(b) for b in ctx.CktElement.BusNames()}
-            if ctx.CktElement.NumTerminals() > 1 and len(buses) > 1:
-                raise FeederError(
-                    f"{element}: unsupported series element between buses {sorted(buses)} "
-                    "(popdispatch reads lines, switches, transformers and regulators)"
-                )
-        if not ctx.PDElements.Next():
-            return
+def _dispatched_elements(fleet, candidates: pd.DataFrame) -> list[str]:
+    """Candidate elements (``Generator.g1``) that fleet rows name: dispatched, not fixed."""
+    if fleet is None:
+        return []
+    by_name = _candidate_names(candidates)
+    return [by_name[str(g).lower()] for g in fleet.index if str(g).lower() in by_name]
 
 
-def fleet_candidates(ctx) -> pd.DataFrame:
-    """The compiled circuit's generators, PV systems and storage (no cost data): index element
-    name (``Generator.g1``), columns ``bus_name`` and ``rating_kw``."""
-    rows = []
-    for cls, prefix, rating in (
-        (ctx.Generators, "Generator", lambda: ctx.Generators.kW()),
-        (ctx.PVsystems, "PVSystem", lambda: ctx.PVsystems.Pmpp()),
-        (ctx.Storages, "Storage", lambda: _storage_rating(ctx)),
-    ):  # fmt: skip
-        for name in _elements(ctx, cls):
-            cls.Name(name)
-            if ctx.CktElement.Enabled():
-                rows.append((f"{prefix}.{name}", _bus(ctx.CktElement.BusNames()[0]), rating()))
-    table = pd.DataFrame(rows, columns=CANDIDATE_COLUMNS).set_index("element")
-    return table
+def _candidate_names(candidates: pd.DataFrame) -> dict[str, str]:
+    by_name = {e.lower(): e for e in candidates.index}
+    by_name.update({e.split(".", 1)[1].lower(): e for e in candidates.index})
+    return by_name
 
 
-def _storage_rating(ctx) -> float:
-    """The active storage element's ``kWrated`` (no dedicated getter in OpenDSSDirect.py)."""
-    ctx.Text.Command(f"? {ctx.CktElement.Name()}.kWrated")
-    try:
-        return float(ctx.Text.Result())
-    except (AttributeError, ValueError):  # pragma: no cover - old engines
-        return math.nan
-
-
-def _map_fleet(fleet: pd.DataFrame, ids: dict[str, int], candidates: pd.DataFrame) -> pd.DataFrame:
+def _map_fleet(
+    fleet: pd.DataFrame, ids: dict[str, int], candidates: pd.DataFrame, path: Path
+) -> pd.DataFrame:
     missing = [c for c in FLEET_COLUMNS if c not in fleet.columns]
     if missing:
         raise FleetError(f"fleet table lacks column {missing[0]!r} (needs {FLEET_COLUMNS})")
     table = fleet.copy()
-    by_name = {e.lower(): e for e in candidates.index}
-    by_name.update({e.split(".", 1)[1].lower(): e for e in candidates.index})
+    by_name = _candidate_names(candidates)
     buses = []
     for generator, row in table.iterrows():
         element = by_name.get(str(generator).lower())
@@ -482,7 +378,9 @@ def _map_fleet(fleet: pd.DataFrame, ids: dict[str, int], candidates: pd.DataFram
             bus = int(bus)
         key = str(bus).strip().lower()
         if key not in ids:
-            raise FleetError(f"generator {generator!r} is on unknown OpenDSS bus {bus!r}")
+            raise FleetError(
+                f"generator {generator!r} is on unknown OpenDSS bus {bus!r} ({path.name})"
+            )
         buses.append(ids[key])
         if element is not None:
             if pd.isna(row["pmax_kw"]):
@@ -497,25 +395,25 @@ def _map_fleet(fleet: pd.DataFrame, ids: dict[str, int], candidates: pd.DataFram
 
 
 def _layout(
-    names: list[str], parent: dict[str, str | None], order: list[str], coords: dict
-) -> dict[str, tuple[float, float]]:
-    """Coordinates per bus (see the module docstring); ``order`` is a pre-order from the root."""
-    if coords:
-        placed = dict(coords)
-        root = order[0]
-        if root not in placed:
-            placed[root] = next(coords[b] for b in order if b in coords)
+    buses: pd.DataFrame, lines: pd.DataFrame, source: int, coords: dict[int, tuple]
+) -> np.ndarray:
+    """``(buses, 2)`` coordinates (see the module docstring), in the buses' order."""
+    order, parent = _tree_order(buses.index, lines, source)
+    placed: dict[int, tuple[float, float]] = {b: c for b, c in coords.items() if b in parent}
+    if placed:
+        if source not in placed:
+            placed[source] = next(placed[b] for b in order if b in placed)
         for bus in order:
             if bus not in placed:
                 placed[bus] = placed[parent[bus]]
-        return placed
-    children: dict[str, list[str]] = {b: [] for b in names}
+        return np.array([placed.get(b, (0.0, 0.0)) for b in buses.index], dtype=float)
+    children: dict[int, list[int]] = {b: [] for b in order}
     for bus in order[1:]:
         children[parent[bus]].append(bus)
     depth = {order[0]: 0}
     for bus in order[1:]:
         depth[bus] = depth[parent[bus]] + 1
-    x: dict[str, float] = {}
+    x: dict[int, float] = {}
     leaf = 0
     for bus in reversed(order):  # children before parents
         if children[bus]:
@@ -523,196 +421,31 @@ def _layout(
         else:
             x[bus] = float(leaf)
             leaf += 1
-    return {b: (100.0 * x[b], -100.0 * depth[b] + 0.0) for b in order}
-
-
-def read_opendss_master(
-    master_path: str | Path,
-    *,
-    fleet: pd.DataFrame | None = None,
-    root: str | int | None = None,
-    ratings: bool = True,
-    name: str | None = None,
-) -> Feeder:
-    """Read the radial circuit of an OpenDSS master file as a :class:`Feeder`.
-
-    Parameters
-    ----------
-    master_path : the master ``.dss`` file (compiled by OpenDSS; see the module docstring).
-    fleet : the generator table (columns ``bus, a, b, c, pmin_kw, pmax_kw``, ``bus`` = OpenDSS
-        bus name; required: OpenDSS has no cost data).
-    root : the source bus (OpenDSS bus name, or an int spelling it); default the Vsource's bus.
-    ratings : line limits from ``NormAmps`` and transformer limits from kVA (else ``inf``).
-    name : the feeder's case name; default the OpenDSS circuit's name.
-
-    Conversion rules: see :mod:`popdispatch.readers.opendss_direct`.
-    """
-    ctx, notes = compile_master(master_path)
-    if notes:
-        warnings.warn(
-            f"{master_path}: compiled from a portable copy: {_summary(notes)}",
-            UserWarning,
-            stacklevel=2,
-        )
-    circuit = ctx.Circuit.Name()
-    ctx.Text.Command("makebuslist")  # buses of elements defined after the master's last solve
-    names = [b.lower() for b in ctx.Circuit.AllBusNames()]
-    if not names:
-        raise FeederError(f"{master_path}: the OpenDSS circuit {circuit!r} has no bus")
-    ids = bus_ids(names)
-    kv = _base_voltages(ctx, names)
-    _check_other_series(ctx)
-    branches = _read_lines(ctx, ids, kv, ratings) + _read_transformers(ctx, ids, ratings)
-    if not branches:
-        raise FeederError(f"{master_path}: the OpenDSS circuit {circuit!r} has no line")
-
-    loads = []
-    for load in _elements(ctx, ctx.Loads):
-        ctx.Loads.Name(load)
-        if ctx.CktElement.Enabled():
-            bus = _bus(ctx.CktElement.BusNames()[0])
-            loads.append((load, ids[bus], ctx.Loads.kW(), ctx.Loads.kvar()))
-    candidates = fleet_candidates(ctx)
-
-    source = _source(ctx, root, ids, master_path)
-    name_of = {v: k for k, v in ids.items()}
-    lines = pd.DataFrame(branches).set_index("line")
-    parent, order = _tree_order(lines, name_of, source)
-    occupied = {name_of[b] for _, b, _, _ in loads} | set(candidates.bus_name)
-    island = [b for b in names if b not in parent]
-    for bus in island:
-        if bus in occupied:
-            raise FeederError(
-                f"{master_path}: bus {bus!r} is not connected to source bus {name_of[source]!r} "
-                "but has a load or generator: feeder is disconnected"
-            )
-    if island:
-        warnings.warn(
-            f"{master_path}: dropped {len(island)} bus(es) cut off from the source, with nothing "
-            f"connected: {island[:10]}",
-            UserWarning,
-            stacklevel=2,
-        )
-        keep_ids = {ids[b] for b in names if b in parent}
-        lines = lines[lines.from_bus.isin(keep_ids) & lines.to_bus.isin(keep_ids)]
-    kept = [b for b in names if b in parent]
-    lines = _refer_to_source(lines, kv[name_of[source]], name_of, master_path)
-
-    coords = {}
-    for bus in kept:
-        ctx.Circuit.SetActiveBus(bus)
-        if ctx.Bus.Coorddefined():
-            coords[bus] = (ctx.Bus.X(), ctx.Bus.Y())
-    xy = _layout(kept, parent, order, coords)
-    buses = pd.DataFrame(
-        {
-            "x": [xy[b][0] for b in kept],
-            "y": [xy[b][1] for b in kept],
-            "name": kept,
-            "kv_ln_base": [kv.get(b, 0.0) for b in kept],
-        },
-        index=pd.Index([ids[b] for b in kept], name="bus", dtype=np.int64),
+    return np.array(
+        [(100.0 * x.get(b, 0.0), -100.0 * depth.get(b, 0)) for b in buses.index], dtype=float
     )
-    load_table = pd.DataFrame(
-        {
-            "bus": np.array([b for _, b, _, _ in loads], dtype=np.int64),
-            "p_kw": np.array([p for _, _, p, _ in loads], dtype=float),
-            "q_kvar": np.array([q for _, _, _, q in loads], dtype=float),
-        },
-        index=pd.Index([n for n, _, _, _ in loads], name="load", dtype=object),
-    )
-    if fleet is None:
-        if len(candidates):
-            listed = ", ".join(f"{e} (bus {b})" for e, b in candidates.bus_name.items())
-            raise FleetError(
-                f"{master_path}: OpenDSS generators have no cost data: give fleet= (columns "
-                f"{', '.join(FLEET_COLUMNS)}; bus = OpenDSS bus name); candidates: {listed}"
-            )
-        raise FleetError(
-            f"{master_path}: the circuit has no generator: give fleet= (columns "
-            f"{', '.join(FLEET_COLUMNS)}; bus = OpenDSS bus name)"
-        )
-    generators = _map_fleet(fleet, ids, candidates)
-    lines.index.name = "line"
-    lines = lines.astype({"from_bus": np.int64, "to_bus": np.int64})
-    return Feeder(name or circuit, buses, lines, load_table, source, generators)
-
-
-def _refer_to_source(
-    lines: pd.DataFrame, kv_source: float, name_of: dict[int, str], master_path
-) -> pd.DataFrame:
-    """Impedances in ohm referred to the source bus's base voltage (see the module docstring)."""
-    if not kv_source > 0:
-        raise FeederError(f"{master_path}: the source bus has no base voltage (set voltagebases)")
-    line_kv = lines["_kv"].to_numpy(float)
-    transformer = np.isnan(line_kv)
-    bad = ~transformer & ~(line_kv > 0)
-    if bad.any():
-        name = lines.index[bad][0]
-        raise FeederError(
-            f"{master_path}: line {name!r}: bus {name_of[lines.loc[name, 'from_bus']]!r} has no "
-            "base voltage to refer its impedance to the source's (set voltagebases)"
-        )
-    scale = np.where(transformer, kv_source**2, (kv_source / np.where(bad, 1.0, line_kv)) ** 2)
-    lines = lines.drop(columns="_kv")
-    lines["r_ohm"] = lines["r_ohm"].to_numpy(float) * scale
-    lines["x_ohm"] = lines["x_ohm"].to_numpy(float) * scale
-    return lines
-
-
-def _kv(ctx, bus: str) -> float:
-    ctx.Circuit.SetActiveBus(bus)
-    return float(ctx.Bus.kVBase())
-
-
-def _base_voltages(ctx, names: list[str]) -> dict[str, float]:
-    kv = {b: _kv(ctx, b) for b in names}
-    if any(v <= 0 for v in kv.values()):
-        ctx.Text.Command("calcvoltagebases")
-        kv = {b: _kv(ctx, b) for b in names}
-    return kv
-
-
-def _source(ctx, root, ids: dict[str, int], master_path) -> int:
-    if root is not None:
-        key = str(root).strip().lower()
-        if key not in ids:
-            raise FeederError(f"{master_path}: root bus {root!r} is not an OpenDSS bus")
-        return ids[key]
-    sources = []
-    for vsource in _elements(ctx, ctx.Vsources):
-        ctx.Vsources.Name(vsource)
-        if ctx.CktElement.Enabled():
-            sources.append((vsource, _bus(ctx.CktElement.BusNames()[0])))
-    buses = sorted({b for _, b in sources})
-    if len(buses) != 1:
-        raise FeederError(
-            f"{master_path}: {len(buses)} source buses ({', '.join(buses) or 'no Vsource'}): "
-            "give root= to pick the radial feeder's source bus"
-        )
-    return ids[buses[0]]
 
 
 def _tree_order(
-    lines: pd.DataFrame, name_of: dict[int, str], source: int
-) -> tuple[dict[str, str | None], list[str]]:
-    """Parent bus name per bus reached from the source, and a pre-order (loops are left to
-    the Feeder's own check, which names them)."""
+    index: pd.Index, lines: pd.DataFrame, source: int
+) -> tuple[list[int], dict[int, int | None]]:
+    """A pre-order of the buses reached from the source and each one's parent (loops are left
+    to the Feeder's own check, which names them)."""
     adjacent: dict[int, list[int]] = {}
     for a, b in zip(lines.from_bus.tolist(), lines.to_bus.tolist(), strict=True):
         adjacent.setdefault(a, []).append(b)
         adjacent.setdefault(b, []).append(a)
-    parent: dict[str, str | None] = {name_of[source]: None}
+    parent: dict[int, int | None] = {source: None}
     order = []
     stack = [source]
     while stack:
         bus = stack.pop()
-        order.append(name_of[bus])
+        order.append(bus)
         for other in adjacent.get(bus, []):
-            if name_of[other] not in parent:
-                parent[name_of[other]] = name_of[bus]
+            if other not in parent:
+                parent[other] = bus
                 stack.append(other)
-    return parent, order
+    return order, parent
 
 
-__all__ = ["compile_master", "fleet_candidates", "read_opendss_master"]
+__all__ = ["bus_ids", "fleet_candidates", "read_opendss_master"]

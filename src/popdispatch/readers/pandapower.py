@@ -11,22 +11,29 @@ Conversion rules (all vectorised; a 10,000-bus net reads in a fraction of a seco
 - **Lines** (``line`` rows in service, not opened by an open line switch) are named
   ``line<index>``; ``length_km`` as given, ``r_ohm``/``x_ohm`` = per-km values x length /
   ``parallel``. **Two-winding transformers** (``trafo``) are branches named ``trafo<index>``
-  with ``length_km`` 0. Impedances are in **ohm referred to the nominal voltage of the source
-  bus** (the LV side of the substation): a line at nominal voltage V (its ``from_bus``) has
-  ``Z (V_source / V)^2``; a transformer ``z = vk% / 100`` (``r = vkr% / 100``) on its own rating
-  is ``z V_source^2 / sn_mva / parallel``. Nominal ratios only: taps and phase shifts are
-  ignored (the DC dispatch uses only the topology and the limits; the impedances are for later
-  AC work).
-- **Source.** Each in-service ``ext_grid`` whose bus is the HV side of in-service transformers
-  is replaced by those transformers' LV buses (the HV bus and the transformer are dropped),
-  unless ``root`` names the ext_grid's own bus. Without ``root`` exactly one source bus must
-  remain in the whole network (else one-line errors naming the sources: several in one tree,
-  or separate trees to choose from with ``root``). With ``root`` the feeder is the tree
-  containing it; other trees with a source are left out. Any other island is named in an
-  error if it carries load (a ``load``/``asymmetric_load`` with nonzero p or q), else dropped.
+  with ``length_km`` 0. Impedances are each branch's own ohms on the nominal voltage stated
+  in ``kv_base`` (line-to-line kV): a line's at its ``from_bus``'s ``vn_kv``, a transformer's
+  ``z = vk% / 100`` (``r = vkr% / 100``) on its own rating at its LV side, ``z V_LV^2 / sn_mva
+  / parallel``. Nominal ratios only: taps and phase shifts are ignored (the DC dispatch uses
+  only the topology and the limits; the impedances are for AC work, which refers them to one
+  base, :meth:`~popdispatch.feeder.Feeder.lines_on_base`). Parallel branches between the same
+  buses are merged (parallel impedance, summed ratings; :mod:`popdispatch.feeder.radial`).
+  ``vn_kv`` of every bus is kept.
+- **Source.** Each in-service ``ext_grid`` (a net without one: each slack ``gen``) whose bus is
+  the HV side of in-service transformers is replaced by those transformers' LV buses (the HV
+  bus and the transformer are dropped), unless ``root`` names the ext_grid's own bus. Sources
+  in separate trees are several feeders, joined for one run at a virtual bus by balance lines
+  of 0 kW (each balanced by its own generators, :mod:`popdispatch.feeder.radial`); several
+  sources in one tree are refused, naming them. With ``root`` the feeder is the tree containing
+  it; other trees with a source are left out. Any other island is named in an error if it
+  carries load (a ``load``/``asymmetric_load`` with nonzero p or q), else dropped.
 - **Loads**: ``load`` (``p_mw * scaling``, ``q_mvar * scaling``) and ``asymmetric_load``
   (sum of the three phases, times ``scaling``), in service, named ``load<index>`` and
-  ``asymmetric_load<index>``; columns ``bus``, ``p_kw``, ``q_kvar``.
+  ``asymmetric_load<index>``; columns ``bus``, ``p_kw``, ``q_kvar``, ``kind = "load"``.
+- **Fixed injections**: in-service ``sgen`` and (non-slack) ``gen`` rows without a
+  ``poly_cost`` (SimBench's PV and wind) are load rows ``sgen<index>``/``gen<index>`` with
+  ``p_kw = -p_mw x scaling x 1000`` and ``kind`` their table: the dispatch does not move them
+  (SimBench's years give their profiles, :mod:`popdispatch.readers.series`).
 - **Ratings** (``ratings=True``): a line's ``limit_kw = sqrt(3) * vn_kv * max_i_ka * df *
   parallel * 1000 * max_loading_percent / 100`` (``vn_kv`` of its ``from_bus``; the last
   factor only when the column exists and is finite), the active power at unity power factor at
@@ -34,16 +41,19 @@ Conversion rules (all vectorised; a 10,000-bus net reads in a fraction of a seco
   max_loading_percent / 100``. ``max_i_ka`` that is missing, not positive or at least 99999
   (pandapower's "unlimited", e.g. from ``from_mpc`` with ``RATE_A`` 0) means no limit.
   ``ratings=False``: no limits.
-- **Fleet.** ``fleet`` (a fleet table, see :mod:`popdispatch.feeder.generators`, its ``bus``
-  the pandapower bus index) replaces the network's own generators. Otherwise every in-service
-  ``gen``, ``sgen`` and ``storage`` of the feeder, and an ``ext_grid`` at the source that has
-  a ``poly_cost``, is a generator named ``<table><index>`` with ``a = cp0_eur``, ``b =
-  cp1_eur_per_mw``, ``c = cp2_eur_per_mw2`` and ``pmin_kw``/``pmax_kw`` = ``min_p_mw``/
-  ``max_p_mw`` x 1000 (``pmin`` clipped at 0; a missing ``max_p_mw`` falls back to ``sn_mva``,
-  then ``p_mw``; for an ext_grid to the substation transformers' ``sn_mva``). ``storage`` is
+- **Fleet.** ``fleet`` (a fleet table or the path of a fleet file, see
+  :mod:`popdispatch.feeder.generators`, its ``bus`` the pandapower bus index) replaces the
+  network's priced generators. Otherwise every in-service ``gen``, ``sgen`` and ``storage`` of
+  the feeder, and an ``ext_grid`` at a source, that has a ``poly_cost`` is a generator named
+  ``<table><index>`` with ``a = cp0_eur``, ``b = cp1_eur_per_mw``, ``c = cp2_eur_per_mw2``
+  and ``pmin_kw``/``pmax_kw`` = ``min_p_mw``/``max_p_mw`` x 1000 (``pmin`` clipped at 0; a
+  missing ``max_p_mw`` falls back to ``sn_mva``, then ``p_mw``; for an ext_grid to the
+  substation transformers' ``sn_mva``). ``storage`` is
   in load convention, so its generator takes ``pmax = -min_p_mw``, ``pmin = max(-max_p_mw, 0)``
-  and ``b = -cp1``. A generator without a ``poly_cost`` (or with a ``pwl_cost``) raises
-  :class:`FleetError` asking for ``fleet``; so does a network without any priced generator.
+  and ``b = -cp1``. A ``storage`` without a ``poly_cost`` (or with a ``pwl_cost``) stays idle,
+  named in a :class:`UserWarning`; a ``gen``/``sgen`` with only a ``pwl_cost`` is a fixed
+  injection. A network without
+  any priced generator has an empty fleet: it can be described; a dispatch needs a fleet.
 - **Unsupported** in-service elements (``trafo3w``, ``dcline``, ``impedance``, ``ward``,
   ``xward``, ``motor``, ``asymmetric_sgen``, FACTS, DC grids, shunts with nonzero p) raise a
   one-line :class:`FeederError` naming the element.
@@ -53,6 +63,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -60,9 +71,10 @@ import pandas as pd
 from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components
 
-from popdispatch.errors import FeederError, FleetError
-from popdispatch.feeder.generators import FLEET_COLUMNS, make_fleet
+from popdispatch.errors import FeederError, FleetError, OptionError
+from popdispatch.feeder.generators import FLEET_COLUMNS, as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
+from popdispatch.feeder.radial import join_feeders, merge_parallel
 
 #: Tables popdispatch cannot represent, with a readable name for the error.
 UNSUPPORTED = {
@@ -113,10 +125,9 @@ def read_pandapower(
     return _read(net_or_path, fleet, root, ratings, name)
 
 
-def _read(net_or_path, fleet, root, ratings, name, placeholder: bool = False) -> Feeder:
-    """:func:`read_pandapower`; ``placeholder``: a network without a priced generator gets a
-    0 kW generator ``placeholder`` at the source instead of a :class:`FleetError` (for counts
-    and totals only, never for a dispatch)."""
+def _read(net_or_path, fleet, root, ratings, name) -> Feeder:
+    """:func:`read_pandapower` (its ``fleet`` already a table or ``None``)."""
+    fleet = as_fleet(fleet)
     net, default_name = _load(net_or_path)
     _check_unsupported(net)
     bus_table = net.bus
@@ -134,8 +145,9 @@ def _read(net_or_path, fleet, root, ratings, name, placeholder: bool = False) ->
     ext = _ext_grids(net, position, bus_ok, rep)
     root_pos = None
     if root is not None:
+        root = _root_index(root)
         if root not in position:
-            raise FeederError(f"root bus {root} is not a bus of the pandapower net")
+            raise OptionError(f"root bus {root} is not a bus of the pandapower net", "--root")
         root_pos = int(rep[position.get_loc(root)])
         if not bus_ok[position.get_loc(root)]:
             raise FeederError(f"root bus {root} is out of service")
@@ -156,9 +168,9 @@ def _read(net_or_path, fleet, root, ratings, name, placeholder: bool = False) ->
         alive[pos] = True
 
     load_table = _loads(net, position, bus_ok, rep)
-    root_pos = _pick_root(sources, component, root_pos, bus_ids)
-    keep = alive & (component == component[root_pos])
-    _check_islands(alive, keep, component, load_table, sources, root_pos, bus_ids, root)
+    roots = _pick_roots(sources, component, root_pos, bus_ids)
+    keep = alive & np.isin(component, [component[r] for r in roots])
+    _check_islands(alive, keep, component, load_table, sources, roots[0], bus_ids, root)
 
     in_feeder = keep[a] & keep[b]
     branches = branches[in_feeder]
@@ -171,44 +183,57 @@ def _read(net_or_path, fleet, root, ratings, name, placeholder: bool = False) ->
             f"{bus_ids[a[k]]}): feeder is meshed (popdispatch supports radial feeders only)"
         )
     vn = bus_table.vn_kv.to_numpy(float)
-    v_src = vn[root_pos]
     lines = pd.DataFrame(
         {
             "from_bus": bus_ids[a],
             "to_bus": bus_ids[b],
             "length_km": branches.length_km.to_numpy(float),
-            "r_ohm": branches.r_ohm.to_numpy(float) * (v_src / branches.v_kv.to_numpy(float)) ** 2,
-            "x_ohm": branches.x_ohm.to_numpy(float) * (v_src / branches.v_kv.to_numpy(float)) ** 2,
+            "r_ohm": branches.r_ohm.to_numpy(float),
+            "x_ohm": branches.x_ohm.to_numpy(float),
             "limit_kw": branches.limit_kw.to_numpy(float) if ratings else np.inf,
+            "kv_base": branches.v_kv.to_numpy(float),
         },
         index=pd.Index(branches.index, name="line"),
     )
+    lines, _ = merge_parallel(lines)
     kept = np.flatnonzero(keep)
     xy, schematic = _coordinates(net, bus_table, kept)
     buses = pd.DataFrame(xy, columns=["x", "y"], index=pd.Index(bus_ids[kept], name="bus"))
-    buses["vn_kv"] = v_src  # every impedance is referred to the source's nominal voltage
-    loads = load_table[keep[load_table.pos.to_numpy()]]
+    buses["vn_kv"] = vn[kept]
+    costs = _costs(net)
+    if fleet is None:
+        generators = _fleet(net, position, bus_ok, rep, keep, ext, roots, dropped, costs)
+    else:
+        generators = _user_fleet(fleet, position, rep, bus_ids)
+    injections = _fixed_injections(net, position, bus_ok, rep, costs[0])
+    loads = pd.concat([load_table, injections]) if len(injections) else load_table
+    loads = loads[keep[loads.pos.to_numpy()]]
     loads = pd.DataFrame(
         {
             "bus": bus_ids[loads.pos.to_numpy()],
             "p_kw": loads.p_kw.to_numpy(float),
             "q_kvar": loads.q_kvar.to_numpy(float),
+            "kind": loads.kind.to_numpy(object),
         },
         index=pd.Index(loads.index, name="load"),
     )
-    if fleet is None:
-        try:
-            generators = _fleet(net, position, bus_ok, rep, keep, ext, root_pos, dropped)
-        except FleetError:
-            if not placeholder:
-                raise
-            generators = make_fleet([(int(bus_ids[root_pos]), 0, 0, 0, 0, 0)], ["placeholder"])
+    source_ids = [int(bus_ids[r]) for r in roots]
+    if len(source_ids) > 1:
+        buses, lines, source = join_feeders(buses, lines, source_ids)
     else:
-        generators = _user_fleet(fleet, position, rep, bus_ids)
-    feeder = Feeder(name or default_name, buses, lines, loads, int(bus_ids[root_pos]), generators)
+        source = source_ids[0]
+    feeder = Feeder(name or default_name, buses, lines, loads, source, generators)
     if schematic:
         _schematic_layout(feeder)
     return feeder
+
+
+def _root_index(root) -> int:
+    """The pandapower bus index ``root`` spells; :class:`FeederError` otherwise."""
+    try:
+        return int(str(root).strip())
+    except ValueError:
+        raise OptionError(f"root {root!r} is not a pandapower bus index", "--root") from None
 
 
 # -- input ---------------------------------------------------------------------------------------
@@ -420,10 +445,14 @@ def _branches(net, position: pd.Index, bus_ok: np.ndarray) -> pd.DataFrame:
 
 
 def _ext_grids(net, position: pd.Index, bus_ok: np.ndarray, rep: np.ndarray) -> pd.DataFrame:
-    """In-service ext_grids on in-service buses: index, ``pos`` (representative position)."""
+    """In-service ext_grids on in-service buses: index, ``pos`` (representative position).
+    A net without any takes its slack ``gen`` rows (``slack=True``) as its sources."""
     ext = _table(net, "ext_grid")
-    if ext is None:
-        return pd.DataFrame({"pos": np.array([], np.int64)})
+    if ext is None or not _in_service(ext).any():
+        gen = _table(net, "gen")
+        if gen is None or "slack" not in gen.columns:
+            return pd.DataFrame({"pos": np.array([], np.int64)})
+        ext = gen[gen.slack.fillna(False).to_numpy(bool)]
     pos = position.get_indexer(ext.bus)
     ok = _in_service(ext) & (pos >= 0)
     ok[ok] &= bus_ok[pos[ok]]
@@ -450,7 +479,9 @@ def _substation_mva(substation: pd.DataFrame, ext: pd.DataFrame, index, root_pos
     return float(rows.sn_mva.sum()) if len(rows) else np.nan
 
 
-def _pick_root(sources, component, root_pos, bus_ids) -> int:
+def _pick_roots(sources, component, root_pos, bus_ids) -> list[int]:
+    """The source positions of the feeder: ``root_pos`` (no other source in its tree), else
+    every source, one per tree (several trees: several feeders, joined by the caller)."""
     if root_pos is not None:
         others = [
             (pos, label) for pos, label in sources
@@ -460,27 +491,23 @@ def _pick_root(sources, component, root_pos, bus_ids) -> int:
             pos, label = others[0]
             raise FeederError(
                 f"several sources feed the tree of root bus {bus_ids[root_pos]}: {label} at bus "
-                f"{bus_ids[pos]}; take it out of service or name its bus as root"
+                f"{bus_ids[pos]}; take it out of service or name its bus as root (--root BUS)"
             )
-        return root_pos
+        return [root_pos]
     if not sources:
-        raise FeederError("the pandapower net has no in-service ext_grid: name the source bus "
-                          "with root")  # fmt: skip
+        raise FeederError("the pandapower net has no in-service ext_grid (nor slack gen): name "
+                          "the source bus (--root BUS)")  # fmt: skip
     distinct = {}
     for pos, label in sources:
         distinct.setdefault(pos, label)
-    if len(distinct) == 1:
-        return next(iter(distinct))
-    named = ", ".join(f"{label} at bus {bus_ids[pos]}" for pos, label in distinct.items())
-    trees = {component[pos] for pos in distinct}
-    if len(trees) == len(distinct):
+    trees = [component[pos] for pos in distinct]
+    if len(set(trees)) < len(trees):
+        named = ", ".join(f"{label} at bus {bus_ids[pos]}" for pos, label in distinct.items())
         raise FeederError(
-            f"several sources feed separate trees ({named}): name one source bus with root"
+            f"several sources feed one connected network ({named}): popdispatch supports one "
+            "source per radial feeder; take the others out of service"
         )
-    raise FeederError(
-        f"several sources feed one connected network ({named}): popdispatch supports one "
-        "source per radial feeder; take the others out of service"
-    )
+    return list(distinct)
 
 
 def _on_kept_buses(table, position: pd.Index, bus_ok: np.ndarray):
@@ -508,12 +535,17 @@ def _loads(net, position: pd.Index, bus_ok: np.ndarray, rep: np.ndarray) -> pd.D
             q = sum(_finite(table, f"q_{ph}_mvar", 0.0) for ph in "abc")
         parts.append(
             pd.DataFrame(
-                {"pos": rep[pos], "p_kw": p * scaling * 1000.0, "q_kvar": q * scaling * 1000.0},
+                {
+                    "pos": rep[pos],
+                    "p_kw": p * scaling * 1000.0,
+                    "q_kvar": q * scaling * 1000.0,
+                    "kind": "load",
+                },
                 index=[f"{key}{i}" for i in table.index],
             )
         )
     if not parts:
-        return pd.DataFrame({"pos": np.array([], np.int64), "p_kw": [], "q_kvar": []})
+        return pd.DataFrame({"pos": np.array([], np.int64), "p_kw": [], "q_kvar": [], "kind": []})
     return pd.concat(parts) if len(parts) > 1 else parts[0]
 
 
@@ -590,7 +622,8 @@ def _user_fleet(fleet: pd.DataFrame, position: pd.Index, rep, bus_ids) -> pd.Dat
     return fleet
 
 
-def _fleet(net, position, bus_ok, rep, keep, ext, root_pos, substation) -> pd.DataFrame:
+def _costs(net) -> tuple[dict[tuple[str, int], tuple[float, float, float]], set]:
+    """``(poly_cost (a, b, c) by (table, index), pwl_cost keys)``."""
     costs = _table(net, "poly_cost")
     cost = {}
     if costs is not None:
@@ -606,15 +639,56 @@ def _fleet(net, position, bus_ok, rep, keep, ext, root_pos, substation) -> pd.Da
         if pwl is None
         else {(str(e), int(i)) for e, i in zip(pwl.et, pwl.element, strict=True)}
     )
-    rows, names = [], []
+    return cost, pwl_keys
+
+
+def _fixed_injections(net, position, bus_ok, rep, priced: dict) -> pd.DataFrame:
+    """In-service ``gen`` and ``sgen`` rows without a ``poly_cost``: fixed injections, as
+    load rows ``<table><index>`` with ``p_kw = -p_mw x scaling x 1000`` (kind: the table)."""
+    parts = []
+    for et in ("gen", "sgen"):
+        table = _table(net, et)
+        if table is None:
+            continue
+        table, pos = _on_kept_buses(table, position, bus_ok)
+        if et == "gen" and "slack" in table.columns:
+            slack = table.slack.fillna(False).to_numpy(bool)
+            table, pos = table[~slack], pos[~slack]
+        free = np.array([(et, int(i)) not in priced for i in table.index], dtype=bool)
+        table, pos = table[free], pos[free]
+        scaling = _finite(table, "scaling", 1.0)
+        parts.append(
+            pd.DataFrame(
+                {
+                    "pos": rep[pos],
+                    "p_kw": -_finite(table, "p_mw", 0.0) * scaling * 1000.0,
+                    "q_kvar": -_finite(table, "q_mvar", 0.0) * scaling * 1000.0,
+                    "kind": et,
+                },
+                index=[f"{et}{i}" for i in table.index],
+            )
+        )
+    return pd.concat(parts) if parts else _no_injections()
+
+
+def _no_injections() -> pd.DataFrame:
+    return pd.DataFrame({"pos": np.array([], np.int64), "p_kw": [], "q_kvar": [], "kind": []})
+
+
+def _fleet(net, position, bus_ok, rep, keep, ext, roots, substation, costs) -> pd.DataFrame:
+    """The priced generators of the feeder (possibly none: a network described without a
+    fleet); ``gen``/``sgen`` without a poly_cost are fixed injections instead, ``storage``
+    without one stays idle."""
+    cost, pwl_keys = costs
+    rows, names, unpriced = [], [], []
 
     def add(et, index, bus_id, pmin_mw, pmax_mw, sign=1.0):
         key = (et, int(index))
         if key not in cost:
-            why = "a piecewise-linear cost (pwl_cost)" if key in pwl_keys else "no poly_cost"
-            raise FleetError(
-                f"{et} {index} at bus {bus_id} has {why}: give a fleet (fleet=..., --fleet FILE)"
-            )
+            if key in pwl_keys or et == "storage":
+                why = "a piecewise-linear cost (pwl_cost)" if key in pwl_keys else "no poly_cost"
+                unpriced.append(f"{et} {index} at bus {bus_id} has {why}")
+            return
         a, b, c = cost[key]
         rows.append((bus_id, a, sign * b, c, max(pmin_mw, 0.0) * 1000.0, pmax_mw * 1000.0))
         names.append(f"{et}{index}")
@@ -642,21 +716,22 @@ def _fleet(net, position, bus_ok, rep, keep, ext, root_pos, substation) -> pd.Da
                     _known(pmax, et, index))  # fmt: skip
     ext_table = _table(net, "ext_grid")
     for index, pos in ext.pos.items():
-        feeds = (pos == root_pos) or len(
-            substation[(substation.a == pos) & (substation.b == root_pos)]
-        ) > 0
-        if not feeds or ("ext_grid", int(index)) not in cost:
+        root = next((r for r in roots if pos == r or len(
+            substation[(substation.a == pos) & (substation.b == r)]) > 0), None)  # fmt: skip
+        if root is None or ext_table is None or ("ext_grid", int(index)) not in cost:
             continue
         row = ext_table.loc[[index]]
         pmax = _finite(row, "max_p_mw", np.nan)[0]
         if not np.isfinite(pmax):
-            pmax = _substation_mva(substation, ext, index, root_pos)
+            pmax = _substation_mva(substation, ext, index, root)
         pmin = _finite(row, "min_p_mw", 0.0)[0]
-        add("ext_grid", index, int(bus_ids[root_pos]), pmin, _known(pmax, "ext_grid", index))
-    if not rows:
-        raise FleetError(
-            "the pandapower net has no priced generator (poly_cost) in the feeder: "
-            "give a fleet (fleet=..., --fleet FILE)"
+        add("ext_grid", index, int(bus_ids[root]), pmin, _known(pmax, "ext_grid", index))
+    if unpriced:
+        warnings.warn(
+            f"left out of the fleet: {'; '.join(unpriced)} (a dispatch of these needs a fleet: "
+            "--fleet FILE)",
+            UserWarning,
+            stacklevel=4,
         )
     return make_fleet(rows, names)[FLEET_COLUMNS]
 
@@ -664,6 +739,6 @@ def _fleet(net, position, bus_ok, rep, keep, ext, root_pos, substation) -> pd.Da
 def _known(pmax: float, et: str, index) -> float:
     if not np.isfinite(pmax) or pmax < 0:
         raise FleetError(
-            f"{et} {index} has no usable max_p_mw (nor sn_mva): give a fleet (fleet=..., --fleet)"
+            f"{et} {index} has no usable max_p_mw (nor sn_mva): give a fleet (--fleet FILE)"
         )
     return float(pmax)

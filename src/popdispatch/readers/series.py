@@ -16,8 +16,8 @@ load, values in kW.
 
 **SimBench** (:func:`simbench_profiles`): the grid's bundled one-year profiles at 15 minutes
 (2016, 35,136 steps; German local time, ``+01:00``/``+02:00``) as absolute values
-(``simbench.get_absolute_values``), loads' active power only (the grid's PV and other static
-generators are not dispatchable; give them to the fleet or leave them out).
+(``simbench.get_absolute_values``): the loads' active power, and the PV, wind and other
+static generators' (``sgen``) as fixed injections (negative kW; they have no cost data).
 
 Every problem raises a one-line :class:`~popdispatch.errors.ProfileError` naming the file, the
 column and, for a bad value, the row.
@@ -110,13 +110,12 @@ def _times(column: pd.Series, path: Path, name) -> pd.DatetimeIndex:
 def _numbers(values: pd.DataFrame, path: Path) -> pd.DataFrame:
     """The load columns as floats; the first non-numeric cell named."""
     numeric = values.apply(pd.to_numeric, errors="coerce")
-    bad = numeric.isna().to_numpy() & values.notna().to_numpy()
-    bad |= values.isna().to_numpy()
+    bad = ~np.isfinite(numeric.to_numpy(float))  # text, missing cells, inf
     if bad.any():
         row, col = np.argwhere(bad)[0]
         raise ProfileError(
             f"{path}: column {values.columns[col]!r}, row {row + 1}: "
-            f"{values.iat[row, col]!r} is not a number (kW)"
+            f"{values.iat[row, col]!r} is not a finite number (kW)"
         )
     return numeric.astype(float)
 
@@ -187,7 +186,8 @@ def _loads_by_bus(feeder: Feeder) -> dict[str, np.ndarray]:
 
 def simbench_profiles(code: str, feeder: Feeder) -> LoadProfiles:
     """SimBench grid ``code``'s bundled year (15-minute steps, absolute kW) for ``feeder``'s
-    loads (the feeder read from the same grid: its loads are ``load<index>``)."""
+    loads and fixed injections (the feeder read from the same grid: its loads are
+    ``load<index>``, its static generators ``sgen<index>``, produced kW negative)."""
     import simbench
 
     from popdispatch.feeder.cases import simbench_net
@@ -196,6 +196,13 @@ def simbench_profiles(code: str, feeder: Feeder) -> LoadProfiles:
     values = simbench.get_absolute_values(net, profiles_instead_of_study_cases=True)
     p_mw = values[("load", "p_mw")]
     kw = pd.DataFrame(p_mw.to_numpy(float) * 1000.0, columns=[f"load{i}" for i in p_mw.columns])
+    injected = [n for n in feeder.loads.index if str(n).startswith("sgen")]
+    if injected and ("sgen", "p_mw") in values:
+        sgen = values[("sgen", "p_mw")]
+        produced = pd.DataFrame(
+            -sgen.to_numpy(float) * 1000.0, columns=[f"sgen{i}" for i in sgen.columns]
+        )  # fixed injections: negative load
+        kw = pd.concat([kw, produced[[c for c in produced.columns if c in injected]]], axis=1)
     # Local German time: the hour of 27 March is missing, 30 October's 02:00-02:45 repeated.
     times = pd.DatetimeIndex(
         pd.to_datetime(net.profiles["load"]["time"], format="%d.%m.%Y %H:%M")

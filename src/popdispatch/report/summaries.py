@@ -20,7 +20,6 @@ import pandas as pd
 
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.profiles import Timeline, day_timeline
-from popdispatch.feeder.reduction import ReducedFeeder
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.opf import OpfResult
 from popdispatch.report.infeasibility import diagnose
@@ -169,34 +168,18 @@ def _finite(value) -> float | None:
     return float(value) if value is not None and np.isfinite(value) else None
 
 
-def feeder_summary(feeder: Feeder, reduced: ReducedFeeder) -> dict:
-    """What the feeder is: sizes of the original and reduced networks, loads, fleet."""
-    gens = reduced.generators
-    ids = source_bus_ids(feeder, gens.bus)
-    return {
-        "case": feeder.name,
-        "buses": len(feeder.buses),
-        "original_lines": len(feeder.lines),
-        "source_bus": int(feeder.source_bus),
-        "nodes": reduced.n_nodes,
-        "key_node_buses": reduced.nodes.bus.tolist(),
-        "lines": reduced.n_lines,
-        "loads": len(feeder.loads),
-        "generators": [
-            {
-                "name": name,
-                "bus": bus,
-                "node": int(row.node),
-                "a_eur": float(row.a),
-                "b_eur_per_mwh": float(row.b),
-                "c_eur_per_mw2h": float(row.c),
-                "pmin_kw": float(row.pmin_kw),
-                "pmax_kw": float(row.pmax_kw),
-            }
-            for (name, row), bus in zip(gens.iterrows(), ids, strict=True)
-        ],
-        "capacity_kw": float(gens.pmax_kw.sum()),
-    }
+def fixed_injection_kw(problem: DispatchProblem, minutes) -> list[float]:
+    """The fixed injections' total output (kW) at each 1-based step of ``minutes``: generators
+    without cost data following their profiles (0 where the network has none)."""
+    fixed = getattr(problem, "fixed_injection", np.zeros(0))
+    rows = np.asarray(minutes, dtype=np.int64) - 1
+    return (fixed[rows] * KW_PER_MW).tolist() if len(fixed) else [0.0] * len(rows)
+
+
+def _fixed_energy_kwh(problem: DispatchProblem, minutes, timeline: Timeline) -> float:
+    """Energy of the fixed injections over ``minutes`` (kWh; each step its own length)."""
+    kw = np.array(fixed_injection_kw(problem, minutes))
+    return float(_energy(kw, timeline.hours[np.asarray(minutes) - 1]))
 
 
 def generator_buses(problem: DispatchProblem) -> list[int | str]:
@@ -206,13 +189,10 @@ def generator_buses(problem: DispatchProblem) -> list[int | str]:
 
 
 def source_bus_ids(feeder: Feeder, buses) -> list[int | str]:
-    """The source format's ids of ``feeder``'s ``buses``: the bus number, or the name of a bus
-    an OpenDSS file names with other than its number (``rg60``, ``sourcebus``)."""
-    numbers = [int(b) for b in buses]
-    if "name" not in feeder.buses.columns:
-        return numbers
-    names = feeder.buses["name"].astype(str)
-    return [b if names.get(b, str(b)) == str(b) else names[b] for b in numbers]
+    """The source format's ids of ``feeder``'s ``buses``: the bus numbers, or, where the format
+    names its buses (OpenDSS), every bus by its name (a string, ``"650"`` too: one JSON type
+    per network)."""
+    return feeder.bus_labels(buses)
 
 
 def opf_summary(
@@ -231,6 +211,7 @@ def opf_summary(
         "minute": opf.minute,
         **_time_keys(_timeline(problem, timeline), opf.minute),
         "demand_kw": opf.demand_kw,
+        "fixed_injection_kw": fixed_injection_kw(problem, [opf.minute])[0],
         "capacity_kw": float(np.where(online, problem.pmax, 0.0).sum() * KW_PER_MW),
         "case": problem.feeder.original.name,
         "profile_source": problem.profile_source,
@@ -284,6 +265,7 @@ def snapshot_summary(
         "minute": run.minute,
         **_time_keys(_timeline(problem, timeline), run.minute),
         "demand_kw": run.demand_kw,
+        "fixed_injection_kw": fixed_injection_kw(problem, [run.minute])[0],
         "capacity_kw": float(setpoint_bounds_kw(problem, online)[1].sum()),
         "case": problem.feeder.original.name,
         "mode": settings.mode,
@@ -315,10 +297,13 @@ def snapshot_summary(
     }
 
 
-def limited_line_buses(problem: DispatchProblem) -> list[tuple[int, int]]:
-    """``(from_bus, to_bus)`` of each limited line (the reduced feeder's, original numbers)."""
+def limited_line_buses(problem: DispatchProblem) -> list[tuple[int | str, int | str]]:
+    """``(from_bus, to_bus)`` of each limited line (the reduced feeder's, named as the source
+    format names its buses, :func:`source_bus_ids`)."""
     lines = problem.feeder.lines.iloc[np.asarray(problem.lines, dtype=int)]
-    return [(int(a), int(b)) for a, b in zip(lines.from_bus, lines.to_bus, strict=True)]
+    original = problem.feeder.original
+    ends = zip(original.bus_labels(lines.from_bus), original.bus_labels(lines.to_bus), strict=True)
+    return list(ends)
 
 
 def snapshot_prices(problem: DispatchProblem, run, opf: OpfResult) -> dict:
@@ -341,10 +326,10 @@ def snapshot_prices(problem: DispatchProblem, run, opf: OpfResult) -> dict:
                                        strict=True)
     ]  # fmt: skip
     buses = [
-        {"bus": int(bus), "price_eur_per_mwh": float(price),
+        {"bus": bus, "price_eur_per_mwh": float(price),
          "opf_price_eur_per_mwh": _finite(dual) if feasible else None}
-        for bus, price, dual in zip(problem.voltage_buses, voltage, opf.voltage_price,
-                                    strict=True)
+        for bus, price, dual in zip(problem.feeder.original.bus_labels(problem.voltage_buses),
+                                    voltage, opf.voltage_price, strict=True)
     ]  # fmt: skip
     return {"line_prices": lines, "voltage_prices": buses}
 
@@ -436,6 +421,7 @@ def day_summary(
         "step_minutes": timeline.step_minutes,
         "case": problem.feeder.original.name,
         "profile_source": run.profile_source,
+        "fixed_injection_kwh": _fixed_energy_kwh(problem, run.minutes, timeline),
         "mode": settings.mode,
         "dynamics": settings.dynamics,
         "x0": settings.x0_label(),
@@ -569,6 +555,8 @@ def day_table(
             "demand_kw": run.demand_kw,
         }
     )
+    if problem is not None:
+        table["fixed_injection_kw"] = fixed_injection_kw(problem, run.minutes)
     for k, name in enumerate(run.generators):
         table[f"{name}_setpoint_kw"] = run.setpoints_kw[:, k]
     for k, name in enumerate(run.generators):

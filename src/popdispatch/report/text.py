@@ -98,24 +98,18 @@ def outside_note(rows: list[dict], mode: str | None = None) -> str | None:
     return f"{OUTSIDE_MARK} set point outside its limits: {which}; {_why_outside(mode)}"
 
 
-def feeder_text(summary: dict) -> str:
-    """``popdispatch feeder``."""
-    gens = ", ".join(
-        f"{g['name']} (bus {g['bus']}, {g['pmax_kw']:g} kW)" for g in summary["generators"]
-    )
-    return (
-        f"feeder {summary['case']}: {summary['buses']} buses, {summary['original_lines']} lines, "
-        f"source bus {summary['source_bus']}\nreduced to {summary['nodes']} key nodes and "
-        f"{summary['lines']} lines\n{summary['loads']} loads\ngenerators: {gens}\n"
-        f"total capacity: {summary['capacity_kw']:g} kW"
-    )
-
-
 def _inputs(s: dict) -> str:
-    """Feeder, profiles and limits lines shared by every minute and day text."""
+    """Feeder, profiles, fixed injections (where there are any) and limits lines shared by
+    every minute and day text."""
     case = s.get("case")
+    fixed = ""
+    if s.get("fixed_injection_kw"):
+        fixed = f"fixed injections (not dispatched): {s['fixed_injection_kw']:.3f} kW\n"
+    elif s.get("fixed_injection_kwh"):
+        fixed = (f"fixed injections (not dispatched): {s['fixed_injection_kwh']:.3f} kWh "
+                 "(per step: fixed_injection_kw in day.csv)\n")  # fmt: skip
     return (f"feeder: {case}\n" if case else "") + (
-        f"profiles: {s['profile_source']}\n"
+        f"profiles: {s['profile_source']}\n{fixed}"
         f"{limits_text(s.get('limits', []), s.get('limits_in_force') or [])}"
     )
 
