@@ -34,11 +34,13 @@ def test_json_has_snapshot_and_message_keys(congestion_problem):
 
 
 def test_loss_is_reported():
+    """30 rounds are too few to converge (exit 1, after the complete JSON)."""
     result = CliRunner().invoke(
         agents, [*CONGESTION, "--json", "--loss", "0.2", "--seed", "3", "--max-rounds", "30"]
     )
-    assert result.exit_code == 0, result.output
-    s = json.loads(result.output)
+    assert result.exit_code == 1, result.output
+    s = json.loads(result.stdout)
+    assert s["status"] == "not_converged" and "not at rest after 30 rounds" in s["horizon_reason"]
     assert 0.1 < s["lost"] / s["messages"] < 0.3
     assert abs(s["max_imbalance_w"]) < 1.0 and abs(s["final_imbalance_w"]) < 1.0
 

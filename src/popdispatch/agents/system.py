@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 import networkx as nx
 import numpy as np
 
-from popdispatch.agents.controller import ControllerAgent, LineEnd
+from popdispatch.agents.controller import PAYOFFS, ControllerAgent, LineEnd, LinePrice
 from popdispatch.agents.generator import GeneratorAgent, GeneratorRule
 from popdispatch.agents.network import FaultEvent, Faults, LossyNetwork
 from popdispatch.agents.plant import Inverters, PlantAgent
@@ -30,7 +30,9 @@ from popdispatch.errors import OptionError
 from popdispatch.game.controllers import NodeControllers
 from popdispatch.game.parameters import MinuteInputs, PriceLaw
 from popdispatch.game.problem import DispatchProblem
+from popdispatch.integrate import STABLE_STEP
 from popdispatch.modes import get_mode
+from popdispatch.modes.exact import price_weights, scales
 from popdispatch.online.settings import RunSettings, initial_shares
 from popdispatch.warm_start import SHARES, warm_start
 
@@ -44,8 +46,7 @@ class AgentSettings:
 
     Attributes
     ----------
-    step_s : the round's Euler step ``h``, s (the engine's ``dt / substeps``; exact mode is
-        stable on the congestion minute at 0.005 s, paper mode's barrier wants 1e-4 s).
+    step_s : the round's Euler step ``h``, s (None: :func:`default_step`).
     max_rounds : horizon, rounds.
     window : rounds over which the set points must move less than ``tol_kw`` to be at rest
         (and every controller's residual, modes/exact.py, be within ``tol_kw``: a price may
@@ -121,29 +122,46 @@ class AgentSettings:
         hold every transaction up for ``delay_max`` rounds; ``window`` in paced rounds)."""
         return self.window * (1 if self.paced else 1 + int(faults.delay_max))
 
-    def step_for(self, mode: str, faults: Faults | None = None, gain: float = 100.0) -> float:
-        """The Euler step in force: the given one, else the mode's default; in exact mode
-        ``0.5 / gain / SAFE_STEP_DIVISOR`` s (:data:`SAFE_STEP_DIVISOR`; ``faults`` is kept
-        for callers, the step no longer depends on them)."""
+    def step_for(self, problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+        """The Euler step in force, s: the given one, else :func:`default_step`."""
         if self.step_s is not None:
             return self.step_s
-        if mode != "exact":
-            return DEFAULT_STEP_S[mode]
-        return EXACT_STEP_GAIN / gain / SAFE_STEP_DIVISOR
+        return default_step(problem, settings, minute)
 
 
-#: Exact mode's default round step times the revision gain (s EUR/MW): 0.005 s at gain 100.
-EXACT_STEP_GAIN = 0.5
-#: How much shorter than ``EXACT_STEP_GAIN / gain`` the default exact-mode step is. With the
-#: dimensionless constants (87cd2d1: gain 250, C 174 on the congestion minute) and
-#: room/offered acceptance, the full step did not settle in 1000 rounds on a perfect network
-#: (0.73 kW away) nor with 10-20 % loss; a third of it converged on a perfect network in 140
-#: rounds (6.6e-4 kW) and came within 0.01 kW from rounds 170 and 150 (10 % loss, seeds 1
-#: and 2), 388 (20 %) and 145 (10 % loss with delays up to 3 rounds, paced).
-SAFE_STEP_DIVISOR = 3.0
+def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+    """An estimate of the fastest rate of exact mode's dynamics at ``minute``, 1/s: the
+    largest sensitivity of a generator's fitness to its own share,
+    ``gain * D * (2 c_i + C_i)`` (``D`` the minute's demand, MW; ``C_i`` the price weight of
+    the lines above it, :func:`popdispatch.modes.exact.price_weights`, 0 for a generator below
+    none), and at least ``gain * S``, the revision rate of a fitness gap of one marginal-cost
+    spread ``S`` (:func:`popdispatch.modes.exact.scales`). Dimensionless constants
+    (:class:`~popdispatch.modes.exact.ExactConstants`), so the same on a feeder scaled by 100.
 
-#: Default Euler step per mode, s (the engine's dt 0.01 s over 2 or 100 substeps).
-DEFAULT_STEP_S = {"exact": 0.005, "paper": 1.0e-4}
+    It counts one priced line above a generator: limits nested several deep along one path
+    (the synthetic feeders with every line limited) make the complete graph stiffer than this
+    (docs/agents.md, "The round step")."""
+    fp = settings.game_constants(problem)
+    row = np.array([minute - 1])
+    weight = np.broadcast_to(price_weights(problem, settings.exact.price_law, fp.C, row),
+                             (1, len(problem.limit)))[0]  # fmt: skip
+    below = np.zeros(problem.n_generators)
+    limited = problem.generator_line >= 0
+    below[limited] = weight[problem.generator_line[limited]]
+    demand = float(problem.demand[minute - 1])
+    own = float(np.max(demand * (2.0 * problem.c + below)))
+    return float(fp.gain) * max(scales(problem)[0], own)
+
+
+def default_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+    """The default round step, s: in exact mode ``STABLE_STEP / rate``
+    (:data:`popdispatch.integrate.STABLE_STEP`, the largest ``h * rate`` the engine's Heun
+    steps take; ``rate``: :func:`stiffness_rate`); in paper mode the engine's own Euler
+    substep (the mode's integrator: ``dt / substeps``)."""
+    if not get_mode(settings.mode).bounded:
+        stepping = settings.stepping
+        return stepping.dt / stepping.substeps
+    return STABLE_STEP / stiffness_rate(problem, settings, minute)
 
 
 @dataclass
@@ -248,7 +266,8 @@ class AgentRun:
     left after the drain (power a trip moved to it that the generators could not take
     back); ``stall_reason``: why a run at rest is
     not at the DC-OPF (exact mode's KKT check, :func:`popdispatch.online.kkt_violations`, on
-    the set points and the controllers' prices), None otherwise.
+    the set points and the controllers' prices), None otherwise; ``horizon_reason``: why a run
+    never came to rest (:func:`horizon_reason`), None otherwise.
     """
 
     generators: list[str]
@@ -273,14 +292,32 @@ class AgentRun:
     source_kw: float = 0.0
 
     stall_reason: str | None = None
+    horizon_reason: str | None = None
 
     @property
     def status(self) -> str:
         """``converged`` (at rest and, in exact mode, at a KKT point of the DC-OPF),
-        ``stalled`` (at rest elsewhere: ``stall_reason``) or ``not_converged``."""
+        ``stalled`` (at rest elsewhere: ``stall_reason``) or ``not_converged`` (never at rest:
+        ``horizon_reason``)."""
         if self.rest_round is None:
             return "not_converged"
         return "stalled" if self.stall_reason else "converged"
+
+    @property
+    def reason(self) -> str | None:
+        """Why the run is not ``converged`` (None if it is)."""
+        return self.horizon_reason if self.rest_round is None else self.stall_reason
+
+    def line_states(self, n_lines: int) -> np.ndarray:
+        """Exact mode's line prices at the end, EUR/MW: ``z_up`` of every limited line, then
+        ``z_down``, each the mean of its live end controllers' copies (0 in paper mode)."""
+        z, ends = np.zeros(2 * n_lines), np.zeros(n_lines)
+        for copies in self.prices.values():
+            for line, z_up, z_down in copies:
+                z[line] += z_up
+                z[n_lines + line] += z_down
+                ends[line] += 1
+        return z / np.concatenate([ends, ends]).clip(min=1)
 
     @property
     def messages_per_agent_round(self) -> float:
@@ -354,21 +391,25 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     for gen in generators:
         gen.relay = relay
         gen.stale_rounds = stale_rounds
-    controllers, line_ends = _controllers(problem, mode.bounded, fp, step_s, network)
+    controllers, line_ends = _controllers(problem, settings, fp, step_s, network)
     for controller in controllers.values():  # the generators report a silence first
         controller.stale_rounds = 2 * stale_rounds
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
                        network)  # fmt: skip
     source = SourceAgent(names, timeout, copies, network)
+    _check_ids(names, controllers)
     _check_events(faults.events, names, controllers)
     return AgentSystem(plant, controllers, generators, inverters, network, graph, demand,
                        source)  # fmt: skip
 
 
 def check_settings(settings: RunSettings) -> None:
-    """Refuse run settings the agents cannot honour: a price law other than plain (their node
-    controllers hear only their own lines; the tree law needs its neighbours' excesses, the
-    scaled law the count of tradable generators below each line)."""
+    """Refuse run settings the agents cannot honour: a mode other than paper and exact (their
+    node controllers price limited lines only), a price law other than plain (they hear only
+    their own lines; the tree law needs its neighbours' excesses, the scaled law the count of
+    tradable generators below each line)."""
+    if get_mode(settings.mode).code not in PAYOFFS:
+        raise OptionError(f"the agents run paper and exact mode, not {settings.mode}", "--mode")
     if settings.exact.price_law != PriceLaw.PLAIN:
         raise OptionError(
             "the agents' node controllers run the plain price law (each hears only its own "
@@ -376,6 +417,17 @@ def check_settings(settings: RunSettings) -> None:
             "tradable generators below each line)",
             "--price-law",
         )
+
+
+def _check_ids(generators: list[str], controllers: dict) -> None:
+    """No generator may carry another agent's id (the plant, the source bus, a node
+    controller ``C<bus>``): one-line error naming it."""
+    others = {"plant": "the plant", SOURCE_ID: "the source bus"}
+    others.update({aid: "a node controller" for aid in controllers})
+    for name in generators:
+        if str(name) in others:
+            raise OptionError(f"generator {name!r} has the agent id of {others[str(name)]}: "
+                              "rename it in the fleet", "--fleet")  # fmt: skip
 
 
 def _check_events(events, generators: list[str], controllers: dict) -> None:
@@ -408,17 +460,23 @@ def controller_id(bus) -> str:
     return f"C{bus}"
 
 
-def _controllers(problem, exact: bool, fp, step_s: float, network):
-    """``({id: controller}, line_ends)`` from the problem's controller table."""
+def _controllers(problem, settings: RunSettings, fp, step_s: float, network):
+    """``({id: controller}, line_ends)`` from the problem's controller table; each line priced
+    by the mode's own payoff map (:class:`~popdispatch.agents.controller.LinePrice`) with the
+    problem's limit of the line."""
     table = NodeControllers.from_problem(problem).table
     position = {line: k for k, line in enumerate(problem.lines)}
+    payoff = PAYOFFS[get_mode(settings.mode).code]
+    n_states = 2 if get_mode(settings.mode).bounded else 0
     ends: dict[str, list[LineEnd]] = {}
     line_ends: list[list[str]] = [[] for _ in problem.lines]
     for row in table.itertuples():
         aid = controller_id(row.bus)
         k = position[row.line]
+        price = LinePrice(payoff, float(problem.limit[k]), float(fp.C), float(fp.price_rate),
+                          n_states)  # fmt: skip
         ends.setdefault(aid, []).append(
-            LineEnd(k, int(row.orientation), float(row.limit_kw) / KW_PER_MW, list(row.receivers))
+            LineEnd(k, int(row.orientation), price, list(row.receivers))
         )
         line_ends[k].append(aid)
     for aid, own in ends.items():  # each end knows its partner and the other side
@@ -426,10 +484,7 @@ def _controllers(problem, exact: bool, fp, step_s: float, network):
             partner = next(a for a in line_ends[end.line] if a != aid)
             end.partner = partner
             end.other_receivers = next(e.receivers for e in ends[partner] if e.line == end.line)
-    controllers = {
-        aid: ControllerAgent(own, exact, float(fp.C), float(fp.price_rate), step_s, network)
-        for aid, own in ends.items()
-    }
+    controllers = {aid: ControllerAgent(own, step_s, network) for aid, own in ends.items()}
     return controllers, [tuple(e) for e in line_ends]
 
 
@@ -449,8 +504,7 @@ def run_agents(
     settings = settings or RunSettings()
     faults = faults or Faults()
     agent_settings = agent_settings or AgentSettings()
-    gain = float(game_constants(problem, settings).gain)
-    step_s = agent_settings.step_for(settings.mode, faults, gain)
+    step_s = agent_settings.step_for(problem, settings, minute)
     run = _run(problem, minute, settings, faults, agent_settings, step_s, on_round)
     if run.rest_round is None or not get_mode(settings.mode).claims_dc_opf:
         return run
@@ -481,14 +535,7 @@ def _kkt_reason(problem, minute, settings, opts: AgentSettings, step_s: float, r
     from popdispatch.integrate import Integrator
     from popdispatch.online import Engine
 
-    n = len(problem.limit)
-    z, ends = np.zeros(2 * n), np.zeros(n)
-    for copies in run.prices.values():
-        for line, z_up, z_down in copies:
-            z[line] += z_up
-            z[n + line] += z_down
-            ends[line] += 1
-    z /= np.concatenate([ends, ends]).clip(min=1)
+    z = run.line_states(len(problem.limit))
     integrator = Integrator(dt=step_s, tol_kw=max(opts.tol_kw, 1e-9), window=opts.window)
     engine = Engine(problem, replace(settings, integrator=integrator))
     p_mw = run.setpoints_kw[None] / KW_PER_MW
@@ -529,7 +576,7 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         agent.addresses = addresses
     start = time.perf_counter()
     tol = opts.tol_kw / KW_PER_MW
-    rest_round = None
+    rest_round = unrest = None
     max_imbalance = max_transient = 0.0
     last_event = max((_last_round(e) for e in system.network.faults.events), default=-1)
     async with world:
@@ -548,6 +595,11 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
             due = rnd > last_event + window  # no rest declared before the last fault
             if not quiet and due and settled and _at_rest(system.plant.history, window, tol):
                 rest_round = len(system.plant.history) - 1
+            if not quiet and rest_round is None and rnd >= opts.max_rounds:
+                unrest = horizon_reason(system.plant.history, window, tol,
+                                        system.generators[0].rule.step_s, max(
+                                            (c.residual_mw() for c in system.controllers.values()
+                                             if not c.crashed), default=0.0))  # fmt: skip
             if not quiet and (rest_round is not None or rnd >= opts.max_rounds):
                 quiet = True  # the drain: no new offers, open transactions decided
                 for gen in system.parties:
@@ -589,6 +641,7 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         prices=prices,
         events=sorted(_events(system), key=lambda e: e["round"]),
         source_kw=system.source.position_mw * KW_PER_MW,
+        horizon_reason=unrest,
     )
 
 
@@ -608,6 +661,29 @@ def _raise_agent_errors(system: AgentSystem) -> None:
     for agent in system.agents:
         if agent.error is not None:
             raise RuntimeError(f"agent {agent.aid} failed: {agent.error!r}") from agent.error
+
+
+def horizon_reason(history: list[np.ndarray], window: int, tol_mw: float, step_s: float,
+                   residual_mw: float = 0.0) -> str:  # fmt: skip
+    """Why set points ``history`` (MW per round) with the controllers' largest residual
+    ``residual_mw`` (MW) are not at rest: every round of the last ``window`` moves them by more
+    than ``tol_mw`` and two rounds apart they are back where they were (a flip: the round step
+    ``step_s`` is past the stability limit of the Euler rule), or they still move, or a line
+    is still away from complementary slackness (more rounds needed)."""
+    rounds = len(history) - 1
+    recent = np.array(history[-window - 2 :]) * KW_PER_MW
+    moves = np.abs(np.diff(recent, axis=0)).max(axis=1)
+    back = np.abs(recent[2:] - recent[:-2]).max(axis=1)
+    tol_kw = tol_mw * KW_PER_MW
+    if len(back) and moves.min() > tol_kw and (back <= 0.1 * moves[1:]).all():
+        return (f"not at rest after {rounds} rounds: the set points flip back and forth by up "
+                f"to {moves.max():.4g} kW every round; the round step {step_s:.4g} s is past "
+                "the stability limit of the Euler rule on this problem (give a smaller step)")
+    moved = float(np.abs(recent - recent[-1]).max()) if len(recent) else 0.0
+    return (f"not at rest after {rounds} rounds (at rest: within {tol_kw:g} kW): the set "
+            f"points still moved {moved:.4g} kW over the last {len(recent) - 1} rounds and a "
+            f"line is {residual_mw * KW_PER_MW:.4g} kW from complementary slackness (give "
+            "more rounds)")
 
 
 def _at_rest(history: list[np.ndarray], window: int, tol_mw: float) -> bool:
