@@ -187,3 +187,17 @@ def test_a_run_away_from_the_optimum_exits_1_and_says_why(tmp_path, args, words)
     assert len(lines) == 1 and "Traceback" not in result.stderr
     assert "the agents did not converge on minute 1 (not_converged)" in lines[0]
     assert words in lines[0]
+
+
+@needs_case69
+def test_line_prices_that_run_away_end_the_run_as_infeasible(tmp_path):
+    """Line 1-2 limited to 1000 kW while 2.6 MW of load below it cannot be served from below:
+    the prices pass the engine's cap, the agents stop there (not after 4000 rounds) and the
+    command exits 1, naming the line (1-3 of the reduced feeder: bus 2 is no key node)."""
+    result = popdispatch_agents(tmp_path, "--limit", "1:2=1000")
+    assert result.returncode == 1, result.stderr
+    s = json.loads(result.stdout)
+    assert s["status"] == "infeasible" and s["dynamics_status"] == "infeasible"
+    assert "ran away: line 1-3's price" in s["horizon_reason"]
+    assert s["rounds"] < 1000
+    assert len(result.stderr.strip().splitlines()) == 1 and "infeasible" in result.stderr

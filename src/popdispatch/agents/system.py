@@ -178,6 +178,8 @@ class AgentSystem:
     demand_mw: float
     source: SourceAgent | None = None
     events: list = field(default_factory=list)
+    price_cap: float = np.inf  # EUR/MW: a line price beyond it means no dispatch relieves it
+    line_names: list[str] = field(default_factory=list)  # "line A-B" per limited line
 
     @property
     def agents(self) -> list:
@@ -267,7 +269,8 @@ class AgentRun:
     back); ``stall_reason``: why a run at rest is
     not at the DC-OPF (exact mode's KKT check, :func:`popdispatch.online.kkt_violations`, on
     the set points and the controllers' prices), None otherwise; ``horizon_reason``: why a run
-    never came to rest (:func:`horizon_reason`), None otherwise.
+    never came to rest (:func:`horizon_reason`, :func:`runaway`), None otherwise;
+    ``infeasible``: the line prices ran away (:func:`runaway`).
     """
 
     generators: list[str]
@@ -293,12 +296,15 @@ class AgentRun:
 
     stall_reason: str | None = None
     horizon_reason: str | None = None
+    infeasible: bool = False
 
     @property
     def status(self) -> str:
         """``converged`` (at rest and, in exact mode, at a KKT point of the DC-OPF),
-        ``stalled`` (at rest elsewhere: ``stall_reason``) or ``not_converged`` (never at rest:
-        ``horizon_reason``)."""
+        ``stalled`` (at rest elsewhere: ``stall_reason``), ``infeasible`` (the line prices ran
+        away: ``horizon_reason``) or ``not_converged`` (never at rest: ``horizon_reason``)."""
+        if self.infeasible:
+            return "infeasible"
         if self.rest_round is None:
             return "not_converged"
         return "stalled" if self.stall_reason else "converged"
@@ -399,8 +405,16 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     source = SourceAgent(names, timeout, copies, network)
     _check_ids(names, controllers)
     _check_events(faults.events, names, controllers)
+    cap = mode.price_cap(problem) if mode.bounded else np.inf
     return AgentSystem(plant, controllers, generators, inverters, network, graph, demand,
-                       source)  # fmt: skip
+                       source, price_cap=cap, line_names=_line_names(problem))  # fmt: skip
+
+
+def _line_names(problem: DispatchProblem) -> list[str]:
+    """``line A-B`` of every limited line (its end buses as the feeder names them)."""
+    lines = problem.feeder.lines.iloc[np.asarray(problem.lines, dtype=int)]
+    return [f"line {bus_name(a)}-{bus_name(b)}"
+            for a, b in zip(lines.from_bus, lines.to_bus, strict=True)]  # fmt: skip
 
 
 def check_settings(settings: RunSettings) -> None:
@@ -453,11 +467,17 @@ def relay_phase_ticks(n_generators: int, delay_max: int) -> int:
     return int(hops * (0.5 + TICKS_PER_ROUND * int(delay_max))) + 1
 
 
-def controller_id(bus) -> str:
-    """Agent id of the node controller at original bus ``bus`` (``C505``)."""
+def bus_name(bus) -> str:
+    """An original bus as the source format names it (a whole number read into a float
+    column, ``505.0``, as ``505``)."""
     if isinstance(bus, float) and bus.is_integer():
         bus = int(bus)
-    return f"C{bus}"
+    return str(bus)
+
+
+def controller_id(bus) -> str:
+    """Agent id of the node controller at original bus ``bus`` (``C505``)."""
+    return f"C{bus_name(bus)}"
 
 
 def _controllers(problem, settings: RunSettings, fp, step_s: float, network):
@@ -575,8 +595,8 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
     for agent in system.agents:
         agent.addresses = addresses
     start = time.perf_counter()
-    tol = opts.tol_kw / KW_PER_MW
     rest_round = unrest = None
+    infeasible = False
     max_imbalance = max_transient = 0.0
     last_event = max((_last_round(e) for e in system.network.faults.events), default=-1)
     async with world:
@@ -589,21 +609,12 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
             max_imbalance = max(max_imbalance, abs(system.committed_imbalance_mw()))
             if on_round is not None:
                 on_round(system, rnd)
-            settled = all(
-                c.residual_mw() <= tol for c in system.controllers.values() if not c.crashed
-            )
-            due = rnd > last_event + window  # no rest declared before the last fault
-            if not quiet and due and settled and _at_rest(system.plant.history, window, tol):
-                rest_round = len(system.plant.history) - 1
-            if not quiet and rest_round is None and rnd >= opts.max_rounds:
-                unrest = horizon_reason(system.plant.history, window, tol,
-                                        system.generators[0].rule.step_s, max(
-                                            (c.residual_mw() for c in system.controllers.values()
-                                             if not c.crashed), default=0.0))  # fmt: skip
-            if not quiet and (rest_round is not None or rnd >= opts.max_rounds):
-                quiet = True  # the drain: no new offers, open transactions decided
-                for gen in system.parties:
-                    gen.quiet = True
+            if not quiet:
+                due = rnd > last_event + window  # no rest declared before the last fault
+                rest_round, unrest, infeasible = _verdict(system, rnd, opts, window, due)
+                quiet = rest_round is not None or unrest is not None
+                for gen in system.parties if quiet else ():
+                    gen.quiet = True  # the drain: no new offers, open transactions decided
             busy = any(g.busy for g in system.parties if not g.crashed)
             if (quiet and not busy) or rnd >= opts.max_rounds + opts.drain_rounds:
                 break
@@ -642,7 +653,44 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         events=sorted(_events(system), key=lambda e: e["round"]),
         source_kw=system.source.position_mw * KW_PER_MW,
         horizon_reason=unrest,
+        infeasible=infeasible,
     )
+
+
+def _verdict(system: AgentSystem, rnd: int, opts: AgentSettings, window: int,
+             due: bool) -> tuple[int | None, str | None, bool]:  # fmt: skip
+    """``(rest round, reason, infeasible)`` of a run at round ``rnd``: at rest (the set points
+    still over ``window`` rounds and every live controller's residual within ``tol_kw``, once
+    ``due``: after the last fault), or why it stops without: a line price past the cap
+    (:func:`runaway`; infeasible), the horizon (:func:`horizon_reason`); all None and False
+    while it runs on."""
+    tol = opts.tol_kw / KW_PER_MW
+    live = [c for c in system.controllers.values() if not c.crashed]
+    residual = max((c.residual_mw() for c in live), default=0.0)
+    if due and residual <= tol and _at_rest(system.plant.history, window, tol):
+        return len(system.plant.history) - 1, None, False
+    ran_away = runaway(system, live)
+    if ran_away is not None:
+        return None, ran_away, True
+    if rnd >= opts.max_rounds:
+        step = system.generators[0].rule.step_s
+        return None, horizon_reason(system.plant.history, window, tol, step, residual), False
+    return None, None, False
+
+
+def runaway(system: AgentSystem, controllers: list[ControllerAgent]) -> str | None:
+    """Why the line prices ran away, if one of ``controllers``' prices passed the mode's cap
+    (:meth:`popdispatch.modes.mechanism.Mode.price_cap`: no dispatch relieves the line, as in
+    the engine's stopping rule), else None."""
+    for controller in controllers:
+        for end in controller.ends:
+            price = max(end.z_up, end.z_down)
+            if price > system.price_cap:
+                line = system.line_names[end.line]
+                return (f"the line prices ran away: {line}'s price {price:.4g} EUR/MWh passed "
+                        f"{system.price_cap:.4g} EUR/MWh, which no dispatch within the limits "
+                        "needs (the line limits cannot be met)")
+    return None
 
 
 def _last_round(event: FaultEvent) -> int:

@@ -99,7 +99,8 @@ def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, dupl
     if summary["status"] == "infeasible":
         raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given limits")
     if summary["status"] != "converged":
-        raise Failure(f"the agents did not converge on minute {minute} ({summary['status']}): "
+        raise Failure(f"the agents did not converge on minute {minute} "
+                      f"({summary['dynamics_status']}): "
                       f"{summary['stall_reason'] or summary['horizon_reason']}")  # fmt: skip
     return 0
 
@@ -202,6 +203,7 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         profile_source=problem.profile_source,
         stall_reason=run.stall_reason,
         rest_at=run.rest_round,
+        infeasible=run.infeasible,
         line_price_eur_per_mwh=line_prices,
         voltage_price_eur_per_mwh=voltage_prices,
     )
