@@ -232,15 +232,16 @@ class AgentSystem:
 
     def committed_imbalance_mw(self) -> float:
         """Supply minus demand of the committed state: every set point, plus each committed
-        transaction whose receiver has not applied it yet (in flight). Zero up to rounding
-        if every transaction is applied exactly once at each end."""
-        parties = self.parties
-        applied = set().union(*(g.applied for g in parties))
+        transaction whose receiver has not applied it yet (in flight: among the decisions its
+        sender has not seen acknowledged, since a receiver acknowledges what it applied). Zero
+        up to rounding if every transaction is applied exactly once at each end."""
+        parties = {g.aid: g for g in self.parties}
         in_flight = sum(
-            amount for g in parties for txid, amount in g.committed.items()
-            if txid not in applied
+            decision.amount_mw for g in parties.values()
+            for txid, (aid, decision) in g.undelivered.items()
+            if decision.commit and txid not in getattr(parties.get(aid), "applied", ())
         )  # fmt: skip
-        planned = sum(g.planned for g in parties)
+        planned = sum(g.planned for g in parties.values())
         return float(planned + in_flight - self.demand_mw)
 
     def physical_imbalance_mw(self) -> float:
