@@ -135,14 +135,13 @@ def test_a_step_past_the_stability_limit_is_reported_not_converged():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("graph", "step_s", "rounds"), [("ring", None, 6000),
-                                                         ("complete", 1e-4, 16000)])
-def test_the_synthetic_feeder_reaches_the_dc_opf(graph, step_s, rounds):
-    """The synthetic 1k feeder (68 limited lines, 9 binding): on the ring at the default step,
-    on the complete graph at a step below its stability limit (measured about 1.2e-4 s)."""
+def test_the_synthetic_feeder_reaches_the_dc_opf_on_a_ring():
+    """The synthetic 1k feeder (68 limited lines, 9 binding) on the ring at the default step:
+    about 2100 rounds (its complete graph needs a step below 1.2e-4 s and 12,000 rounds, 11 min
+    of CPU: measured in docs/agents.md, not run here)."""
     problem, opf = case("synthetic-1k", "every line")
-    run = run_agents(problem, 1, settings_for("exact", graph), Faults(),
-                     AgentSettings(step_s=step_s, max_rounds=rounds))  # fmt: skip
+    run = run_agents(problem, 1, settings_for("exact", "ring"), Faults(),
+                     AgentSettings(max_rounds=6000))  # fmt: skip
     assert run.status == "converged", run.reason
     assert np.abs(run.setpoints_kw - opf.p_kw).max() <= OPF_ATOL_KW
     assert abs(run.max_imbalance_w) < BALANCE_W
