@@ -1,9 +1,12 @@
 """``popdispatch agents`` through click's test runner (the command is registered in the main
-group by cli/commands.py)."""
+group by cli/commands.py), and on a user's MATPOWER feeder in a subprocess."""
 
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -34,11 +37,13 @@ def test_json_has_snapshot_and_message_keys(congestion_problem):
 
 
 def test_loss_is_reported():
+    """30 rounds are too few to converge (exit 1, after the complete JSON)."""
     result = CliRunner().invoke(
         agents, [*CONGESTION, "--json", "--loss", "0.2", "--seed", "3", "--max-rounds", "30"]
     )
-    assert result.exit_code == 0, result.output
-    s = json.loads(result.output)
+    assert result.exit_code == 1, result.output
+    s = json.loads(result.stdout)
+    assert s["status"] == "not_converged" and "not at rest after 30 rounds" in s["horizon_reason"]
     assert 0.1 < s["lost"] / s["messages"] < 0.3
     assert abs(s["max_imbalance_w"]) < 1.0 and abs(s["final_imbalance_w"]) < 1.0
 
@@ -98,3 +103,101 @@ def test_options_before_a_subcommand_are_refused_not_ignored(capsys):
     err = capsys.readouterr().err
     assert "--mode, -q given before 'launch'" in err
     assert len(err.strip().splitlines()) == 1
+
+
+# -- a user's feeder, in a subprocess: the issue's case69 with its own fleet ------------------
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+import scale_cases  # noqa: E402  (where the MATPOWER cases are: one definition for all)
+
+CASE69 = scale_cases.MATPOWER_DIR / "case69.m"
+FLEET69 = """bus,name,b_eur_per_mwh,c_eur_per_mw2h,pmin_kw,pmax_kw
+1,grid,50,0.1,0,5000
+27,pv27,10,0.1,0,300
+50,bat50,20,0.2,0,500
+65,dg65,5,0.1,0,400
+"""
+needs_case69 = pytest.mark.skipif(
+    not CASE69.is_file(), reason=f"{CASE69} not found (set POPDISPATCH_FEEDERS)"
+)
+
+
+def fleet69(folder: Path) -> Path:
+    """The issue's fleet for case69, written into ``folder``."""
+    path = folder / "fleet69.csv"
+    path.write_text(FLEET69)
+    return path
+
+
+def popdispatch_agents(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
+    """``popdispatch agents --minute 1 --mode exact --net case69.m --fleet fleet69.csv ARGS
+    --json -q`` in a subprocess (the environment's PYTHONPATH and cache folder inherited)."""
+    script = Path(sys.executable).with_name("popdispatch")
+    base = [str(script)] if script.exists() else [sys.executable, "-m", "popdispatch.cli"]
+    command = [*base, "agents", "--minute", "1", "--mode", "exact", "--net", str(CASE69),
+               "--fleet", str(fleet69(tmp_path)), *args, "--json", "-q"]  # fmt: skip
+    return subprocess.run(command, capture_output=True, text=True, timeout=900)
+
+
+def case69_opf(tmp_path: Path, limit_kw: float):
+    """The DC-OPF of the same run (Clarabel)."""
+    from popdispatch.runs import FeederSource, load_run
+
+    source = FeederSource(net=CASE69, fleet=fleet69(tmp_path))
+    problem, _ = load_run(source, None, 1, [(26, 27, limit_kw)])
+    return solve_opf(problem, 1)
+
+
+@needs_case69
+@pytest.mark.parametrize("limit_kw", [100, 200])
+def test_case69_with_a_binding_limit_reaches_the_dc_opf(tmp_path, limit_kw):
+    """The issue's run: before, ``not_converged`` after 4000 rounds (pv27 at 0 kW, the DC-OPF
+    114 kW; at 200 kW the set points never settled) and exit code 0, ``line_prices`` null."""
+    result = popdispatch_agents(tmp_path, "--limit", f"26:27={limit_kw}")
+    assert result.returncode == 0, result.stderr
+    s = json.loads(result.stdout)
+    opf = case69_opf(tmp_path, limit_kw)  # the yardstick: Clarabel, solved here
+    assert s["status"] == "converged" and s["horizon_reason"] is None
+    setpoints = np.array([g["setpoint_kw"] for g in s["generators"]])
+    assert np.abs(setpoints - opf.p_kw).max() <= 0.01  # kW
+    assert opf.p_kw[1] == pytest.approx(limit_kw + 14.0, abs=1e-3)  # pv27 exports the limit
+    [line] = s["line_prices"]
+    assert (line["from_bus"], line["to_bus"]) == (26, 27)
+    assert line["opf_price_eur_per_mwh"] == pytest.approx(opf.line_price[0], abs=1e-6)
+    assert line["price_eur_per_mwh"] == pytest.approx(opf.line_price[0], abs=0.05)  # EUR/MWh
+
+
+@needs_case69
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [(["--max-rounds", "40"], "give more rounds"),
+     (["--step-s", "0.0077", "--max-rounds", "100"], "oscillate")],
+    ids=["horizon", "step-too-large"],
+)  # fmt: skip
+def test_a_run_away_from_the_optimum_exits_1_and_says_why(tmp_path, args, words):
+    """Too few rounds, or the step of before (7.7e-3 s: the set points flipped between 0 and
+    300 kW): exit 1 after the complete JSON, its status ``not_converged`` with the reason,
+    and one line on stderr."""
+    result = popdispatch_agents(tmp_path, "--limit", "26:27=100", *args)
+    assert result.returncode == 1, result.stderr
+    s = json.loads(result.stdout)
+    assert s["status"] == "not_converged" and words in s["horizon_reason"]
+    assert s["max_abs_error_kw"] > 0.01
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr
+    assert "the agents did not converge on minute 1 (not_converged)" in lines[0]
+    assert words in lines[0]
+
+
+@needs_case69
+def test_line_prices_that_run_away_end_the_run_as_infeasible(tmp_path):
+    """Line 1-2 limited to 1000 kW while 2.6 MW of load below it cannot be served from below:
+    the prices pass the engine's cap, the agents stop there (not after 4000 rounds) and the
+    command exits 1, naming the line (1-3 of the reduced feeder: bus 2 is no key node)."""
+    result = popdispatch_agents(tmp_path, "--limit", "1:2=1000")
+    assert result.returncode == 1, result.stderr
+    s = json.loads(result.stdout)
+    assert s["status"] == "infeasible" and s["dynamics_status"] == "infeasible"
+    assert "ran away: line 1-3's price" in s["horizon_reason"]
+    assert s["rounds"] < 1000
+    assert len(result.stderr.strip().splitlines()) == 1 and "infeasible" in result.stderr

@@ -11,13 +11,7 @@ pytest.importorskip(
 )
 
 from popdispatch.agents.network import Faults  # noqa: E402
-from popdispatch.agents.system import (  # noqa: E402
-    EXACT_STEP_GAIN,
-    SAFE_STEP_DIVISOR,
-    AgentSettings,
-    game_constants,
-    run_agents,
-)
+from popdispatch.agents.system import AgentSettings, run_agents  # noqa: E402
 from popdispatch.online import RunSettings  # noqa: E402
 from popdispatch.scenarios import PEAK_MINUTE  # noqa: E402
 
@@ -111,12 +105,10 @@ def test_generator_crash_and_restart(congestion_problem):
         committed = sum(g.planned for g in system.generators) + _in_flight(system)
         worst["w"] = max(worst["w"], abs(committed - demand_mw) * W_PER_MW)
 
-    # a crash is no network fault the defaults know of: the fault-tolerant rules by hand
-    # (room/offered acceptance, the shorter step; see AgentSettings)
+    # a crash is no network fault the defaults know of: the fault-tolerant acceptance by hand
+    # (room/offered; see AgentSettings)
     settings = RunSettings(mode="exact")
-    gain = float(game_constants(problem, settings).gain)
-    opts = AgentSettings(max_rounds=600, engine_limiter=False,
-                         step_s=EXACT_STEP_GAIN / gain / SAFE_STEP_DIVISOR)  # fmt: skip
+    opts = AgentSettings(max_rounds=600, engine_limiter=False)
     run = run_agents(problem, PEAK_MINUTE, settings, Faults(), opts, on_round=crash)
     opf = solve_opf(problem, PEAK_MINUTE).p_kw
     assert worst["held"]

@@ -2,36 +2,80 @@
 
 One agent per key node at an end of a limited line (the rows of
 :class:`popdispatch.game.controllers.NodeControllers`). For each line it ends, the controller
-keeps the latest measured flow and, at its tick, sends its value to the generators on its
-side of the line:
+keeps the latest measured flow and, at its tick, sends the value for its side of the line to
+the generators on that side. The values are the mode's own payoff map
+(:func:`popdispatch.modes.exact.payoff`, :func:`popdispatch.modes.paper.payoff`) evaluated on
+the line alone (:class:`LinePrice`: the line with one generator on each side, so the map's
+broadcast gives the parent side's and the child side's value):
 
-- paper mode: eq. 8, :func:`popdispatch.game.controllers.overflow_signal` of the flow as seen
-  from its node (the parent end sees ``flow``, the child end ``-flow``);
-- exact mode: the line's integrated prices (modes/exact.py): with ``z_up``, ``z_down`` and the
-  excesses ``e_up = flow - U``, ``e_down = -flow - U``, the net price
-  ``nu = max(0, z_up + C e_up) - max(0, z_down + C e_down)`` goes as ``+nu / 2`` to the child
-  side and ``-nu / 2`` to the parent side; then ``z <- max(z + h * price_rate * e, 0)``
-  (one Euler step of the controller-state map). Each end integrates its own copy of the two
-  prices from its own measurements: with perfect sensors and links the copies are equal;
-  otherwise only the sum of the two half prices matters for the generators' comparisons.
+- paper mode: eq. 8 of the flow as seen from each end;
+- exact mode: the line's integrated prices ``z_up``, ``z_down``: the net price ``nu`` goes as
+  ``-nu / 2`` to the parent side and ``+nu / 2`` to the child side, and the map's rates give
+  one Euler step of the prices, ``z <- max(z + h z_rate, 0)``. Each end integrates its own
+  copy of the two prices from its own measurements: with perfect sensors and links the copies
+  are equal; otherwise only the sum of the two half prices matters for the generators'
+  comparisons.
 
 A controller that stops (crash): every round each end sends its partner at the other end of
 the line a :class:`~popdispatch.agents.messages.Heartbeat`. An end whose partner has been
 silent for more than ``stale_rounds`` rounds takes the line over: it also sends the other
-side its half (the negation of its own: it measures the same flow), until the partner's
-heartbeats resume. The generators on the silent end's side keep the last price they heard
-meanwhile (and report the silence themselves, :mod:`popdispatch.agents.generator`).
+side its value (it measures the same flow), until the partner's heartbeats resume. The
+generators on the silent end's side keep the last price they heard meanwhile (and report the
+silence themselves, :mod:`popdispatch.agents.generator`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from popdispatch.agents.base import RoundAgent
 from popdispatch.agents.messages import Heartbeat, Measurement, Signals
 from popdispatch.agents.schedule import Phase
-from popdispatch.game.controllers import overflow_signal
-from popdispatch.modes.exact import line_price
+from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs
+from popdispatch.modes import ModeCode, exact, paper
+
+#: The payoff map each mode's controllers evaluate (the agents run these two modes).
+PAYOFFS = {ModeCode.EXACT: exact.payoff, ModeCode.PAPER: paper.payoff}
+
+
+class LinePrice:
+    """One limited line as its mode's payoff map sees it, alone: a game with this line and one
+    generator on each side (generator 0 above it, 1 below it, no costs, unit gain), so that the
+    map's fitness is the broadcast value of each side and its controller rates the line's.
+
+    ``payoff``: the mode's compiled map (:data:`PAYOFFS`); ``limit_mw``: U; ``C``: EUR/MW per
+    MW (eq. 8's gain, or the proportional part of the price); ``price_rate``: EUR/MW per MW per
+    s. :meth:`evaluate` returns ``(parent side, child side)`` values (EUR/MW) and leaves the
+    rates of ``z`` (upward, downward; EUR/MW per s) in :attr:`rate`.
+    """
+
+    def __init__(self, payoff, limit_mw: float, C: float, price_rate: float, n_states: int):
+        two = np.zeros(2)
+        self.payoff = payoff
+        self.params = GameParameters(
+            b=two, c=two, pmin=two, pmax=two, B=0.0, m=0.0, C=float(C), gain=1.0,
+            price_rate=float(price_rate), limit=np.array([float(limit_mw)]),
+            generator_line=np.array([-1, 0], dtype=np.int64),
+            line_up=np.array([-1], dtype=np.int64), line_preorder=np.array([0], dtype=np.int64),
+        )  # fmt: skip
+        self.minute = MinuteInputs(1.0, np.zeros(1), two, two, np.ones(2, dtype=np.bool_))
+        self.work = GameWork.empty(1)
+        self.p = np.zeros(2)
+        self.values = np.zeros(2)
+        self.z = np.zeros(n_states)
+        self.rate = np.zeros(n_states)
+
+    def evaluate(self, flow_mw: float, z: tuple[float, ...] = ()) -> tuple[float, float, float]:
+        """The values the line's two sides receive at flow ``flow_mw`` (MW, away from the
+        source) and prices ``z``, and the distance from complementary slackness (MW; 0 in a
+        mode without prices)."""
+        self.minute.load_flow[0] = flow_mw  # no generation: the flow is the load flow
+        self.z[:] = z
+        _, residual = self.payoff(self.p, self.z, self.params, self.minute, self.work,
+                                  self.values, self.rate)  # fmt: skip
+        return float(self.values[0]), float(self.values[1]), float(residual)
 
 
 @dataclass
@@ -39,16 +83,17 @@ class LineEnd:
     """One limited line as one of its end controllers sees it.
 
     ``line``: index among the limited lines; ``orientation``: +1 at the parent end (a positive
-    flow leaves this node), -1 at the child end; ``limit_mw``: U; ``receivers``: generator
-    agent ids on this end's side; ``z_up``, ``z_down``: exact-mode prices, EUR/MW;
-    ``partner``: the controller at the other end, ``other_receivers`` the generators on its
-    side; ``partner_round``: round of its latest heartbeat; ``took_over``: this end sends the
-    other side's half too (the partner is silent).
+    flow leaves this node), -1 at the child end; ``price``: the line under the mode's payoff
+    map (:class:`LinePrice`, its limit U inside); ``receivers``: generator agent ids on this
+    end's side; ``z_up``, ``z_down``: exact-mode prices, EUR/MW; ``partner``: the controller
+    at the other end, ``other_receivers`` the generators on its side; ``partner_round``: round
+    of its latest heartbeat; ``took_over``: this end sends the other side's value too (the
+    partner is silent).
     """
 
     line: int
     orientation: int
-    limit_mw: float
+    price: LinePrice
     receivers: list[str]
     flow_mw: float | None = None
     flow_round: int = -1
@@ -59,26 +104,25 @@ class LineEnd:
     partner_round: int = -1
     took_over: bool = False
 
+    @property
+    def states(self) -> tuple[float, ...]:
+        """The prices the line's map integrates (exact mode: ``z_up``, ``z_down``; none in
+        paper mode)."""
+        return (self.z_up, self.z_down) if len(self.price.z) else ()
+
 
 class ControllerAgent(RoundAgent):
-    """The node controller of one key node (see the module docstring).
-
-    ``exact``: the exact mode's prices instead of eq. 8; ``C``: EUR/MW^2 (eq. 8's gain, or the
-    proportional part of the price); ``price_rate``: EUR/MW per MW per s; ``step_s``: the
-    round's Euler step ``h``, s.
-    """
+    """The node controller of one key node (see the module docstring). ``step_s``: the
+    round's Euler step ``h``, s."""
 
     PHASES = (Phase.SIGNAL,)
 
-    def __init__(self, ends: list[LineEnd], exact: bool, C: float, price_rate: float,
-                 step_s: float, network=None, stale_rounds: int = 10):  # fmt: skip
+    def __init__(self, ends: list[LineEnd], step_s: float, network=None,
+                 stale_rounds: int = 10):  # fmt: skip
         super().__init__(network)
         self.stale_rounds = int(stale_rounds)
         self.events: list[dict] = []
         self.ends = ends
-        self.exact = exact
-        self.C = C
-        self.price_rate = price_rate
         self.step_s = step_s
         self.by_line = {}
         for end in ends:
@@ -103,11 +147,10 @@ class ControllerAgent(RoundAgent):
                 self._watch(end, rnd)
             if end.flow_mw is None:
                 continue  # nothing measured yet: nothing to say
-            value = self._price(end) if self.exact else self._overflow(end)
+            own, other = self._price(end)
             for aid in end.receivers:
-                values.setdefault(aid, {})[str(end.line)] = value
-            if end.took_over:  # the silent partner's half: the same law from its side
-                other = -value if self.exact else self._overflow(end, -1)
+                values.setdefault(aid, {})[str(end.line)] = own
+            if end.took_over:  # the silent partner's side: the same map, its value
                 for aid in end.other_receivers:
                     values.setdefault(aid, {})[str(end.line)] = other
         for aid, by_line in values.items():
@@ -127,29 +170,22 @@ class ControllerAgent(RoundAgent):
             self.events.append({"round": rnd, "event": "controller_back",
                                 "agent": end.partner, "line": end.line})  # fmt: skip
 
-    def _overflow(self, end: LineEnd, side: int = 1) -> float:
-        """Paper eq. 8 as seen from this node (``side`` -1: from the other end)."""
-        return overflow_signal(side * end.orientation * end.flow_mw, end.limit_mw, self.C)
-
-    def _price(self, end: LineEnd) -> float:
-        """Exact mode: this end's half of the net price (modes/exact.py ``line_price``), then
-        one Euler step of the prices."""
-        excess_up = end.flow_mw - end.limit_mw
-        excess_down = -end.flow_mw - end.limit_mw
-        nu = line_price(end.z_up, end.z_down, excess_up, excess_down, self.C)
-        h, rate = self.step_s, self.price_rate
-        end.z_up = max(end.z_up + h * (rate * excess_up), 0.0)
-        end.z_down = max(end.z_down + h * (rate * excess_down), 0.0)
-        return -0.5 * nu if end.orientation > 0 else 0.5 * nu
+    def _price(self, end: LineEnd) -> tuple[float, float]:
+        """``(this side's value, the other side's)`` at the latest measurement (EUR/MW), then
+        one Euler step of the line's prices, ``z <- max(z + h z_rate, 0)`` (exact mode)."""
+        parent, child, _ = end.price.evaluate(end.flow_mw, end.states)
+        if end.states:
+            h, rate = self.step_s, end.price.rate
+            end.z_up = max(end.z_up + h * float(rate[0]), 0.0)
+            end.z_down = max(end.z_down + h * float(rate[1]), 0.0)
+        return (parent, child) if end.orientation > 0 else (child, parent)
 
     def residual_mw(self) -> float:
-        """Largest distance from complementary slackness over this controller's lines, MW
-        (as modes/exact.py: any overflow, and any slack while a price is positive)."""
+        """Largest distance from complementary slackness over this controller's lines at their
+        latest measurements and present prices, MW (the mode's own residual: exact mode any
+        overflow and any slack while a price is positive; 0 in paper mode)."""
         worst = 0.0
         for end in self.ends:
-            if end.flow_mw is None:
-                continue
-            for excess, price in ((end.flow_mw - end.limit_mw, end.z_up),
-                                  (-end.flow_mw - end.limit_mw, end.z_down)):  # fmt: skip
-                worst = max(worst, abs(excess) if price > 0.0 else max(excess, 0.0))
+            if end.flow_mw is not None:
+                worst = max(worst, end.price.evaluate(end.flow_mw, end.states)[2])
         return worst

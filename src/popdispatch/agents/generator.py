@@ -53,7 +53,7 @@ from popdispatch.agents.messages import (
 from popdispatch.agents.plant import Inverters
 from popdispatch.agents.schedule import Phase
 from popdispatch.dynamics.fields import field_weights
-from popdispatch.dynamics.pairwise import RELAY_MASS, graph_flows
+from popdispatch.dynamics.pairwise import blocked, graph_flows
 from popdispatch.game.fitness import fitness_into
 from popdispatch.game.parameters import share_bounds
 
@@ -65,8 +65,9 @@ LIMIT_ULPS = 16
 
 def relays(w: float, v: float) -> bool:
     """A generator with receiver weight ``w`` and movable mass ``v`` (shares) cannot take part
-    in a comparison both ways and relays: dynamics/pairwise.py ``blocked``, for one status."""
-    return not (w > 0.0 and v > RELAY_MASS)
+    in a comparison both ways and relays (:func:`popdispatch.dynamics.pairwise.blocked` of
+    its one status)."""
+    return bool(blocked(np.array([w]), np.array([v]), 0))
 
 
 @dataclass(frozen=True)

@@ -198,7 +198,7 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
     ``base_port``: first TCP port (0: free ports the OS hands out); ``startup_s``: longest
     wait, s, for every process to be ready (round 0 starts as soon as all are); ``step_s``:
     the round's Euler step
-    (None: :meth:`popdispatch.agents.system.AgentSettings.step_for`); ``loss``: probability
+    (None: :func:`popdispatch.agents.system.default_step`); ``loss``: probability
     that each message is dropped by its sender (``seed``: of the draws; decisions then go out
     in 3 copies, as in the simulation).
     """
@@ -211,10 +211,9 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
 
     settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph)
     if step_s is None:
-        from popdispatch.agents.system import AgentSettings, game_constants
+        from popdispatch.agents.system import default_step
 
-        gain = float(game_constants(problem, settings).gain)
-        step_s = AgentSettings().step_for(mode, Faults(), gain)
+        step_s = default_step(problem, settings, minute)
     ids = list(agent_ids(build_agents(problem, minute, settings, step_s, Faults())))
     ports = _ports(len(ids), base_port)
     start = time.perf_counter()

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 import networkx as nx
 import numpy as np
 
-from popdispatch.agents.controller import ControllerAgent, LineEnd
+from popdispatch.agents.controller import PAYOFFS, ControllerAgent, LineEnd, LinePrice
 from popdispatch.agents.generator import GeneratorAgent, GeneratorRule
 from popdispatch.agents.network import FaultEvent, Faults, LossyNetwork
 from popdispatch.agents.plant import Inverters, PlantAgent
@@ -30,7 +30,9 @@ from popdispatch.errors import OptionError
 from popdispatch.game.controllers import NodeControllers
 from popdispatch.game.parameters import MinuteInputs, PriceLaw
 from popdispatch.game.problem import DispatchProblem
+from popdispatch.integrate import STABLE_STEP
 from popdispatch.modes import get_mode
+from popdispatch.modes.exact import price_weights, scales
 from popdispatch.online.settings import RunSettings, initial_shares
 from popdispatch.warm_start import SHARES, warm_start
 
@@ -44,8 +46,7 @@ class AgentSettings:
 
     Attributes
     ----------
-    step_s : the round's Euler step ``h``, s (the engine's ``dt / substeps``; exact mode is
-        stable on the congestion minute at 0.005 s, paper mode's barrier wants 1e-4 s).
+    step_s : the round's Euler step ``h``, s (None: :func:`default_step`).
     max_rounds : horizon, rounds.
     window : rounds over which the set points must move less than ``tol_kw`` to be at rest
         (and every controller's residual, modes/exact.py, be within ``tol_kw``: a price may
@@ -121,29 +122,46 @@ class AgentSettings:
         hold every transaction up for ``delay_max`` rounds; ``window`` in paced rounds)."""
         return self.window * (1 if self.paced else 1 + int(faults.delay_max))
 
-    def step_for(self, mode: str, faults: Faults | None = None, gain: float = 100.0) -> float:
-        """The Euler step in force: the given one, else the mode's default; in exact mode
-        ``0.5 / gain / SAFE_STEP_DIVISOR`` s (:data:`SAFE_STEP_DIVISOR`; ``faults`` is kept
-        for callers, the step no longer depends on them)."""
+    def step_for(self, problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+        """The Euler step in force, s: the given one, else :func:`default_step`."""
         if self.step_s is not None:
             return self.step_s
-        if mode != "exact":
-            return DEFAULT_STEP_S[mode]
-        return EXACT_STEP_GAIN / gain / SAFE_STEP_DIVISOR
+        return default_step(problem, settings, minute)
 
 
-#: Exact mode's default round step times the revision gain (s EUR/MW): 0.005 s at gain 100.
-EXACT_STEP_GAIN = 0.5
-#: How much shorter than ``EXACT_STEP_GAIN / gain`` the default exact-mode step is. With the
-#: dimensionless constants (87cd2d1: gain 250, C 174 on the congestion minute) and
-#: room/offered acceptance, the full step did not settle in 1000 rounds on a perfect network
-#: (0.73 kW away) nor with 10-20 % loss; a third of it converged on a perfect network in 140
-#: rounds (6.6e-4 kW) and came within 0.01 kW from rounds 170 and 150 (10 % loss, seeds 1
-#: and 2), 388 (20 %) and 145 (10 % loss with delays up to 3 rounds, paced).
-SAFE_STEP_DIVISOR = 3.0
+def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+    """An estimate of the fastest rate of exact mode's dynamics at ``minute``, 1/s: the
+    largest sensitivity of a generator's fitness to its own share,
+    ``gain * D * (2 c_i + C_i)`` (``D`` the minute's demand, MW; ``C_i`` the price weight of
+    the lines above it, :func:`popdispatch.modes.exact.price_weights`, 0 for a generator below
+    none), and at least ``gain * S``, the revision rate of a fitness gap of one marginal-cost
+    spread ``S`` (:func:`popdispatch.modes.exact.scales`). Dimensionless constants
+    (:class:`~popdispatch.modes.exact.ExactConstants`), so the same on a feeder scaled by 100.
 
-#: Default Euler step per mode, s (the engine's dt 0.01 s over 2 or 100 substeps).
-DEFAULT_STEP_S = {"exact": 0.005, "paper": 1.0e-4}
+    It counts one priced line above a generator: limits nested several deep along one path
+    (the synthetic feeders with every line limited) make the complete graph stiffer than this
+    (docs/agents.md, "The round step")."""
+    fp = settings.game_constants(problem)
+    row = np.array([minute - 1])
+    weight = np.broadcast_to(price_weights(problem, settings.exact.price_law, fp.C, row),
+                             (1, len(problem.limit)))[0]  # fmt: skip
+    below = np.zeros(problem.n_generators)
+    limited = problem.generator_line >= 0
+    below[limited] = weight[problem.generator_line[limited]]
+    demand = float(problem.demand[minute - 1])
+    own = float(np.max(demand * (2.0 * problem.c + below)))
+    return float(fp.gain) * max(scales(problem)[0], own)
+
+
+def default_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+    """The default round step, s: in exact mode ``STABLE_STEP / rate``
+    (:data:`popdispatch.integrate.STABLE_STEP`, the largest ``h * rate`` the engine's Heun
+    steps take; ``rate``: :func:`stiffness_rate`); in paper mode the engine's own Euler
+    substep (the mode's integrator: ``dt / substeps``)."""
+    if not get_mode(settings.mode).bounded:
+        stepping = settings.stepping
+        return stepping.dt / stepping.substeps
+    return STABLE_STEP / stiffness_rate(problem, settings, minute)
 
 
 @dataclass
@@ -160,6 +178,8 @@ class AgentSystem:
     demand_mw: float
     source: SourceAgent | None = None
     events: list = field(default_factory=list)
+    price_cap: float = np.inf  # EUR/MW: a line price beyond it means no dispatch relieves it
+    line_names: list[str] = field(default_factory=list)  # "line A-B" per limited line
 
     @property
     def agents(self) -> list:
@@ -212,15 +232,16 @@ class AgentSystem:
 
     def committed_imbalance_mw(self) -> float:
         """Supply minus demand of the committed state: every set point, plus each committed
-        transaction whose receiver has not applied it yet (in flight). Zero up to rounding
-        if every transaction is applied exactly once at each end."""
-        parties = self.parties
-        applied = set().union(*(g.applied for g in parties))
+        transaction whose receiver has not applied it yet (in flight: among the decisions its
+        sender has not seen acknowledged, since a receiver acknowledges what it applied). Zero
+        up to rounding if every transaction is applied exactly once at each end."""
+        parties = {g.aid: g for g in self.parties}
         in_flight = sum(
-            amount for g in parties for txid, amount in g.committed.items()
-            if txid not in applied
+            decision.amount_mw for g in parties.values()
+            for txid, (aid, decision) in g.undelivered.items()
+            if decision.commit and txid not in getattr(parties.get(aid), "applied", ())
         )  # fmt: skip
-        planned = sum(g.planned for g in parties)
+        planned = sum(g.planned for g in parties.values())
         return float(planned + in_flight - self.demand_mw)
 
     def physical_imbalance_mw(self) -> float:
@@ -248,7 +269,9 @@ class AgentRun:
     left after the drain (power a trip moved to it that the generators could not take
     back); ``stall_reason``: why a run at rest is
     not at the DC-OPF (exact mode's KKT check, :func:`popdispatch.online.kkt_violations`, on
-    the set points and the controllers' prices), None otherwise.
+    the set points and the controllers' prices), None otherwise; ``horizon_reason``: why a run
+    never came to rest (:func:`horizon_reason`, :func:`runaway`), None otherwise;
+    ``infeasible``: the line prices ran away (:func:`runaway`).
     """
 
     generators: list[str]
@@ -273,14 +296,35 @@ class AgentRun:
     source_kw: float = 0.0
 
     stall_reason: str | None = None
+    horizon_reason: str | None = None
+    infeasible: bool = False
 
     @property
     def status(self) -> str:
         """``converged`` (at rest and, in exact mode, at a KKT point of the DC-OPF),
-        ``stalled`` (at rest elsewhere: ``stall_reason``) or ``not_converged``."""
+        ``stalled`` (at rest elsewhere: ``stall_reason``), ``infeasible`` (the line prices ran
+        away: ``horizon_reason``) or ``not_converged`` (never at rest: ``horizon_reason``)."""
+        if self.infeasible:
+            return "infeasible"
         if self.rest_round is None:
             return "not_converged"
         return "stalled" if self.stall_reason else "converged"
+
+    @property
+    def reason(self) -> str | None:
+        """Why the run is not ``converged`` (None if it is)."""
+        return self.horizon_reason if self.rest_round is None else self.stall_reason
+
+    def line_states(self, n_lines: int) -> np.ndarray:
+        """Exact mode's line prices at the end, EUR/MW: ``z_up`` of every limited line, then
+        ``z_down``, each the mean of its live end controllers' copies (0 in paper mode)."""
+        z, ends = np.zeros(2 * n_lines), np.zeros(n_lines)
+        for copies in self.prices.values():
+            for line, z_up, z_down in copies:
+                z[line] += z_up
+                z[n_lines + line] += z_down
+                ends[line] += 1
+        return z / np.concatenate([ends, ends]).clip(min=1)
 
     @property
     def messages_per_agent_round(self) -> float:
@@ -354,21 +398,33 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     for gen in generators:
         gen.relay = relay
         gen.stale_rounds = stale_rounds
-    controllers, line_ends = _controllers(problem, mode.bounded, fp, step_s, network)
+    controllers, line_ends = _controllers(problem, settings, fp, step_s, network)
     for controller in controllers.values():  # the generators report a silence first
         controller.stale_rounds = 2 * stale_rounds
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
                        network)  # fmt: skip
     source = SourceAgent(names, timeout, copies, network)
+    _check_ids(names, controllers)
     _check_events(faults.events, names, controllers)
+    cap = mode.price_cap(problem) if mode.bounded else np.inf
     return AgentSystem(plant, controllers, generators, inverters, network, graph, demand,
-                       source)  # fmt: skip
+                       source, price_cap=cap, line_names=_line_names(problem))  # fmt: skip
+
+
+def _line_names(problem: DispatchProblem) -> list[str]:
+    """``line A-B`` of every limited line (its end buses as the feeder names them)."""
+    lines = problem.feeder.lines.iloc[np.asarray(problem.lines, dtype=int)]
+    return [f"line {bus_name(a)}-{bus_name(b)}"
+            for a, b in zip(lines.from_bus, lines.to_bus, strict=True)]  # fmt: skip
 
 
 def check_settings(settings: RunSettings) -> None:
-    """Refuse run settings the agents cannot honour: a price law other than plain (their node
-    controllers hear only their own lines; the tree law needs its neighbours' excesses, the
-    scaled law the count of tradable generators below each line)."""
+    """Refuse run settings the agents cannot honour: a mode other than paper and exact (their
+    node controllers price limited lines only), a price law other than plain (they hear only
+    their own lines; the tree law needs its neighbours' excesses, the scaled law the count of
+    tradable generators below each line)."""
+    if get_mode(settings.mode).code not in PAYOFFS:
+        raise OptionError(f"the agents run paper and exact mode, not {settings.mode}", "--mode")
     if settings.exact.price_law != PriceLaw.PLAIN:
         raise OptionError(
             "the agents' node controllers run the plain price law (each hears only its own "
@@ -376,6 +432,17 @@ def check_settings(settings: RunSettings) -> None:
             "tradable generators below each line)",
             "--price-law",
         )
+
+
+def _check_ids(generators: list[str], controllers: dict) -> None:
+    """No generator may carry another agent's id (the plant, the source bus, a node
+    controller ``C<bus>``): one-line error naming it."""
+    others = {"plant": "the plant", SOURCE_ID: "the source bus"}
+    others.update({aid: "a node controller" for aid in controllers})
+    for name in generators:
+        if str(name) in others:
+            raise OptionError(f"generator {name!r} has the agent id of {others[str(name)]}: "
+                              "rename it in the fleet", "--fleet")  # fmt: skip
 
 
 def _check_events(events, generators: list[str], controllers: dict) -> None:
@@ -401,24 +468,36 @@ def relay_phase_ticks(n_generators: int, delay_max: int) -> int:
     return int(hops * (0.5 + TICKS_PER_ROUND * int(delay_max))) + 1
 
 
-def controller_id(bus) -> str:
-    """Agent id of the node controller at original bus ``bus`` (``C505``)."""
+def bus_name(bus) -> str:
+    """An original bus as the source format names it (a whole number read into a float
+    column, ``505.0``, as ``505``)."""
     if isinstance(bus, float) and bus.is_integer():
         bus = int(bus)
-    return f"C{bus}"
+    return str(bus)
 
 
-def _controllers(problem, exact: bool, fp, step_s: float, network):
-    """``({id: controller}, line_ends)`` from the problem's controller table."""
+def controller_id(bus) -> str:
+    """Agent id of the node controller at original bus ``bus`` (``C505``)."""
+    return f"C{bus_name(bus)}"
+
+
+def _controllers(problem, settings: RunSettings, fp, step_s: float, network):
+    """``({id: controller}, line_ends)`` from the problem's controller table; each line priced
+    by the mode's own payoff map (:class:`~popdispatch.agents.controller.LinePrice`) with the
+    problem's limit of the line."""
     table = NodeControllers.from_problem(problem).table
     position = {line: k for k, line in enumerate(problem.lines)}
+    payoff = PAYOFFS[get_mode(settings.mode).code]
+    n_states = 2 if get_mode(settings.mode).bounded else 0
     ends: dict[str, list[LineEnd]] = {}
     line_ends: list[list[str]] = [[] for _ in problem.lines]
     for row in table.itertuples():
         aid = controller_id(row.bus)
         k = position[row.line]
+        price = LinePrice(payoff, float(problem.limit[k]), float(fp.C), float(fp.price_rate),
+                          n_states)  # fmt: skip
         ends.setdefault(aid, []).append(
-            LineEnd(k, int(row.orientation), float(row.limit_kw) / KW_PER_MW, list(row.receivers))
+            LineEnd(k, int(row.orientation), price, list(row.receivers))
         )
         line_ends[k].append(aid)
     for aid, own in ends.items():  # each end knows its partner and the other side
@@ -426,10 +505,7 @@ def _controllers(problem, exact: bool, fp, step_s: float, network):
             partner = next(a for a in line_ends[end.line] if a != aid)
             end.partner = partner
             end.other_receivers = next(e.receivers for e in ends[partner] if e.line == end.line)
-    controllers = {
-        aid: ControllerAgent(own, exact, float(fp.C), float(fp.price_rate), step_s, network)
-        for aid, own in ends.items()
-    }
+    controllers = {aid: ControllerAgent(own, step_s, network) for aid, own in ends.items()}
     return controllers, [tuple(e) for e in line_ends]
 
 
@@ -449,8 +525,7 @@ def run_agents(
     settings = settings or RunSettings()
     faults = faults or Faults()
     agent_settings = agent_settings or AgentSettings()
-    gain = float(game_constants(problem, settings).gain)
-    step_s = agent_settings.step_for(settings.mode, faults, gain)
+    step_s = agent_settings.step_for(problem, settings, minute)
     run = _run(problem, minute, settings, faults, agent_settings, step_s, on_round)
     if run.rest_round is None or not get_mode(settings.mode).claims_dc_opf:
         return run
@@ -481,14 +556,7 @@ def _kkt_reason(problem, minute, settings, opts: AgentSettings, step_s: float, r
     from popdispatch.integrate import Integrator
     from popdispatch.online import Engine
 
-    n = len(problem.limit)
-    z, ends = np.zeros(2 * n), np.zeros(n)
-    for copies in run.prices.values():
-        for line, z_up, z_down in copies:
-            z[line] += z_up
-            z[n + line] += z_down
-            ends[line] += 1
-    z /= np.concatenate([ends, ends]).clip(min=1)
+    z = run.line_states(len(problem.limit))
     integrator = Integrator(dt=step_s, tol_kw=max(opts.tol_kw, 1e-9), window=opts.window)
     engine = Engine(problem, replace(settings, integrator=integrator))
     p_mw = run.setpoints_kw[None] / KW_PER_MW
@@ -528,8 +596,8 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
     for agent in system.agents:
         agent.addresses = addresses
     start = time.perf_counter()
-    tol = opts.tol_kw / KW_PER_MW
-    rest_round = None
+    rest_round = unrest = None
+    infeasible = False
     max_imbalance = max_transient = 0.0
     last_event = max((_last_round(e) for e in system.network.faults.events), default=-1)
     async with world:
@@ -542,16 +610,12 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
             max_imbalance = max(max_imbalance, abs(system.committed_imbalance_mw()))
             if on_round is not None:
                 on_round(system, rnd)
-            settled = all(
-                c.residual_mw() <= tol for c in system.controllers.values() if not c.crashed
-            )
-            due = rnd > last_event + window  # no rest declared before the last fault
-            if not quiet and due and settled and _at_rest(system.plant.history, window, tol):
-                rest_round = len(system.plant.history) - 1
-            if not quiet and (rest_round is not None or rnd >= opts.max_rounds):
-                quiet = True  # the drain: no new offers, open transactions decided
-                for gen in system.parties:
-                    gen.quiet = True
+            if not quiet:
+                due = rnd > last_event + window  # no rest declared before the last fault
+                rest_round, unrest, infeasible = _verdict(system, rnd, opts, window, due)
+                quiet = rest_round is not None or unrest is not None
+                for gen in system.parties if quiet else ():
+                    gen.quiet = True  # the drain: no new offers, open transactions decided
             busy = any(g.busy for g in system.parties if not g.crashed)
             if (quiet and not busy) or rnd >= opts.max_rounds + opts.drain_rounds:
                 break
@@ -589,7 +653,45 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         prices=prices,
         events=sorted(_events(system), key=lambda e: e["round"]),
         source_kw=system.source.position_mw * KW_PER_MW,
+        horizon_reason=unrest,
+        infeasible=infeasible,
     )
+
+
+def _verdict(system: AgentSystem, rnd: int, opts: AgentSettings, window: int,
+             due: bool) -> tuple[int | None, str | None, bool]:  # fmt: skip
+    """``(rest round, reason, infeasible)`` of a run at round ``rnd``: at rest (the set points
+    still over ``window`` rounds and every live controller's residual within ``tol_kw``, once
+    ``due``: after the last fault), or why it stops without: a line price past the cap
+    (:func:`runaway`; infeasible), the horizon (:func:`horizon_reason`); all None and False
+    while it runs on."""
+    tol = opts.tol_kw / KW_PER_MW
+    live = [c for c in system.controllers.values() if not c.crashed]
+    residual = max((c.residual_mw() for c in live), default=0.0)
+    if due and residual <= tol and _at_rest(system.plant.history, window, tol):
+        return len(system.plant.history) - 1, None, False
+    ran_away = runaway(system, live)
+    if ran_away is not None:
+        return None, ran_away, True
+    if rnd >= opts.max_rounds:
+        step = system.generators[0].rule.step_s
+        return None, horizon_reason(system.plant.history, window, tol, step, residual), False
+    return None, None, False
+
+
+def runaway(system: AgentSystem, controllers: list[ControllerAgent]) -> str | None:
+    """Why the line prices ran away, if one of ``controllers``' prices passed the mode's cap
+    (:meth:`popdispatch.modes.mechanism.Mode.price_cap`: no dispatch relieves the line, as in
+    the engine's stopping rule), else None."""
+    for controller in controllers:
+        for end in controller.ends:
+            price = max(end.z_up, end.z_down)
+            if price > system.price_cap:
+                line = system.line_names[end.line]
+                return (f"the line prices ran away: {line}'s price {price:.4g} EUR/MWh passed "
+                        f"{system.price_cap:.4g} EUR/MWh, which no dispatch within the limits "
+                        "needs (the line limits cannot be met)")
+    return None
 
 
 def _last_round(event: FaultEvent) -> int:
@@ -608,6 +710,41 @@ def _raise_agent_errors(system: AgentSystem) -> None:
     for agent in system.agents:
         if agent.error is not None:
             raise RuntimeError(f"agent {agent.aid} failed: {agent.error!r}") from agent.error
+
+
+def horizon_reason(history: list[np.ndarray], window: int, tol_mw: float, step_s: float,
+                   residual_mw: float = 0.0) -> str:  # fmt: skip
+    """Why set points ``history`` (MW per round) with the controllers' largest residual
+    ``residual_mw`` (MW) are not at rest. Over the last :data:`CYCLE_ROUNDS` rounds (or
+    ``window``, if longer) their path is at least :data:`CYCLE_PATH` times the range they
+    stay in (an oscillation: the round step ``step_s`` is past the stability limit of the
+    Euler rule on this problem), or they still move, or a line is still away from
+    complementary slackness (more rounds needed)."""
+    rounds = len(history) - 1
+    recent = np.array(history[-max(window, CYCLE_ROUNDS) - 1 :]) * KW_PER_MW
+    path = float(np.abs(np.diff(recent, axis=0)).max(axis=1).sum()) if len(recent) else 0.0
+    spread = float(np.ptp(recent, axis=0).max()) if len(recent) else 0.0
+    tol_kw = tol_mw * KW_PER_MW
+    if spread > tol_kw and path >= CYCLE_PATH * spread:
+        return (f"not at rest after {rounds} rounds: the set points oscillate (a path of "
+                f"{path:.4g} kW over the last {len(recent) - 1} rounds within a range of "
+                f"{spread:.4g} kW); the round step {step_s:.4g} s is past the stability limit "
+                "of the Euler rule on this problem (give a smaller step)")
+    recent = recent[-window - 1 :]
+    moved = float(np.abs(recent - recent[-1]).max()) if len(recent) else 0.0
+    return (f"not at rest after {rounds} rounds (at rest: within {tol_kw:g} kW): the set "
+            f"points still moved {moved:.4g} kW over the last {len(recent) - 1} rounds and a "
+            f"line is {residual_mw * KW_PER_MW:.4g} kW from complementary slackness (give "
+            "more rounds)")
+
+
+#: Rounds over which :func:`horizon_reason` looks for an oscillation.
+CYCLE_ROUNDS = 30
+#: Path over range of the set points (:func:`horizon_reason`) from which they oscillate:
+#: about 1 when they move one way; 27 on the synthetic 1k feeder's complete graph at the
+#: default step (6 kW a round within 6.7 kW), 9 when case69 flips between 0 and 300 kW
+#: every three rounds (a step 13 times its default).
+CYCLE_PATH = 3.0
 
 
 def _at_rest(history: list[np.ndarray], window: int, tol_mw: float) -> bool:

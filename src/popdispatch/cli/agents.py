@@ -59,7 +59,8 @@ from popdispatch.report.progress import Progress
         help="Node controller (C<bus>, e.g. C505) stops at ROUND (restarts after ROUNDS) "
         "(repeatable).")  # fmt: skip
 @option("--step-s", type=click.FloatRange(0.0, min_open=True), default=None,
-        help="Euler step of one round, s (default: exact 0.005, paper 1e-4).")  # fmt: skip
+        help="Euler step of one round, s (default: exact mode 1.5 over the estimated "
+        "stiffness of the minute, paper mode the engine's substep 1e-4).")  # fmt: skip
 @option("--max-rounds", type=click.IntRange(1), default=4000, show_default=True,
         help="Horizon, rounds.")  # fmt: skip
 @option("--pace/--no-pace", default=True, show_default=True,
@@ -97,6 +98,10 @@ def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, dupl
     emit(stamp(summary), as_json, agents_text(summary))
     if summary["status"] == "infeasible":
         raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given limits")
+    if summary["status"] != "converged":
+        raise Failure(f"the agents did not converge on minute {minute} "
+                      f"({summary['dynamics_status']}): "
+                      f"{summary['stall_reason'] or summary['horizon_reason']}")  # fmt: skip
     return 0
 
 
@@ -160,7 +165,10 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
     import numpy as np
 
     from popdispatch.agents.system import AgentSettings, run_agents, without
+    from popdispatch.modes import get_mode
+    from popdispatch.modes.exact import price_weights
     from popdispatch.online import SnapshotResult, limited_flows_mw, overflow_kw
+    from popdispatch.online.kkt import net_prices
     from popdispatch.opf import solve_opf
     from popdispatch.report.summaries import snapshot_summary
     from popdispatch.runs import check_x0
@@ -171,6 +179,14 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
                          paced=options.paced)  # fmt: skip
     run = run_agents(problem, minute, settings, faults, opts)
     final_mw = run.setpoints_kw / 1000.0
+    line_prices = voltage_prices = None
+    if get_mode(settings.mode).claims_dc_opf:  # the prices the controllers broadcast at the end
+        weight = price_weights(problem, settings.exact.price_law,
+                               settings.game_constants(problem).C, np.array([minute - 1]))
+        line_prices, voltage_prices = (
+            prices[0] for prices in net_prices(problem, np.array([minute]), final_mw[None],
+                                               run.line_states(len(problem.limit))[None], weight)
+        )  # fmt: skip
     overflow = [overflow_kw(problem, row / 1000.0, minute).max(initial=0.0) > 0.0
                 for row in run.trajectory_kw]  # fmt: skip
     result = SnapshotResult(
@@ -187,6 +203,9 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         profile_source=problem.profile_source,
         stall_reason=run.stall_reason,
         rest_at=run.rest_round,
+        infeasible=run.infeasible,
+        line_price_eur_per_mwh=line_prices,
+        voltage_price_eur_per_mwh=voltage_prices,
     )
     # the yardstick: the DC-OPF without the tripped DGs
     remaining = without(problem, minute, [e.agent for e in faults.events if e.kind == "trip"])
@@ -196,6 +215,8 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         iterations=run.rounds,
         rounds=run.rounds,
         step_s=run.step_s,
+        step_source="given" if options.step_s is not None else "default",
+        horizon_reason=run.horizon_reason,
         paced=options.paced,
         phase_ticks=run.phase_ticks,
         loss=faults.loss,
@@ -223,19 +244,24 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
 
 def agents_text(s: dict) -> str:
     """What people read: set points against the DC-OPF and what the messages did."""
+    from popdispatch.report.text import limits_text
+
     lines = [
         f"minute {s['minute']}, demand {s['demand_kw']:.3f} kW: {s['dynamics']} dynamics, "
         f"{s['mode']} mode, by {s['agents']} agents ({s['graph']} graph)",
         f"network: loss {s['loss']:g}, delays up to {s['delay_max']} rounds, duplicates "
         f"{s['duplicate']:g}, noise {s['noise_kw']:g} kW, seed {s['seed']}"
         + (f"; rounds paced to {s['phase_ticks']} ticks per phase" if s["phase_ticks"] > 1 else ""),
-        f"status: {s['dynamics_status']} after {s['rounds']} rounds of {s['step_s']:g} s"
+        limits_text(s["limits"]),
+        f"status: {s['dynamics_status']} after {s['rounds']} rounds of {s['step_s']:.4g} s "
+        f"({s['step_source']} step)"
         + (
             f" (at rest from round {s['rest_iteration']})"
             if s["rest_iteration"] is not None
             else ""
         )
-        + (f"\nstalled: {s['stall_reason']}" if s["stall_reason"] else ""),
+        + (f"\nstalled: {s['stall_reason']}" if s["stall_reason"] else "")
+        + (f"\n{s['horizon_reason']}" if s["horizon_reason"] else ""),
         f"{'generator':>10} {'setpoint_kw':>12} {'opf_kw':>10}",
     ]
     for g in s["generators"]:
@@ -246,6 +272,7 @@ def agents_text(s: dict) -> str:
         "max |error| vs DC-OPF: "
         + ("null" if error is None else f"{error:.4f} kW")
         + f", max overflow {s['max_overflow_kw']:.4f} kW",
+        *_price_lines(s["line_prices"]),
         f"messages {s['messages']} ({s['lost']} lost, {s['messages_per_agent_round']:.2f} per "
         f"agent per round); imbalance: committed max {s['max_imbalance_w']:.3g} W, source bus "
         f"max {s['max_transient_w']:.3g} W, final {s['final_imbalance_w']:.3g} W, open "
@@ -255,6 +282,17 @@ def agents_text(s: dict) -> str:
     if abs(s["source_kw"]) > 0.0005:
         lines.append(f"source bus still carries {s['source_kw']:.3f} kW after the trips")
     return "\n".join(lines)
+
+
+def _price_lines(prices: list[dict] | None) -> list[str]:
+    """Each limited line's price at the end against the DC-OPF's dual (exact mode)."""
+    lines = []
+    for row in prices or ():
+        dual = row["opf_price_eur_per_mwh"]
+        lines.append(f"line {row['from_bus']}-{row['to_bus']}: price "
+                     f"{row['price_eur_per_mwh']:.4f} EUR/MWh (DC-OPF "
+                     + ("null" if dual is None else f"{dual:.4f}") + ")")  # fmt: skip
+    return lines
 
 
 def _event_text(e: dict) -> str:
