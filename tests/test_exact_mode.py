@@ -336,20 +336,11 @@ def _exact_run(problem, horizon: int = 200, law: PriceLaw = PriceLaw.PLAIN):
     iterations, evaluations per iteration, set points kW, tolerance kW)``."""
     settings = RunSettings(mode="exact", exact=ExactConstants(price_law=law))
     settings = replace(settings, integrator=replace(settings.stepping, max_iterations=horizon))
-    engine = Engine(problem, settings)
-    x = initial_shares(problem, "uniform", 1)
-    engine.warm_up(x, 1)
-    start = engine.evaluations
-    run = engine.run_minute(x, 1, record=False)
-    p_mw = run.x * problem.demand[0]
-    status = "not converged"
-    if run.status == Status.CONVERGED:
-        reason = engine.stall_reasons(np.array([1]), p_mw[None], engine.z[None],
-                                      np.array([True]))[0]  # fmt: skip
-        status = "converged" if reason is None else f"stalled: {reason}"
-    evaluations = (engine.evaluations - start) / run.iterations
+    run = run_snapshot(problem, 1, settings)
+    status = run.status if run.status != "stalled" else f"stalled: {run.stall_reason}"
+    evaluations = run.evaluations / max(run.iterations, 1)
     tol_kw = settings.stepping.tol_mw(float(problem.demand[0])) * 1e3
-    return status, run.iterations, evaluations, p_mw * 1e3, tol_kw
+    return status, run.iterations, evaluations, run.setpoints_kw, tol_kw
 
 
 @pytest.mark.parametrize("law", [PriceLaw.PLAIN, PriceLaw.SCALED], ids=["plain", "scaled"])
@@ -371,8 +362,8 @@ def test_every_case_converges_to_the_dc_opf_in_200_iterations(name, limits, buil
     assert status == "converged"
     assert iterations <= 200
     assert np.abs(p_kw - opf.p_kw).max() <= max(1e-6 * opf.demand_kw, 1e-3)
-    # the run's own tolerance: a converged state is within a few tolerances of the optimum
-    assert tol_kw == pytest.approx(max(1e-6 * opf.demand_kw, 1e-3 * 1e-3))
+    # the run stops at a tenth of the accuracy's floor or at its relative part
+    assert tol_kw == pytest.approx(max(1e-6 * opf.demand_kw, 1e-3 / 10))
 
 
 @pytest.mark.parametrize("law", list(PriceLaw))
@@ -437,7 +428,10 @@ def _nested_binding_pairs(problem, binding: np.ndarray) -> int:
 def test_convergence_tolerance_is_relative_to_demand_with_a_floor():
     stepping = RunSettings(mode="exact").stepping
     assert stepping.tol_mw(8.6) == pytest.approx(8.6e-6)
-    assert stepping.tol_mw(1e-4) == pytest.approx(1e-9)  # the floor, 1e-6 kW
+    assert stepping.tol_mw(1e-4) == pytest.approx(1e-7)  # the floor: a tenth of 0.001 kW
+    finer = RunSettings(mode="exact", accuracy_kw=1e-5, accuracy_rel=1e-8).stepping
+    assert finer.tol_mw(8.6) == pytest.approx(8.6e-8)
+    assert finer.tol_mw(1e-4) == pytest.approx(1e-9)
     floor = RunSettings(mode="exact", tol_floor_kw=0.01).stepping
     assert floor.tol_mw(1.0) == pytest.approx(1e-5)
     with pytest.raises(OptionError, match="tolerance floor"):

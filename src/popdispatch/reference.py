@@ -126,6 +126,17 @@ def weights(field: Field, x, lo, hi, active, rate=None):
     return share, share, np.full(len(x), np.inf), share
 
 
+def neighbourhood_weights(graph, rate, w, room, mass) -> np.ndarray:
+    """The curvature-scaled receiver weights on a communication graph: ``r_i / R_i``, ``R_i``
+    the rates of ``i``'s closed neighbourhood inside their limits (else with room)."""
+    closed = (graph + np.eye(len(w))) > 0
+    inside = closed @ np.where((room > 0) & (mass > 0), rate, 0.0)
+    receivers = closed @ np.where(room > 0, rate, 0.0)
+    total = np.where(inside > 0, inside, receivers)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(w > 0, rate / total, 0.0)
+
+
 def pair_flows(f, w, v, graph, mass=None, room=None):
     """``(inflow, outflow)``: ``T[i, j] = g_ij w_i v_j [f_i - f_j]_+`` plus the relay
     (:func:`relay_matrix`; ``mass``, ``room``: the movable masses and rooms that say who is
@@ -188,6 +199,8 @@ class ReferenceMinute:
             self.mode.code, x * self.demand, z, self.problem, self.minute, self.fp
         )
         w, v, room, mass = weights(self.field, x, self.lo, self.hi, self.active, self.rate)
+        if self.field == Field.CAPACITY_NEWTON and not (self.graph + np.eye(len(x)) > 0).all():
+            w = neighbourhood_weights(self.graph, self.rate, w, room, mass)
         inflow, outflow = pair_flows(f, w, v, self.graph, mass, room)
         return (f, w, v, room, mass, inflow, outflow, z_rate), congestion, residual
 

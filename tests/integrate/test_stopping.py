@@ -133,7 +133,7 @@ def test_exact_mode_stops_only_with_every_residual_of_the_last_window_within_tol
     demand_mw = float(congested.demand[PEAK_MINUTE - 1])
     steps, window = outcome.iterations, integrator.window
     tol_kw = integrator.tol_mw(demand_mw) * 1000.0
-    assert tol_kw == pytest.approx(1e-6 * demand_mw * 1000.0)
+    assert tol_kw == pytest.approx(max(1e-6 * demand_mw * 1000.0, 1e-4))
     assert outcome.status == Status.CONVERGED
     assert 0 <= outcome.converged_at == steps - window and outcome.first_congestion >= 1
     assert steps >= 3 * window  # the extrapolating rule needs three windows

@@ -24,7 +24,8 @@ import numba as nb
 from numba.extending import overload
 
 from popdispatch.dynamics.capacity import capacity_smith_weights
-from popdispatch.dynamics.newton import newton_weights
+from popdispatch.dynamics.newton import neighbourhood_receivers, newton_weights
+from popdispatch.dynamics.pairwise import SparseGraph
 from popdispatch.dynamics.replicator import replicator_weights
 from popdispatch.dynamics.smith import smith_weights
 
@@ -151,3 +152,27 @@ def _weights(tag, x, lo, hi, active, rate, w, v, room, mass):
             mass[i] = v[i]
 
     return impl
+
+
+def local_receivers(tag, graph, rate, w, room, mass):
+    """On a communication graph, the curvature-scaled field's receiver weights normalised by
+    each receiver's own neighbourhood (:func:`~popdispatch.dynamics.newton.
+    neighbourhood_receivers`); nothing for any other field or graph. Compiled code only."""
+    raise TypeError("local_receivers() runs in compiled code only")
+
+
+@overload(local_receivers, inline="always")
+def _local_receivers(tag, graph, rate, w, room, mass):
+    field_cls = getattr(tag, "instance_class", None)
+    graph_cls = getattr(graph, "instance_class", None)
+    if field_cls is CapacityNewtonTag and graph_cls is SparseGraph:
+
+        def local(tag, graph, rate, w, room, mass):
+            neighbourhood_receivers(graph.indptr, graph.indices, rate, w, room, mass)
+
+        return local
+
+    def nothing(tag, graph, rate, w, room, mass):
+        pass
+
+    return nothing

@@ -24,6 +24,11 @@ fitter and one at ``lo`` less fit than them (the KKT conditions, docs/exact-mode
 
 A linear generator (``c = 0``) has no curvature to scale by: its rate is capped at
 :data:`RATE_CAP` (:func:`revision_rates`).
+
+On a communication graph no generator knows ``R``: each receiver normalises by its own closed
+neighbourhood instead, ``w_i = r_i / R_i`` with ``R_i`` the rates of ``i`` and its neighbours
+inside their limits (:func:`neighbourhood_receivers`); on the complete graph that is ``R``.
+The weights stay positive, so the rest points are unchanged.
 """
 
 from __future__ import annotations
@@ -85,3 +90,22 @@ def newton_weights(x, lo, hi, active, rate, w, v, room, mass):
     for i in range(x.shape[0]):
         w[i] = rate[i] / total if room[i] > 0.0 else 0.0
         v[i] = rate[i] if mass[i] > 0.0 else 0.0
+
+
+@nb.njit(cache=True)
+def neighbourhood_receivers(indptr, indices, rate, w, room, mass):
+    """Receiver weights ``r_i / R_i`` (in place, where ``w > 0``) with ``R_i`` the rates of
+    generator ``i`` and its neighbours in the graph of CSR adjacency ``indptr``, ``indices``
+    that are strictly inside their limits (room and movable mass), else of those with room."""
+    for i in range(w.shape[0]):
+        if w[i] <= 0.0:
+            continue
+        inside = rate[i] if mass[i] > 0.0 else 0.0
+        receivers = rate[i]
+        for e in range(indptr[i], indptr[i + 1]):
+            j = indices[e]
+            if room[j] > 0.0:
+                receivers += rate[j]
+                if mass[j] > 0.0:
+                    inside += rate[j]
+        w[i] = rate[i] / (inside if inside > 0.0 else receivers)

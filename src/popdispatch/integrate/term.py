@@ -15,7 +15,7 @@ import numba as nb
 import numpy as np
 from numba.extending import overload
 
-from popdispatch.dynamics.fields import Field, FieldTag, field_tag, weights
+from popdispatch.dynamics.fields import Field, FieldTag, field_tag, local_receivers, weights
 from popdispatch.dynamics.pairwise import (
     CompleteGraph,
     Graph,
@@ -148,6 +148,7 @@ def evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term,
     weights(term.field, x, minute.lo, minute.hi, minute.active, params.revision_rate, w, v, room,
             mass)  # fmt: skip
     graph = term.graph
+    local_receivers(term.field, graph, params.revision_rate, w, room, mass)
     sort_for(graph, f, order)
     graph_flows_of(graph, f, w, v, mass, room, order, inflow, outflow)
     return congestion, residual

@@ -196,8 +196,17 @@ class RunSettings:
     @property
     def stepping(self) -> Integrator:
         """The integrator in force: the given one, else the mode's default, with
-        ``tol_floor_kw`` as its ``tol_kw`` when given."""
-        integrator = self.integrator or get_mode(self.mode).integrator
+        ``tol_floor_kw`` as its ``tol_kw`` when given. The default integrator of a mode that
+        claims the DC-OPF stops at a tenth of the accuracy's floor and at the accuracy's
+        relative part, ``max(accuracy_rel P_d, accuracy_kw / 10)``: a minute at rest within
+        that is what the certificate then proves."""
+        integrator = self.integrator
+        if integrator is None:
+            mode = get_mode(self.mode)
+            integrator = mode.integrator
+            if mode.claims_dc_opf:
+                integrator = replace(integrator, tol_kw=self.accuracy_kw / 10.0,
+                                     tol_rel=self.accuracy_rel)  # fmt: skip
         if self.tol_floor_kw is None:
             return integrator
         return replace(integrator, tol_kw=float(self.tol_floor_kw))
