@@ -260,7 +260,7 @@ def _ac_correct_day_text(c: dict) -> str:
     return (
         f"\nAC-corrected ({c['status']}): {c['converged_steps']} of {c['steps']} steps "
         f"converged, {c['settled_steps']} settled (model within {c['tolerance_pu']:g} p.u. of "
-        f"AC); per step median {c['rounds_per_step_median']:g} rounds (at most "
+        f"AC); per step (median): {c['rounds_per_step_median']:g} rounds (at most "
         f"{c['rounds_per_step_max']}), {c['power_flows_per_step_median']:g} AC power flows, "
         f"{c['seconds_per_step_median']:.3f} s; losses {c['losses_kwh']:.3f} kWh; cost "
         f"{c['cost_eur']:.6f} EUR with the losses"
