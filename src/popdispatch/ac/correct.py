@@ -37,6 +37,7 @@ from popdispatch.ac.check import ACDay, ACFlows, ACSnapshot, power_flow, snapsho
 from popdispatch.ac.limits import limits_summary
 from popdispatch.ac.network import ACNetwork, build_network
 from popdispatch.constants import KW_PER_MW
+from popdispatch.errors import OptionError
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.online import RunSettings
 from popdispatch.scenarios import SnapshotComparison, snapshot_vs_opf
@@ -243,6 +244,9 @@ def ac_correct(
     corrected model's voltages at the dispatch are within this of the AC ones and the AC
     voltages within this of the limits (p.u., :func:`settled`);
     ``model_options``: of the AC model (:func:`popdispatch.ac.check_setpoints`)."""
+    if rounds < 1 or not tol_pu > 0.0:
+        raise OptionError(f"the AC correction needs rounds >= 1 and tol_pu > 0 (got {rounds}, "
+                          f"{tol_pu})", "--ac-correct")  # fmt: skip
     loads = np.asarray(load_kw, dtype=float).reshape(-1)
     meter, rows = Meter(problem, **model_options), Rows(problem)
     corrections = Corrections.none(problem)

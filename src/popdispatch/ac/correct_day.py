@@ -41,6 +41,7 @@ from popdispatch.ac.correct import (
 )
 from popdispatch.ac.limits import limits_summary, miss_columns
 from popdispatch.constants import KW_PER_MW
+from popdispatch.errors import OptionError
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import Status
 from popdispatch.online import Engine, RunSettings, _verdicts, initial_shares
@@ -100,7 +101,8 @@ class CorrectedDay:
         return "stalled" if (status == "stalled").any() else "not_converged"
 
     def summary(self, step_hours: np.ndarray | None = None) -> dict:
-        """The day's ``ac_correct`` JSON object: the status and step counts, the cost of the
+        """The day's ``ac_correct`` JSON object: the status and step counts (the steps whose
+        corrected problem is infeasible in ``infeasible_minutes``), the cost of the
         loop per step (rounds, AC power flows, seconds: median and largest), the worst model
         error and certificate bound, the AC extremes, losses and source supply (kWh) and cost
         (EUR; ``step_hours``: each step's duration, h, default one minute) of the corrected
@@ -113,6 +115,7 @@ class CorrectedDay:
             "status": self.status,
             "steps": len(s),
             "converged_steps": int((s["status"] == "converged").sum()),
+            "infeasible_minutes": [int(m) for m in s.index[s["status"] == "infeasible"]],
             "settled_steps": int(s["settled"].sum()),
             "tolerance_pu": self.tolerance_pu,
             "max_rounds": self.max_rounds,
@@ -174,6 +177,9 @@ def ac_correct_day(
 
     settings = settings or RunSettings()
     check_voltage(problem, settings)
+    if rounds < 1 or not tol_pu > 0.0:
+        raise OptionError(f"the AC correction needs rounds >= 1 and tol_pu > 0 (got {rounds}, "
+                          f"{tol_pu})", "--ac-correct")  # fmt: skip
     minutes = np.arange(1, len(problem.demand) + 1) if minutes is None else np.asarray(minutes)
     minutes = minutes.astype(np.int64)
     loads = np.atleast_2d(np.asarray(load_kw, dtype=float))

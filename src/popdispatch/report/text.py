@@ -263,8 +263,18 @@ def _ac_correct_day_text(c: dict) -> str:
         f"AC); per step (median): {c['rounds_per_step_median']:g} rounds (at most "
         f"{c['rounds_per_step_max']}), {c['power_flows_per_step_median']:g} AC power flows, "
         f"{c['seconds_per_step_median']:.3f} s; losses {c['losses_kwh']:.3f} kWh; cost "
-        f"{c['cost_eur']:.6f} EUR with the losses"
+        f"{c['cost_eur']:.6f} EUR with the losses{_corrected_infeasible(c)}"
     ) + voltage_limits_text(c.get("voltage_limits"), "AC-corrected: AC voltages")
+
+
+def _corrected_infeasible(c: dict) -> str:
+    """The steps whose corrected problem is infeasible (their voltage limits out of reach
+    with the AC offsets), where there are any."""
+    steps = c.get("infeasible_minutes") or []
+    if not steps:
+        return ""
+    shown = ", ".join(str(m) for m in steps[:10]) + (", ..." if len(steps) > 10 else "")
+    return f"; infeasible with the AC corrections at {len(steps)} steps ({shown})"
 
 
 def voltage_limits_text(lim: dict | None, label: str = "AC voltages") -> str:
