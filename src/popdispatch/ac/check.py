@@ -81,6 +81,11 @@ class ACFlows:
     source_kw: np.ndarray
     source_kvar: np.ndarray
 
+    def first(self) -> ACFlows:
+        """The first step alone."""
+        return ACFlows(self.network, self.v[:, :1], self.current[:, :1], self.source_kw[:1],
+                       self.source_kvar[:1])  # fmt: skip
+
     @cached_property
     def v_pu(self) -> np.ndarray:
         return np.abs(self.v).T

@@ -1,11 +1,15 @@
-"""``--ac``, ``--html``, ``--vmin`` and ``--vmax`` on ``snapshot`` and ``day``: the AC check of
-the dispatch (:mod:`popdispatch.ac`), the interactive report
-(:mod:`popdispatch.report.interactive`) and the voltage limits (docs/voltage.md: the voltage
-mode, its problem's voltage rows and the ``voltage`` JSON object).
+"""``--ac``, ``--html``, ``--vmin``, ``--vmax`` and ``--ac-correct`` on ``snapshot`` and ``day``:
+the AC check of the dispatch (:mod:`popdispatch.ac`), the interactive report
+(:mod:`popdispatch.report.interactive`), the voltage limits (docs/voltage.md: the voltage
+mode, its problem's voltage rows and the ``voltage`` JSON object) and the AC-corrected dispatch
+(:mod:`popdispatch.ac.correct`, :mod:`popdispatch.ac.correct_day`).
 
-Both are checked before any work (the optional extra installed, the report's folder writable)
+They are checked before any work (the optional extra installed, the report's folder writable)
 and run after the dynamics; the AC check's summary goes under the ``ac`` key of the command's
-JSON, its per-step columns into ``day.csv``, its bus voltages onto the report's map.
+JSON, its per-step columns into ``day.csv``, its bus voltages onto the report's map. With
+voltage limits every AC power flow says whether its voltages keep them and by how much they
+miss (:mod:`popdispatch.ac.limits`: ``voltage_limits`` in the ``ac`` and ``ac_correct``
+objects, ``below_vmin_pu``/``above_vmax_pu`` per step in ``day.csv``).
 """
 
 from __future__ import annotations
@@ -70,12 +74,6 @@ def analysis_options(func):
 
     @functools.wraps(func)
     def command(*args, ac, vn_kv, html, vmin, vmax, ac_correct, **kwargs):
-        if ac_correct and click.get_current_context().info_name != "snapshot":
-            raise click.BadParameter(
-                "runs on snapshot only: a day's loss factors would change the generators' "
-                "costs step by step, which the day loop holds fixed (docs/voltage.md)",
-                param_hint="'--ac-correct'",
-            )
         if ac_correct and vmin is None and vmax is None:
             raise click.BadParameter("needs --vmin or --vmax", param_hint="'--ac-correct'")
         analyses = Analyses(ac or vn_kv is not None or ac_correct, vn_kv, html, vmin, vmax,
@@ -113,9 +111,10 @@ def analysis_options(func):
         click.option(
             "--ac-correct",
             is_flag=True,
-            help="snapshot with --vmin/--vmax: rerun the voltage-aware dispatch with voltage "
-            "offsets and loss factors from AC power flows until they settle (implies --ac; "
-            "reported under ac_correct).",
+            help="With --vmin/--vmax: rerun the voltage-aware dispatch (each step of a day, "
+            "from the step before) with voltage offsets and loss factors from AC power flows "
+            "until its model voltages equal the AC ones within 1e-5 p.u. (implies --ac; "
+            "reported under ac_correct, per step in day.csv's ac_correct_* columns).",
         ),
     ]
     for decorate in reversed(decorators):
@@ -155,6 +154,7 @@ def snapshot_analyses(analyses, problem, profiles, result, summary: dict, progre
         with progress.step("AC power flow of the dispatch"):
             ac = check_snapshot(problem, profiles, result, **analyses.model_options())
         summary["ac"] = ac.summary()
+        _limits(problem, ac.totals.to_frame().T, summary["ac"])
     if problem.n_voltage:
         run = result.run
         summary["voltage"] = _voltage(problem, [run.minute], run.setpoints_kw, [result.opf],
@@ -183,8 +183,8 @@ def day_analyses(analyses, problem, profiles, result, summary: dict, progress: P
 
         with progress.step(f"AC power flows of {len(result.run.minutes)} steps"):
             ac = check_day(problem, profiles, result, **analyses.model_options())
-        hours = profiles.timeline.hours[ac.steps.index.to_numpy() - 1]
-        summary["ac"] = ac.summary(hours)
+        summary["ac"] = ac.summary(_hours(profiles, ac.steps.index))
+        _limits(problem, ac.steps, summary["ac"])
     if problem.n_voltage:
         run = result.run
         summary["voltage"] = _voltage(problem, run.minutes, run.setpoints_kw, result.opf,
@@ -197,13 +197,40 @@ def day_analyses(analyses, problem, profiles, result, summary: dict, progress: P
         with progress.step(f"writing {analyses.html}"):
             write_day_html(analyses.html, result, problem, profiles, run_info=summary,
                            voltages_pu=voltages)  # fmt: skip
-    steps = None if ac is None else ac.steps
+    steps = None if ac is None else ac.steps.join(_misses(problem, ac.steps))
     if problem.n_voltage:
         from popdispatch.ac.report import voltage_columns
 
         columns = voltage_columns(problem, result.run.minutes, result.run.setpoints_kw)
         steps = columns if steps is None else steps.join(columns)
+    if analyses.ac_correct:
+        corrected = _corrected_day(analyses, problem, profiles, result, progress)
+        summary["ac_correct"] = corrected.summary(_hours(profiles, corrected.steps.index))
+        steps = steps.join(corrected.columns())
     return steps
+
+
+def _hours(profiles, minutes):
+    """Each step's duration, h (the series' timeline)."""
+    return profiles.timeline.hours[minutes.to_numpy() - 1]
+
+
+def _limits(problem, steps, ac: dict) -> None:
+    """With voltage limits, the ``voltage_limits`` verdict of the AC voltages into ``ac``
+    (:func:`popdispatch.ac.limits.limits_summary`)."""
+    from popdispatch.ac.limits import has_bounds, limits_summary
+
+    if has_bounds(problem.vmin_pu, problem.vmax_pu):
+        ac["voltage_limits"] = limits_summary(steps, problem.vmin_pu, problem.vmax_pu)
+
+
+def _misses(problem, steps):
+    """Per step, the AC voltages' misses of the limits (none without limits)."""
+    from popdispatch.ac.limits import has_bounds, miss_columns
+
+    if not has_bounds(problem.vmin_pu, problem.vmax_pu):
+        return steps[[]]
+    return miss_columns(steps, problem.vmin_pu, problem.vmax_pu)
 
 
 def _voltage(problem, minutes, p_kw, opf, ac_v_min_pu: float | None, prices=None) -> dict:
@@ -233,3 +260,16 @@ def _corrected(analyses, problem, profiles, result, progress: Progress) -> dict:
     if problem.vmin_pu > 0.0:
         out["below_vmin_pu"] = max(problem.vmin_pu - out["ac_v_min_pu"], 0.0)
     return out
+
+
+def _corrected_day(analyses, problem, profiles, result, progress: Progress):
+    """The AC-corrected dispatch of every step of a day run
+    (:func:`popdispatch.ac.correct_day.ac_correct_day`)."""
+    from popdispatch.ac.check import minute_loads
+    from popdispatch.ac.correct_day import ac_correct_day
+
+    run = result.run
+    loads = minute_loads(problem.feeder.original, profiles, run.minutes)
+    with progress.counter("AC-corrected day", len(run.minutes)) as advance:
+        return ac_correct_day(problem, loads, run.minutes, run.settings, progress=advance,
+                              **analyses.model_options())  # fmt: skip

@@ -236,21 +236,69 @@ def voltage_text(v: dict | None) -> str:
 
 
 def ac_correct_text(c: dict | None) -> str:
-    """The ``--ac-correct`` line: rounds, AC minimum voltage, cost; empty without."""
+    """The ``--ac-correct`` lines: rounds, AC minimum voltage, cost, whether the AC voltages
+    keep the limits; a day's: its status and the loop's cost per step; empty without."""
     if not c:
         return ""
+    if "steps" in c:
+        return _ac_correct_day_text(c)
     points = ", ".join(f"{g} {kw:.3f}" for g, kw in c["setpoints_kw"].items())
     return (
         f"\nAC-corrected ({c['rounds']} rounds, {c['status']}): {points} kW; AC voltage "
         f"{c['ac_v_min_pu']:.6f} p.u. (bus {c['ac_v_min_bus']}) and up; losses "
         f"{c['losses_kw']:.3f} kW; cost {c['cost_eur_per_h']:.6f} EUR/h with the losses"
-    )
+    ) + voltage_limits_text(c.get("voltage_limits"), "AC-corrected: AC voltages")
+
+
+def _ac_correct_day_text(c: dict) -> str:
+    return (
+        f"\nAC-corrected ({c['status']}): {c['converged_steps']} of {c['steps']} steps "
+        f"converged, {c['settled_steps']} settled (model within {c['tolerance_pu']:g} p.u. of "
+        f"AC); per step (median): {c['rounds_per_step_median']:g} rounds (at most "
+        f"{c['rounds_per_step_max']}), {c['power_flows_per_step_median']:g} AC power flows, "
+        f"{c['seconds_per_step_median']:.3f} s; losses {c['losses_kwh']:.3f} kWh; cost "
+        f"{c['cost_eur']:.6f} EUR with the losses{_corrected_infeasible(c)}"
+    ) + voltage_limits_text(c.get("voltage_limits"), "AC-corrected: AC voltages")
+
+
+def _corrected_infeasible(c: dict) -> str:
+    """The steps whose corrected problem is infeasible (their voltage limits out of reach
+    with the AC offsets), where there are any."""
+    steps = c.get("infeasible_minutes") or []
+    if not steps:
+        return ""
+    shown = ", ".join(str(m) for m in steps[:10]) + (", ..." if len(steps) > 10 else "")
+    return f"; infeasible with the AC corrections at {len(steps)} steps ({shown})"
+
+
+def voltage_limits_text(lim: dict | None, label: str = "AC voltages") -> str:
+    """Whether AC voltages keep the voltage limits and by how much they miss
+    (:func:`popdispatch.ac.limits.limits_summary`'s object); empty without limits."""
+    if not lim:
+        return ""
+    several = lim["steps"] > 1
+    parts = []
+    for bound, key, side in (("vmin", "below_vmin", "below"), ("vmax", "above_vmax", "above")):
+        limit, miss = lim[f"{bound}_pu"], lim[f"{key}_pu"]
+        if limit is None:
+            continue
+        if not miss > 0.0:
+            parts.append(f"{bound} {limit:g} kept")
+            continue
+        where = f"bus {lim[f'{key}_bus']}" + (f", minute {lim[f'{key}_minute']}" if several else "")
+        parts.append(f"{'up to ' if several else ''}{miss:.2g} p.u. {side} {bound} {limit:g} "
+                     f"({where})")  # fmt: skip
+    verdict = "keep the limits" if lim["kept"] else "miss the limits"
+    if not lim["kept"] and several:
+        verdict += f" at {lim['steps_outside']} of {lim['steps']} steps"
+    return f"\n{label} {verdict} (tolerance {lim['tolerance_pu']:g} p.u.): {'; '.join(parts)}"
 
 
 def snapshot_text(s: dict) -> str:
     """``popdispatch snapshot``."""
     extra = voltage_text(s.get("voltage")) + ac_correct_text(s.get("ac_correct"))
-    return _yardstick(s, _snapshot_text(s)) + ac_text(s.get("ac")) + extra
+    ac = ac_text(s.get("ac")) + voltage_limits_text((s.get("ac") or {}).get("voltage_limits"))
+    return _yardstick(s, _snapshot_text(s)) + ac + extra
 
 
 def _snapshot_text(s: dict) -> str:
@@ -361,7 +409,9 @@ def day_text(s: dict) -> str:
         outcome = [line.replace(" minute", " step") for line in outcome]
     head = f"{_span(s)}: {s['dynamics']} dynamics, {s['mode']} mode"
     body = "\n".join([head, _inputs(s), events_text(s.get("events", [])), *outcome])
-    return _yardstick(s, body) + ac_text(s.get("ac")) + voltage_text(s.get("voltage"))
+    ac = ac_text(s.get("ac")) + voltage_limits_text((s.get("ac") or {}).get("voltage_limits"))
+    extra = voltage_text(s.get("voltage")) + ac_correct_text(s.get("ac_correct"))
+    return _yardstick(s, body) + ac + extra
 
 
 def _day_proof(s: dict) -> str:
