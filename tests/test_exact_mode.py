@@ -18,7 +18,6 @@ from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.parameters import PriceLaw
 from popdispatch.game.problem import build_problem
-from popdispatch.integrate import Status
 from popdispatch.modes.exact import ExactConstants, scales
 from popdispatch.online import Engine, RunSettings, initial_shares, run_snapshot
 from popdispatch.opf import generation_cost, solve_opf
@@ -47,7 +46,6 @@ def test_minute_566_lands_on_dc_opf_within_100_iterations(limit_kw, x0):
 def test_congestion_prices_match_the_opf_duals():
     """The congestion price a controller ends with is the DC-OPF's line dual."""
     problem = elv_problem(limits=[(505, 666, 28.0)])
-    from popdispatch.online import Engine, initial_shares
 
     engine = Engine(problem, EXACT)
     engine.run_minute(initial_shares(problem, "uniform", 566), 566)

@@ -44,7 +44,7 @@ from popdispatch.constants import KW_PER_MW
 from popdispatch.errors import OptionError
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import Status
-from popdispatch.online import Engine, RunSettings, _verdicts, initial_shares
+from popdispatch.online import Engine, RunSettings, initial_shares, verdicts
 from popdispatch.online.day import DayArrays
 
 #: Per-step columns of :attr:`CorrectedDay.steps` besides the AC check's (units in the names).
@@ -229,7 +229,7 @@ class _Stepper:
             done_now = settled(error, miss, self.tol_pu)
             if done_now or done == self.rounds or status == Status.INFEASIBLE:
                 break
-        verdict = _verdicts(engine, np.array([minute]), p_mw[None], self.z[None],
+        verdict = verdicts(engine, np.array([minute]), p_mw[None], self.z[None],
                             np.array([status == Status.CONVERGED]),
                             np.array([status == Status.INFEASIBLE]))  # fmt: skip
         p_kw = p_mw * KW_PER_MW

@@ -121,7 +121,7 @@ def run_snapshot(
     flows = limited_flows_mw(problem, final, minute)
     rested = run.status == Status.CONVERGED
     infeasible = np.array([run.status == Status.INFEASIBLE])
-    verdict = _verdicts(engine, np.array([minute]), final[None], engine.z[None],
+    verdict = verdicts(engine, np.array([minute]), final[None], engine.z[None],
                         np.array([rested]), infeasible)  # fmt: skip
     certified, reason = bool(verdict.certified[0]), verdict.reasons[0]
     line_price, voltage_price = _prices(engine, np.array([minute]), final[None], engine.z[None])
@@ -177,7 +177,7 @@ def _run_until_proved(engine: Engine, x: np.ndarray, minute: int) -> MinuteRun:
 
 
 @dataclass(frozen=True)
-class _Verdict:
+class Verdict:
     """Per minute: proved within the accuracy (``certified``), why a minute at rest is not
     (``reasons``), the bound and the accuracy (kW; ``None`` in paper mode)."""
 
@@ -187,21 +187,21 @@ class _Verdict:
     accuracy_kw: np.ndarray | None
 
 
-def _verdicts(
+def verdicts(
     engine: Engine,
     minutes: np.ndarray,
     p_mw: np.ndarray,
     z: np.ndarray,
     rested: np.ndarray,
     infeasible: np.ndarray,
-) -> _Verdict:
+) -> Verdict:
     """Each minute's verdict: in a mode that claims the DC-OPF, certified when the distance
     certificate proves the accuracy (and the run was not infeasible); a minute at rest that
     is not certified gets the reason (a failing KKT condition, else the bound). Paper mode:
     certified means at rest."""
     certificates = engine.certificates(minutes, p_mw, z)
     if certificates is None:
-        return _Verdict(rested & ~infeasible, [None] * len(minutes), None, None)
+        return Verdict(rested & ~infeasible, [None] * len(minutes), None, None)
     bound = np.array([c.distance_mw for c in certificates]) * KW_PER_MW
     demand = engine.problem.demand[np.asarray(minutes) - 1]
     accuracy = np.atleast_1d(engine.settings.accuracy_mw(demand)) * KW_PER_MW
@@ -215,7 +215,7 @@ def _verdicts(
                 f"the distance to the DC-OPF is bounded only by {bound[r]:.3g} kW, above the "
                 f"accuracy {accuracy[r]:.3g} kW" + (f" ({why})" if why else "")
             )
-    return _Verdict(certified, reasons, bound, accuracy)
+    return Verdict(certified, reasons, bound, accuracy)
 
 
 def _prices(
@@ -324,7 +324,7 @@ def run_day(
     online = problem.online[minutes - 1]
     rested = out.status == Status.CONVERGED
     infeasible = out.status == Status.INFEASIBLE
-    verdict = _verdicts(engine, minutes, setpoints, out.states, rested, infeasible)
+    verdict = verdicts(engine, minutes, setpoints, out.states, rested, infeasible)
     reasons = verdict.reasons
     stalled = np.array([r is not None for r in reasons], dtype=bool)
     line_price, voltage_price = _prices(engine, minutes, setpoints, out.states)
@@ -361,10 +361,12 @@ __all__ = [
     "MinuteRun",
     "RunSettings",
     "SnapshotResult",
+    "Verdict",
     "initial_shares",
     "kkt_violations",
     "limited_flows_mw",
     "overflow_kw",
     "run_day",
     "run_snapshot",
+    "verdicts",
 ]
