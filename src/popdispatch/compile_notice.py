@@ -79,8 +79,7 @@ def run_classes(settings: RunSettings) -> set[type] | None:
     from popdispatch.dynamics.fields import field_tag
     from popdispatch.dynamics.pairwise import CompleteGraph, SparseGraph
     from popdispatch.integrate.steppers import method_tag
-    from popdispatch.modes import get_mode
-    from popdispatch.modes.mechanism import mode_tag
+    from popdispatch.modes import get_mode, mode_tag
     from popdispatch.warm_start import WARM_STARTS, start_tag
 
     mode = get_mode(settings.mode)

@@ -13,11 +13,11 @@ from popdispatch.dynamics.fields import Field
 from popdispatch.game.parameters import GameParameters, MinuteInputs
 from popdispatch.integrate import Term, workspace
 from popdispatch.integrate.steppers import euler_steps, heun_combination
-from popdispatch.modes import ModeCode
+from popdispatch.modes import ModeCode, mode_tag
 
 EMPTY = np.zeros(0, dtype=np.int64)
 #: The term of a complete graph (field and mode are not read by the stages).
-RULES = Term.of(Field.SMITH, ModeCode.PAPER, True, EMPTY, EMPTY)
+RULES = Term.of(Field.SMITH, mode_tag(ModeCode.PAPER), True, EMPTY, EMPTY)
 
 
 # --- flux-limited stages on hand-made states -------------------------------------------------

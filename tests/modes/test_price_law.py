@@ -86,7 +86,8 @@ def test_run_settings_carry_the_law_to_the_engine(problem):
     """``RunSettings.exact.price_law`` reaches the engine as its term's compile-time mode
     record (a choice of kernel, so a run compiles only its own law); paper mode has no line
     prices and keeps its record."""
-    from popdispatch.modes.mechanism import ExactTag, ExactTreeTag, PaperTag
+    from popdispatch.modes.exact import ExactTag, ExactTreeTag
+    from popdispatch.modes.paper import PaperTag
     from popdispatch.online import Engine, RunSettings
 
     tree = Engine(problem, RunSettings(mode="exact", exact=ExactConstants(price_law="tree")))

@@ -63,7 +63,7 @@ def test_scaled_rates_equal_the_dense_preconditioner(problem, seed):
 
 
 def test_the_engine_compiles_the_scaled_kernel_by_its_name(problem):
-    from popdispatch.modes.mechanism import ExactScaledTag
+    from popdispatch.modes.exact import ExactScaledTag
     from popdispatch.online import Engine, RunSettings
 
     assert ExactConstants(price_law="SCALED").price_law is PriceLaw.SCALED
@@ -75,8 +75,7 @@ def test_voltage_mode_refuses_the_scaled_law():
     """Voltage mode has no scaled kernel: asking for one is an option error, not a silent
     plain law."""
     from popdispatch.errors import OptionError
-    from popdispatch.modes import ModeCode
-    from popdispatch.modes.mechanism import mode_tag
+    from popdispatch.modes import ModeCode, mode_tag
 
     with pytest.raises(OptionError, match="exact mode only"):
         mode_tag(ModeCode.VOLTAGE, PriceLaw.SCALED)

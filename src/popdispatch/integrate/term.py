@@ -23,19 +23,6 @@ from popdispatch.dynamics.pairwise import (
     graph_of,
     sort_for,
 )
-from popdispatch.game.parameters import PriceLaw
-from popdispatch.modes import ModeCode, exact, voltage
-from popdispatch.modes.mechanism import (
-    ExactScaledTag,
-    ExactTag,
-    ExactTreeTag,
-    ModeTag,
-    PaperTag,
-    VoltageTag,
-    VoltageTreeTag,
-    mode_tag,
-)
-from popdispatch.modes.paper import payoff as paper_payoff
 
 
 class Term(NamedTuple):
@@ -52,16 +39,15 @@ class Term(NamedTuple):
     """
 
     field: FieldTag
-    mode: ModeTag
+    mode: tuple  # a ModeTag record: its class carries the payoff kernel
     graph: Graph
 
     @classmethod
-    def of(cls, field: Field, mode: ModeCode, complete: bool, indptr, indices,
-           price_law: PriceLaw = PriceLaw.PLAIN) -> Term:  # fmt: skip
-        """The term of ``field`` and ``mode`` (with exact mode's ``price_law``) on the
-        complete graph, else on the graph of CSR adjacency ``indptr``, ``indices``."""
-        return cls(field_tag(field), mode_tag(mode, price_law),
-                   graph_of(complete, indptr, indices))  # fmt: skip
+    def of(cls, field: Field, mode, complete: bool, indptr, indices) -> Term:
+        """The term of ``field`` and the mode's record ``mode`` (a
+        :class:`~popdispatch.modes.mechanism.ModeTag`: :func:`popdispatch.modes.mode_tag`) on
+        the complete graph, else on the graph of CSR adjacency ``indptr``, ``indices``."""
+        return cls(field_tag(field), mode, graph_of(complete, indptr, indices))
 
     @property
     def complete(self) -> bool:
@@ -69,14 +55,6 @@ class Term(NamedTuple):
         return isinstance(self.graph, CompleteGraph)
 
 
-_PAYOFFS = {
-    PaperTag: paper_payoff,
-    ExactTag: exact.payoff,
-    VoltageTag: voltage.payoff,
-    ExactTreeTag: exact.tree_payoff,
-    VoltageTreeTag: voltage.tree_payoff,
-    ExactScaledTag: exact.scaled_payoff,
-}
 
 
 def payoff(mode, p, z, params, minute, work, f, z_rate):
@@ -89,7 +67,7 @@ def payoff(mode, p, z, params, minute, work, f, z_rate):
 
 @overload(payoff, inline="always")
 def _payoff(mode, p, z, params, minute, work, f, z_rate):
-    kernel = _PAYOFFS.get(getattr(mode, "instance_class", None))
+    kernel = getattr(getattr(mode, "instance_class", None), "kernel", None)
     if kernel is None:
         return None
 

@@ -13,19 +13,44 @@ defaults. All modes take the same arguments
 :class:`~popdispatch.game.parameters.MinuteInputs`), so the integrator and the dynamics never
 depend on the mode.
 
-Adding a mode: a module here with ``payoff`` and ``MODE``, a :class:`ModeCode` member, an entry
-in :data:`MODES`, a :class:`~popdispatch.modes.mechanism.ModeTag` class and its kernel in
-:data:`popdispatch.integrate.term._PAYOFFS`. The tag's class picks the kernel when numba
-compiles: a static dispatch that numba caches on disk (a kernel taking a function argument
-recompiles in every process) and that compiles a run's own mode only.
+Adding a mode: a module here with its compiled ``payoff``, its ``MODE`` record and a
+:class:`~popdispatch.modes.mechanism.ModeTag` subclass carrying the kernel (``kernel =
+staticmethod(payoff)``); a :class:`ModeCode` member; its entry in :data:`MODES` and in
+:data:`TAGS`. The tag's class picks the kernel when numba compiles: a static dispatch that
+numba caches on disk (a kernel taking a function argument recompiles in every process) and
+that compiles a run's own mode only. Nothing outside this package changes.
 """
 
 from __future__ import annotations
 
+from popdispatch.game.parameters import PriceLaw
 from popdispatch.modes import exact, paper, voltage
-from popdispatch.modes.mechanism import Mode, ModeCode
+from popdispatch.modes.mechanism import Mode, ModeCode, ModeTag
 
 MODES = {mode.name: mode for mode in (paper.MODE, exact.MODE, voltage.MODE)}
+
+#: Each mode's tag classes by price law (the plain law's for a law the mode does not know).
+TAGS: dict[ModeCode, dict[PriceLaw, type]] = {
+    ModeCode.PAPER: {PriceLaw.PLAIN: paper.PaperTag},
+    ModeCode.EXACT: {PriceLaw.PLAIN: exact.ExactTag, PriceLaw.TREE: exact.ExactTreeTag,
+                     PriceLaw.SCALED: exact.ExactScaledTag},
+    ModeCode.VOLTAGE: {PriceLaw.PLAIN: voltage.VoltageTag, PriceLaw.TREE: voltage.VoltageTreeTag},
+}  # fmt: skip
+
+
+def mode_tag(code: ModeCode, price_law: PriceLaw = PriceLaw.PLAIN) -> ModeTag:
+    """The compile-time record of the mode ``code`` with exact mode's line-price law (a
+    choice of kernel, so a run compiles only its own law; paper mode has no line prices).
+    The scaled law exists for exact mode only: voltage mode with it raises
+    :class:`~popdispatch.errors.OptionError`."""
+    law, code = PriceLaw(price_law), ModeCode(code)
+    if law == PriceLaw.SCALED and code == ModeCode.VOLTAGE:
+        from popdispatch.errors import OptionError
+
+        raise OptionError("the scaled price law is for exact mode only (voltage mode: plain or "
+                          "tree)", "--price-law")  # fmt: skip
+    tags = TAGS[code]
+    return tags.get(law, tags[PriceLaw.PLAIN])(int(code))
 
 
 def get_mode(name: str) -> Mode:
@@ -35,4 +60,4 @@ def get_mode(name: str) -> Mode:
         raise ValueError(f"unknown mode {name!r} (known: {', '.join(MODES)})") from None
 
 
-__all__ = ["MODES", "Mode", "ModeCode", "get_mode"]
+__all__ = ["MODES", "TAGS", "Mode", "ModeCode", "ModeTag", "get_mode", "mode_tag"]

@@ -21,7 +21,7 @@ from popdispatch.game.fitness import FitnessParameters, fitness_into
 from popdispatch.game.flows import broadcast, limited_line_flows
 from popdispatch.game.parameters import PriceLaw
 from popdispatch.game.problem import DispatchProblem
-from popdispatch.modes.mechanism import Mode, ModeCode
+from popdispatch.modes.mechanism import Mode, ModeCode, ModeTag
 
 #: Default dimensionless constants (:class:`ExactConstants`), measured on every case of
 #: benchmarks/bench_scale.py (docs/exact-mode.md, "Every scale").
@@ -93,7 +93,7 @@ def game_constants(problem: DispatchProblem, constants: ExactConstants) -> Fitne
     of spread), ``C = C S / P``, ``price_rate = price_rate S / P`` (:func:`scales`), ``B = 0``
     (a common shift of fitness, which no pairwise comparison sees) and no barrier. (The price
     law is not a constant of the kernels but a choice of kernel: the mode's compile-time
-    record, :func:`popdispatch.modes.mechanism.mode_tag`.)"""
+    record, :func:`popdispatch.modes.mode_tag`.)"""
     spread, demand = scales(problem)
     return FitnessParameters(
         B=0.0, m=0.0, C=constants.C * spread / demand, gain=constants.gain / spread,
@@ -390,3 +390,24 @@ MODE = Mode(
     game_constants=lambda problem, settings: game_constants(problem, settings.exact),
     price_scale=lambda problem: scales(problem)[0],
 )
+
+
+class ExactTag(ModeTag):
+    """Exact mode's payoff, plain price law (:func:`payoff`)."""
+
+    __slots__ = ()
+    kernel = staticmethod(payoff)
+
+
+class ExactTreeTag(ModeTag):
+    """Exact mode's payoff with the tree price law (:func:`tree_payoff`)."""
+
+    __slots__ = ()
+    kernel = staticmethod(tree_payoff)
+
+
+class ExactScaledTag(ModeTag):
+    """Exact mode's payoff with the scaled price law (:func:`scaled_payoff`)."""
+
+    __slots__ = ()
+    kernel = staticmethod(scaled_payoff)

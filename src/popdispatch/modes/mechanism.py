@@ -5,9 +5,9 @@ map* ``(p, z) -> fitness`` and the *controller-state map* ``(p, z) -> z'``, with
 mode's dimension (:attr:`Mode.controller_states`). Both maps are one compiled kernel per mode,
 ``payoff(p, z, params, minute, work, fitness, z_rate) -> (congestion, residual)``, in the mode's
 own module (:mod:`popdispatch.modes.paper`, :mod:`popdispatch.modes.exact`,
-:mod:`popdispatch.modes.voltage`), reached by the mode's :class:`ModeTag` in
-:func:`popdispatch.integrate.term.evaluate`: the tag's class picks the kernel when numba
-compiles, so a run compiles its own mode's payoff only.
+:mod:`popdispatch.modes.voltage`), which also defines the :class:`ModeTag` class that carries
+it: the term (:func:`popdispatch.integrate.term.evaluate`) calls the kernel of the tag's
+class, knowing no mode.
 """
 
 from __future__ import annotations
@@ -18,11 +18,9 @@ from enum import IntEnum
 from typing import TYPE_CHECKING, NamedTuple
 
 from popdispatch.game.fitness import FitnessParameters
-from popdispatch.game.parameters import PriceLaw
 from popdispatch.game.problem import DispatchProblem
 
 if TYPE_CHECKING:
-    from popdispatch.integrate import Integrator
     from popdispatch.online.settings import RunSettings
 
 
@@ -44,70 +42,13 @@ class ModeCode(IntEnum):
 
 
 class ModeTag(NamedTuple):
-    """A mode as the compiled kernels take it: its :class:`ModeCode` value in ``code``; the
-    *class* (one per mode) picks the payoff kernel when numba compiles
-    (:func:`popdispatch.integrate.term.payoff`)."""
+    """A mode as the compiled kernels take it: its :class:`ModeCode` value in ``code``. Each
+    mode module subclasses it once per payoff kernel, the kernel in the class attribute
+    ``kernel``: the *class* picks the kernel when numba compiles
+    (:func:`popdispatch.integrate.term.payoff` reads ``kernel`` off the class, knowing no
+    mode), so a run compiles its own mode's payoff only."""
 
     code: int
-
-
-class PaperTag(ModeTag):
-    """Paper mode's payoff (:mod:`popdispatch.modes.paper`)."""
-
-    __slots__ = ()
-
-
-class ExactTag(ModeTag):
-    """Exact mode's payoff (:mod:`popdispatch.modes.exact`)."""
-
-    __slots__ = ()
-
-
-class VoltageTag(ModeTag):
-    """Voltage mode's payoff (:mod:`popdispatch.modes.voltage`)."""
-
-    __slots__ = ()
-
-
-class ExactTreeTag(ModeTag):
-    """Exact mode's payoff with the tree price law (:func:`popdispatch.modes.exact.tree_payoff`)."""
-
-    __slots__ = ()
-
-
-class VoltageTreeTag(ModeTag):
-    """Voltage mode's payoff with the tree price law
-    (:func:`popdispatch.modes.voltage.tree_payoff`)."""
-
-    __slots__ = ()
-
-
-class ExactScaledTag(ModeTag):
-    """Exact mode's payoff with the scaled price law
-    (:func:`popdispatch.modes.exact.scaled_payoff`)."""
-
-    __slots__ = ()
-
-
-_TAGS = {ModeCode.PAPER: PaperTag, ModeCode.EXACT: ExactTag, ModeCode.VOLTAGE: VoltageTag}
-_TREE_TAGS = {ModeCode.EXACT: ExactTreeTag, ModeCode.VOLTAGE: VoltageTreeTag}
-_SCALED_TAGS = {ModeCode.EXACT: ExactScaledTag}
-_LAW_TAGS = {PriceLaw.TREE: _TREE_TAGS, PriceLaw.SCALED: _SCALED_TAGS}
-
-
-def mode_tag(code: ModeCode, price_law: PriceLaw = PriceLaw.PLAIN) -> ModeTag:
-    """The compile-time record of the mode ``code`` with exact mode's line-price law (a
-    choice of kernel, so a run compiles only its own law; paper mode has no line prices).
-    The scaled law exists for exact mode only: voltage mode with it raises
-    :class:`~popdispatch.errors.OptionError`."""
-    law = PriceLaw(price_law)
-    if law == PriceLaw.SCALED and ModeCode(code) == ModeCode.VOLTAGE:
-        from popdispatch.errors import OptionError
-
-        raise OptionError("the scaled price law is for exact mode only (voltage mode: plain or "
-                          "tree)", "--price-law")  # fmt: skip
-    tags = _LAW_TAGS.get(law, _TAGS)
-    return tags.get(ModeCode(code), _TAGS[ModeCode(code)])(int(code))
 
 
 @dataclass(frozen=True)
@@ -117,7 +58,9 @@ class Mode:
     ``code``: its payoff kernel. ``controller_states``: the dimension of ``z`` for a problem.
     ``bounded``: generator limits are kept by a capacity-constrained revision rule (the
     dynamics' ``bounded_field``) and warm starts respect the limits, instead of a barrier.
-    ``integrator``: keyword arguments of the default :class:`~popdispatch.integrate.Integrator`.
+    ``integrator_options``: keyword arguments of the default
+    :class:`~popdispatch.integrate.Integrator` (built by
+    :meth:`popdispatch.online.RunSettings.stepping`).
     ``warm_start``: the default policy between minutes (:mod:`popdispatch.warm_start`).
     ``claims_dc_opf``: whether a run that comes to rest claims the DC-OPF optimum, so that its
     end state is checked against the DC-OPF's KKT conditions
@@ -136,13 +79,6 @@ class Mode:
     claims_dc_opf: bool = False
     game_constants: Callable[[DispatchProblem, RunSettings], FitnessParameters] = _paper_constants
     price_scale: Callable[[DispatchProblem], float] = _unit_price_scale
-
-    @property
-    def integrator(self) -> Integrator:
-        """The mode's default integrator."""
-        from popdispatch.integrate import Integrator
-
-        return Integrator(**self.integrator_options)
 
     def price_cap(self, problem: DispatchProblem) -> float:
         """Price (EUR/MW) beyond which congestion is deemed impossible to relieve: ten times

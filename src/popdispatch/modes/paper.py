@@ -12,7 +12,7 @@ import numba as nb
 from popdispatch.game.controllers import overflow_signal
 from popdispatch.game.fitness import fitness_into
 from popdispatch.game.flows import broadcast, limited_line_flows
-from popdispatch.modes.mechanism import Mode, ModeCode
+from popdispatch.modes.mechanism import Mode, ModeCode, ModeTag
 
 
 @nb.njit(cache=True, inline="always")
@@ -37,3 +37,10 @@ def payoff(p, z, params, minute, work, fitness, z_rate):
 
 
 MODE = Mode("paper", ModeCode.PAPER, lambda problem: 0, bounded=False)
+
+
+class PaperTag(ModeTag):
+    """Paper mode's payoff (:func:`payoff`)."""
+
+    __slots__ = ()
+    kernel = staticmethod(payoff)

@@ -37,7 +37,7 @@ from popdispatch.modes.exact import (
     marginal_costs_into,
     tree_line_signals,
 )
-from popdispatch.modes.mechanism import ModeCode
+from popdispatch.modes.mechanism import ModeCode, ModeTag
 
 #: Voltage mode's Heun error control, relative (exact mode: 1e-4). Measured (docs/voltage.md):
 #: at 1e-4 the prices and set points hover at the error control's noise, 0.02 kW on the
@@ -121,3 +121,17 @@ MODE = replace(
     controller_states=controller_states,
     integrator_options={**exact.MODE.integrator_options, "rtol": RTOL},
 )
+
+
+class VoltageTag(ModeTag):
+    """Voltage mode's payoff, plain price law (:func:`payoff`)."""
+
+    __slots__ = ()
+    kernel = staticmethod(payoff)
+
+
+class VoltageTreeTag(ModeTag):
+    """Voltage mode's payoff with the tree price law (:func:`tree_payoff`)."""
+
+    __slots__ = ()
+    kernel = staticmethod(tree_payoff)

@@ -13,7 +13,7 @@ from popdispatch.game.flows import limited_line_flows
 from popdispatch.game.parameters import GameParameters
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.integrate import Status, Term, workspace
-from popdispatch.modes import get_mode
+from popdispatch.modes import get_mode, mode_tag
 from popdispatch.modes.exact import price_weights
 from popdispatch.online.certificate import Certificate, certify_minutes
 from popdispatch.online.day import DayArrays, DayInputs, integrate_day
@@ -52,7 +52,8 @@ class Engine:
                 "imitative, so a generator at zero share stays at zero (extinction) and the "
                 "DC-OPF is out of reach whenever it uses one; use smith or distributed-smith"
             )
-        self.term = Term.of(field, self.mode.code, *self._graph(), settings.exact.price_law)
+        self.term = Term.of(field, mode_tag(self.mode.code, settings.exact.price_law),
+                            *self._graph())  # fmt: skip
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
         self.params = GameParameters.of(problem, self.constants, settings.revision_rates(problem))

@@ -203,7 +203,7 @@ class RunSettings:
         integrator = self.integrator
         if integrator is None:
             mode = get_mode(self.mode)
-            integrator = mode.integrator
+            integrator = Integrator(**mode.integrator_options)
             if mode.claims_dc_opf:
                 integrator = replace(integrator, tol_kw=self.accuracy_kw / 10.0,
                                      tol_rel=self.accuracy_rel)  # fmt: skip

@@ -281,8 +281,12 @@ class _Runner:
             return
         if command in COORDINATE_COMMANDS:
             target = self.resolve(first_argument(code), path, number)
-            if target is None:
-                raise FeederError(f"{path}:{number}: no such file: {text!r}")
+            if target is None:  # coordinates only place the buses on the figures
+                self.script.notes.append(
+                    f"{path.name}:{number}: {command} of a missing file "
+                    f"{first_argument(code)!r} skipped: the buses have no coordinates"
+                )
+                return
             self.send(path, number, text, f'{command} "{target}"')
             self.flush()
             return
