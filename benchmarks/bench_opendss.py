@@ -112,7 +112,7 @@ def _parent(feeder, name: str) -> int:
 def ckt24_year(
     master: Path, repeat: int, limit_kw: float | None = None, warm_start: str | None = None
 ) -> list[float]:
-    from popdispatch.feeder.sources import FeederSource
+    from popdispatch.cases.sources import FeederSource
     from popdispatch.online import RunSettings, run_day
     from popdispatch.runs import load_run
 

@@ -32,10 +32,9 @@ import warnings
 import numpy as np
 import pandas as pd
 
+from popdispatch.cases.builtin import load_case, simbench_net, simbench_profiles
 from popdispatch.feeder import make_fleet
-from popdispatch.feeder.cases import load_case, simbench_net
 from popdispatch.online import RunSettings, run_day
-from popdispatch.readers.series import simbench_profiles
 from popdispatch.scenarios import day_vs_opf, elv_problem
 
 

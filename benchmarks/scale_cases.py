@@ -34,7 +34,7 @@ MATPOWER_DIR = (
          / "feeders") / "matpower"
 )  # fmt: skip
 MATPOWER_CASES = ("case22", "case33bw", "case69", "case85")
-#: Built-in cases of the study (``popdispatch.feeder.cases``; SimBench when installed is extra).
+#: Built-in cases of the study (``popdispatch.cases.builtin``; SimBench when installed is extra).
 BUILT_IN = (
     "kerber-landnetz-freileitung-1", "kerber-landnetz-kabel-2", "kerber-dorfnetz",
     "kerber-vorstadtnetz-kabel-1", "dickert-lv-long", "cigre-lv-residential", "case33bw",
@@ -144,7 +144,7 @@ def synthetic(n_buses: int, n_generators: int, factor: float = 1.0) -> DispatchP
 
 
 def _case_feeder(name: str) -> Feeder:
-    from popdispatch.feeder import cases
+    from popdispatch.cases import builtin as cases
 
     feeder = cases.CASES[name].loader(None)  # no fleet of its own: described
     return cases.load_case(name, fleet=test_fleet(feeder))

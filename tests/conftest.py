@@ -15,7 +15,8 @@ import pytest
 from hypothesis import settings
 
 from popdispatch.cache import CACHE_ENV
-from popdispatch.feeder import ieee_elv, reduce_feeder
+from popdispatch.cases import ieee_elv
+from popdispatch.feeder import reduce_feeder
 
 _TEST_CACHE = tempfile.TemporaryDirectory(prefix="popdispatch-test-cache-")
 os.environ[CACHE_ENV] = _TEST_CACHE.name  # read at each use, so importing above is fine

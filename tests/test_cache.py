@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 from popdispatch import cache
-from popdispatch.feeder import cases
+from popdispatch.cases import builtin as cases
 
 
 @pytest.fixture
@@ -294,7 +294,7 @@ def test_a_warm_process_does_not_import_pandapower(cache_dir):
     cases.ieee_elv()  # fills the cache
     code = (
         "import sys\n"
-        "from popdispatch.feeder import ieee_elv, elv_snapshot_566_kw\n"
+        "from popdispatch.cases import ieee_elv, elv_snapshot_566_kw\n"
         "f = ieee_elv(); s = elv_snapshot_566_kw()\n"
         "print(len(f.buses), len(f.lines), len(f.loads), round(s.sum(), 3),\n"
         "      'pandapower' in sys.modules)\n"

@@ -158,7 +158,7 @@ def test_run_settings_accept_good_options(settings):
 
 def test_run_settings_are_checked_without_loading_data(monkeypatch):
     """Construction is cheap: no feeder or profile is read (the CLI validates first)."""
-    import popdispatch.feeder.cases as cases
+    import popdispatch.cases.builtin as cases
 
     def fail(*args, **kwargs):
         raise AssertionError("data loaded")

@@ -18,8 +18,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linprog, minimize
 
+from popdispatch.cases.builtin import elv_snapshot_566_kw
 from popdispatch.errors import InfeasibleError
-from popdispatch.feeder.cases import elv_snapshot_566_kw
 from popdispatch.feeder.profiles import single_minute_profiles
 from popdispatch.feeder.reduction import ReducedFeeder, reduce_feeder
 from popdispatch.game.problem import build_problem

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 #: The kernels every engine run compiles (``module:function``): the day loop (a single minute
 #: runs as a day of one row) and the game and field it calls; their callees are compiled and
 #: cached with them. (Not the problem's build, ``game.flows.limited_ancestors``: a run whose
-#: built problem comes from the problem cache, feeder/cached.py, never calls it, and the
+#: built problem comes from the problem cache, cases/cached.py, never calls it, and the
 #: notice then showed on every run.)
 ENTRY_POINTS = (
     "popdispatch.integrate.steppers:evaluate_stage",

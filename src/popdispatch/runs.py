@@ -17,11 +17,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from popdispatch.errors import OptionError
-from popdispatch.events import Event, apply_events
-from popdispatch.feeder.model import Feeder
-from popdispatch.feeder.profiles import LoadProfiles
-from popdispatch.feeder.sources import (  # noqa: F401  (re-exported: the runs' feeders)
+from popdispatch.cases.builtin import PEAK_MINUTE
+from popdispatch.cases.sources import (  # noqa: F401  (re-exported: the runs' feeders)
     FLEET_RANGES,
     NETWORK_READERS,
     FeederSource,
@@ -30,6 +27,19 @@ from popdispatch.feeder.sources import (  # noqa: F401  (re-exported: the runs' 
     read_network,
     require_fleet,
 )
+from popdispatch.compare import (
+    DayComparison,
+    SnapshotComparison,
+    check_voltage,
+    day_vs_opf,
+    elv_problem,
+    peak_profiles,
+    snapshot_vs_opf,
+)
+from popdispatch.errors import OptionError
+from popdispatch.events import Event, apply_events
+from popdispatch.feeder.model import Feeder
+from popdispatch.feeder.profiles import LoadProfiles
 from popdispatch.game.problem import (
     DispatchProblem,
     check_net_demand,
@@ -37,16 +47,7 @@ from popdispatch.game.problem import (
     feeder_shortfalls,
 )
 from popdispatch.online import RunSettings
-from popdispatch.report.progress import Progress
-from popdispatch.scenarios import (
-    PEAK_MINUTE,
-    DayComparison,
-    SnapshotComparison,
-    day_vs_opf,
-    elv_problem,
-    peak_profiles,
-    snapshot_vs_opf,
-)
+from popdispatch.progress import Progress
 
 #: A path limit: every line between original buses A and B (as the source format names them)
 #: limited to KW kW.
@@ -89,8 +90,8 @@ def known_steps(
     """How many steps a run's series has when that is known before any data is read: the
     ELV day (1440 minutes) or a network on its own loads (1); ``None`` for a load table, a
     SimBench year or an OpenDSS circuit (its load shapes, :mod:`popdispatch.feeder.shapes`)."""
+    from popdispatch.cases.builtin import SIMBENCH_PREFIX
     from popdispatch.constants import MINUTES_PER_DAY
-    from popdispatch.feeder.cases import SIMBENCH_PREFIX
 
     if loads is not None:
         return None
@@ -135,10 +136,10 @@ def series_for(
             return read_load_table(loads, feeder)
     if profiles is not None or not source.own_loads:
         return load_profiles(profiles, minute, progress).for_loads(feeder.loads.index)
-    from popdispatch.feeder.cases import SIMBENCH_PREFIX
+    from popdispatch.cases.builtin import SIMBENCH_PREFIX
 
     if source.case is not None and source.case.startswith(SIMBENCH_PREFIX):
-        from popdispatch.readers.series import simbench_profiles
+        from popdispatch.cases.builtin import simbench_profiles
 
         with progress.step("reading SimBench's year profiles"):
             return simbench_profiles(source.case[len(SIMBENCH_PREFIX) :], feeder)
@@ -297,7 +298,7 @@ def _elv_run_problem(
 ) -> DispatchProblem:
     """The problem of the ieee-elv feeder (built in, or from OpenDSS files) with ``series``
     and path ``limits``, from the on-disk cache where the built-in case was built before
-    (:mod:`popdispatch.feeder.cached`: skips reading and reducing the feeder, ~0.25 s)."""
+    (:mod:`popdispatch.cases.cached`: skips reading and reducing the feeder, ~0.25 s)."""
 
     def build() -> DispatchProblem:
         with progress.step(f"loading {source.label}"):
@@ -308,7 +309,7 @@ def _elv_run_problem(
     builtin = source.opendss is None and source.case in (None, "ieee-elv")
     if not builtin or source.fleet is not None:  # files the key does not follow: no cache
         return build()
-    from popdispatch.feeder.cached import cached_build
+    from popdispatch.cases.cached import cached_build
 
     described = {"case": "ieee-elv", "root": source.root, "ratings": source.ratings}
     return cached_build(series, limits, build, described)[0]
@@ -357,19 +358,6 @@ def with_voltage(
 
     loads = profiles.for_loads(problem.feeder.original.loads.index).kw.to_numpy(float)
     return with_voltage_limits(problem, loads, settings.vmin_pu, settings.vmax_pu, vn_kv=vn_kv)
-
-
-def check_voltage(problem: DispatchProblem, settings: RunSettings) -> None:
-    """:class:`OptionError` where the problem's voltage limits are not the settings' (a
-    problem built without :func:`with_voltage`, or for other limits)."""
-    want = (settings.vmin_pu or 0.0, settings.vmax_pu or 2.0) if settings.voltage_limited else None
-    have = (problem.vmin_pu, problem.vmax_pu) if not np.isnan(problem.vmin_pu) else None
-    if want != have:
-        raise OptionError(
-            f"the run's voltage limits {want or 'none'} are not the problem's {have or 'none'}: "
-            "build the problem with popdispatch.runs.with_voltage(problem, profiles, settings)",
-            "--vmin",
-        )
 
 
 def run_snapshot_vs_opf(

@@ -16,9 +16,9 @@ pytest.importorskip("power_grid_model", reason='the AC check needs pip install "
 
 from popdispatch.ac import check_setpoints  # noqa: E402
 from popdispatch.ac.lindistflow import shared_path_ohm, voltage_sensitivity  # noqa: E402
+from popdispatch.cases import ieee_elv  # noqa: E402
+from popdispatch.cases.builtin import elv_snapshot_566_kw  # noqa: E402
 from popdispatch.errors import FeederError  # noqa: E402
-from popdispatch.feeder import ieee_elv  # noqa: E402
-from popdispatch.feeder.cases import elv_snapshot_566_kw  # noqa: E402
 
 STEP_KW = 0.5
 

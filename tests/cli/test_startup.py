@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from popdispatch import cache
-from popdispatch.feeder import cases
+from popdispatch.cases import builtin as cases
 
 SRC = Path(__file__).resolve().parents[2] / "src"
 HEAVY = ("numba", "pandas", "scipy", "networkx", "tqdm", "pandapower", "matplotlib")
@@ -82,7 +82,7 @@ def test_lazy_namespaces():
 
 def test_quick_progress_never_imports_tqdm():
     code = (
-        "from popdispatch.report.progress import Progress\n"
+        "from popdispatch.progress import Progress\n"
         "loud, quiet = Progress(False), Progress(True)\n"
         "assert sum(loud.iterate(range(1000), 'quick', 1000)) == 499500\n"
         "assert list(quiet.iterate(range(3), 'quiet', 3)) == [0, 1, 2]\n"
@@ -101,7 +101,7 @@ class Terminal(io.StringIO):
 def test_late_bar_counts_from_the_start(monkeypatch):
     """On a terminal a bar due after DELAY_S (here 0 s) is made then and continues the count,
     its rate counted over every unit from the first (never "?it/s")."""
-    from popdispatch.report import progress
+    from popdispatch import progress
 
     monkeypatch.setattr(progress, "DELAY_S", 0.0)
     monkeypatch.setattr(progress.sys, "stderr", Terminal())

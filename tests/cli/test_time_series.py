@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from popdispatch.feeder import ieee_elv
+from popdispatch.cases import ieee_elv
 
 from helpers import official_folder
 from test_commands import assert_one_line_error, gens, run
@@ -188,7 +188,7 @@ def test_simbench_case_runs_on_its_year_across_the_clock_change(tmp_path):
     later); the demand of those steps is simbench's own absolute values."""
     import simbench
 
-    from popdispatch.feeder.cases import simbench_net
+    from popdispatch.cases.builtin import simbench_net
 
     fleet = tmp_path / "fleet.csv"
     fleet.write_text(SB_FLEET)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from popdispatch.feeder import ieee_elv
+from popdispatch.cases import ieee_elv
 
 from test_commands import assert_one_line_error, run
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import pytest
 
+from popdispatch.cases import builtin as cases
+from popdispatch.cases.sources import FeederSource
 from popdispatch.errors import FeederError
-from popdispatch.feeder import cases
-from popdispatch.feeder.sources import FeederSource
 
 from helpers import FEEDERS_REASON, feeders_folder
 

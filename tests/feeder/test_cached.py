@@ -1,4 +1,4 @@
-"""The cached ieee-elv problem (popdispatch.feeder.cached, runs.load_run): a problem from the
+"""The cached ieee-elv problem (popdispatch.cases.cached, runs.load_run): a problem from the
 cache equals one built afresh field by field and array by array; other profiles, limits or code,
 a corrupt or foreign entry and a disabled cache all build afresh."""
 
@@ -12,8 +12,8 @@ import pandas as pd
 import pytest
 
 from popdispatch import cache, runs
-from popdispatch.feeder import cached
-from popdispatch.feeder.cases import ieee_elv
+from popdispatch.cases import cached
+from popdispatch.cases.builtin import ieee_elv
 from popdispatch.feeder.profiles import LoadProfiles
 from popdispatch.readers import PROFILES_ENV, default_profiles
 from popdispatch.runs import FeederSource, load_run

@@ -11,7 +11,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from popdispatch.feeder import Feeder, elv_snapshot_566_kw, make_fleet, reduce_feeder
+from popdispatch.cases import elv_snapshot_566_kw
+from popdispatch.feeder import Feeder, make_fleet, reduce_feeder
 from popdispatch.feeder.tree import build_tree, line_flows
 
 GENERATOR_BUSES = [1, 114, 578, 739, 817, 835]

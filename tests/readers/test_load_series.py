@@ -138,8 +138,7 @@ CODE = "1-LV-rural1--0-sw"
 def test_simbench_year_totals_equal_simbench_absolute_values():
     import simbench
 
-    from popdispatch.feeder.cases import load_case
-    from popdispatch.readers.series import simbench_profiles
+    from popdispatch.cases.builtin import load_case, simbench_profiles
 
     net = simbench.get_simbench_net(CODE)
     expected = simbench.get_absolute_values(net, profiles_instead_of_study_cases=True)

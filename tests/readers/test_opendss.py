@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from popdispatch.cases.builtin import ieee_elv
 from popdispatch.errors import FeederError
-from popdispatch.feeder.cases import ieee_elv
 from popdispatch.feeder.generators import paper_fleet
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.readers import read_opendss_feeder
@@ -64,7 +64,7 @@ def test_first_line_numbers(dss_feeder):
 @needs_official
 def test_pandapower_holds_the_opendss_values_in_single_precision(dss_feeder):
     """pandapower stores length_km and r/x per km as float32-rounded copies of the OpenDSS data."""
-    from popdispatch.feeder.cases import _elv_net
+    from popdispatch.cases.builtin import _elv_net
 
     line = _elv_net().line
     ours = dss_feeder.lines

@@ -331,7 +331,8 @@ def test_master_with_reports_writes_nothing_beside_it(tmp_path):
 
 @needs_elv
 def test_elv_same_reduction_as_pandapower():
-    from popdispatch.feeder import ieee_elv, paper_fleet, reduce_feeder
+    from popdispatch.cases import ieee_elv
+    from popdispatch.feeder import paper_fleet, reduce_feeder
 
     with pytest.warns(UserWarning, match=r"Master.dss:13: redirect of a missing file "
                       r"'Monitors.txt' skipped \(OpenDSS error 243\)$"):  # fmt: skip

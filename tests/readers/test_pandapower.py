@@ -15,8 +15,8 @@ import pytest
 pp = pytest.importorskip("pandapower")
 pn = pytest.importorskip("pandapower.networks")
 
+from popdispatch.cases import builtin as cases  # noqa: E402
 from popdispatch.errors import FeederError, FleetError  # noqa: E402
-from popdispatch.feeder import cases  # noqa: E402
 from popdispatch.feeder.generators import make_fleet  # noqa: E402
 from popdispatch.feeder.profiles import single_minute_profiles  # noqa: E402
 from popdispatch.feeder.reduction import reduce_feeder  # noqa: E402

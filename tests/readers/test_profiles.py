@@ -12,8 +12,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from popdispatch.cases.builtin import elv_snapshot_566_kw
 from popdispatch.errors import ProfileError
-from popdispatch.feeder.cases import elv_snapshot_566_kw
 from popdispatch.feeder.profiles import LoadProfiles
 from popdispatch.readers import PROFILES_ENV, default_profiles, read_profiles, resolve_profiles
 

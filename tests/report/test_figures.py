@@ -163,7 +163,7 @@ def test_fitness_legend_covers_no_curve(peak_problem):
 @pytest.fixture(scope="module")
 def detection_figure(peak_problem):
     from popdispatch.opf import solve_opf
-    from popdispatch.report.reproduce import peak_load_kw
+    from popdispatch.reproduce import peak_load_kw
     from popdispatch.scenarios import CONGESTION_PATH, PEAK_MINUTE, elv_problem, peak_profiles
 
     problem = elv_problem(peak_profiles(), [CONGESTION_PATH])
@@ -233,7 +233,7 @@ def test_detection_figure_has_no_empty_band_above_its_legend(detection_figure):
 @pytest.fixture(scope="module")
 def flow_figure(peak_problem):
     from popdispatch.opf import solve_opf
-    from popdispatch.report.reproduce import peak_load_kw
+    from popdispatch.reproduce import peak_load_kw
     from popdispatch.scenarios import PEAK_MINUTE
 
     opf = solve_opf(peak_problem, PEAK_MINUTE)
@@ -413,7 +413,7 @@ def voltage_figure():
         index=["source", "DG18", "DG33", "DG25", "DG30"],
     )
     costs = dict(zip(points.columns, [86.0, 104.4, 105.7, 105.7], strict=True))
-    from popdispatch.report.reproduce import branch_label
+    from popdispatch.reproduce import branch_label
 
     label = branch_label(list(range(1, 34)), [19, 23, 26], {19: 2, 23: 3, 26: 6})
     fig = figures.voltage_profile_figure(profile, points, costs, 0.95, "case33bw", label)

@@ -369,7 +369,7 @@ def test_voltages_colour_the_buses(small) -> None:
 def test_the_elv_map_is_drawn_on_its_own_coordinates() -> None:
     """As the static figures draw it: the ELV puts a few of its 906 buses on one spot, which
     must not turn the map into a tree layout (that one read upside down against them)."""
-    from popdispatch.feeder.cases import ieee_elv
+    from popdispatch.cases.builtin import ieee_elv
 
     feeder = ieee_elv()
     pd.testing.assert_frame_equal(bus_coordinates(feeder), feeder.buses[["x", "y"]].astype(float))

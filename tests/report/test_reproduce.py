@@ -8,12 +8,12 @@ import stat
 import numpy as np
 import pytest
 
+from popdispatch import reproduce as rp
 from popdispatch.online import RunSettings
+from popdispatch.progress import Progress
 from popdispatch.readers import default_profiles
-from popdispatch.report import reproduce as rp
-from popdispatch.report.markdown import reproduction_report
 from popdispatch.report.output import atomic_write_text, json_text, staged_folder
-from popdispatch.report.progress import Progress
+from popdispatch.reproduce.markdown import reproduction_report
 
 
 @pytest.fixture(scope="module")
@@ -134,7 +134,7 @@ def test_report_table_carries_paper_ours_and_dc_opf(reproduction):
 
 
 def test_every_figure_entry_of_the_report_has_a_title_and_no_issue_number(reproduction):
-    from popdispatch.report.markdown import FIGURES
+    from popdispatch.reproduce.markdown import FIGURES
 
     summary = rp.reproduction_summary(reproduction)
     assert rp.VOLTAGE_FIGURE in FIGURES
@@ -196,7 +196,7 @@ def test_differences_follow_the_numbers_not_the_paper_mode_story(reproduction):
     """A run that detects at 53, ends on the DC-OPF without overflow gets no such notes."""
     import copy
 
-    from popdispatch.report.markdown import differences
+    from popdispatch.reproduce.markdown import differences
 
     summary = copy.deepcopy(rp.reproduction_summary(reproduction))
     cong = summary["congestion"]

@@ -13,7 +13,7 @@ pytest.importorskip("pandapower", reason="case33bw and runopp come from pandapow
 
 from popdispatch.ac import check_setpoints  # noqa: E402
 from popdispatch.ac.check import TOLERANCE_PU  # noqa: E402
-from popdispatch.report.reproduce import DISPATCHES, voltage_summary  # noqa: E402
+from popdispatch.reproduce import DISPATCHES, voltage_summary  # noqa: E402
 from popdispatch.scenarios import VOLTAGE_LIMITS, voltage  # noqa: E402
 
 VMIN = VOLTAGE_LIMITS[0]
@@ -96,7 +96,7 @@ def test_the_scenario_run_in_a_second_process_is_the_same(result):
     comes back through the pipe summarises exactly as the scenario run here."""
     from popdispatch.online import RunSettings
     from popdispatch.report.output import json_text
-    from popdispatch.report.reproduce import voltage_in_background
+    from popdispatch.reproduce import voltage_in_background
 
     with voltage_in_background(RunSettings(), parallel=True) as pending:
         remote = pending.get(timeout=600)

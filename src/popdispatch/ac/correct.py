@@ -36,11 +36,11 @@ import pandas as pd
 from popdispatch.ac.check import ACDay, ACFlows, ACSnapshot, power_flow, snapshot_of, step_table
 from popdispatch.ac.limits import limits_summary
 from popdispatch.ac.network import ACNetwork, build_network
+from popdispatch.compare import SnapshotComparison, snapshot_vs_opf
 from popdispatch.constants import KW_PER_MW
 from popdispatch.errors import OptionError
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.online import RunSettings
-from popdispatch.scenarios import SnapshotComparison, snapshot_vs_opf
 
 #: Injection step of the loss-factor differences, kW per kW of demand (1e-4: 0.37 kW on
 #: case33bw; losses are smooth, so the one-sided difference errs by the step's order).

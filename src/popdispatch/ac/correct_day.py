@@ -173,7 +173,7 @@ def ac_correct_day(
     the AC voltages within this of the limits (p.u., :func:`popdispatch.ac.correct.settled`);
     ``progress``: called with each step once done; ``model_options``: of the AC model
     (:func:`popdispatch.ac.check_setpoints`)."""
-    from popdispatch.runs import check_voltage
+    from popdispatch.compare import check_voltage
 
     settings = settings or RunSettings()
     check_voltage(problem, settings)

@@ -30,10 +30,11 @@ import pandas as pd
 
 from popdispatch.ac.network import load_q_per_kw, nominal_kv
 from popdispatch.constants import KW_PER_MW
-from popdispatch.errors import FeederError, InfeasibleError, OptionError
+from popdispatch.errors import FeederError, InfeasibleError
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.tree import downstream
 from popdispatch.game.problem import DispatchProblem
+from popdispatch.online.settings import check_voltage_limits
 
 
 def shared_path_ohm(
@@ -86,19 +87,6 @@ def _positions(feeder: Feeder, buses: Sequence[int]) -> np.ndarray:
         bad = list(buses)[int(np.flatnonzero(positions < 0)[0])]
         raise FeederError(f"unknown bus {bad} of feeder {feeder.name!r} in a sensitivity query")
     return positions
-
-
-def check_voltage_limits(vmin_pu: float | None, vmax_pu: float | None) -> tuple[float, float]:
-    """``(vmin, vmax)`` in p.u. (a missing one: 0 or 2, i.e. no bound), or :class:`OptionError`
-    naming the option for a value outside (0, 2) or ``vmin >= vmax``."""
-    for value, option in ((vmin_pu, "--vmin"), (vmax_pu, "--vmax")):
-        if value is not None and not (math.isfinite(value) and 0.0 < value < 2.0):
-            raise OptionError(f"voltage limit {option} {value} p.u. is outside (0, 2)", option)
-    low = 0.0 if vmin_pu is None else float(vmin_pu)
-    high = 2.0 if vmax_pu is None else float(vmax_pu)
-    if low >= high:
-        raise OptionError(f"--vmin {low:g} p.u. is not below --vmax {high:g} p.u.", "--vmin")
-    return low, high
 
 
 def base_voltage_sq(

@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import click
 
+from popdispatch.cli.clock import Failure, stamp
 from popdispatch.cli.options import (
     feeder_options,
     json_option,
@@ -27,9 +28,8 @@ from popdispatch.cli.options import (
     run_options,
     settings_from,
 )
-from popdispatch.cli.process import Failure, stamp
 from popdispatch.cli.render import emit
-from popdispatch.report.progress import Progress
+from popdispatch.progress import Progress
 
 
 @click.group(
@@ -165,6 +165,7 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
     import numpy as np
 
     from popdispatch.agents.system import AgentSettings, run_agents, without
+    from popdispatch.compare import SnapshotComparison
     from popdispatch.modes import get_mode
     from popdispatch.modes.exact import price_weights
     from popdispatch.online import SnapshotResult, limited_flows_mw, overflow_kw
@@ -172,7 +173,6 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
     from popdispatch.opf import solve_opf
     from popdispatch.report.summaries import snapshot_summary
     from popdispatch.runs import check_x0
-    from popdispatch.scenarios import SnapshotComparison
 
     check_x0(settings.x0, problem.generators)
     opts = AgentSettings(step_s=options.step_s, max_rounds=options.max_rounds,

@@ -20,8 +20,8 @@ from typing import NamedTuple
 
 import click
 
-from popdispatch.cli.process import Failure
-from popdispatch.report.progress import Progress
+from popdispatch.cli.clock import Failure
+from popdispatch.progress import Progress
 
 #: The optional extra each analysis needs: (importable module, extra's name).
 EXTRAS = {"ac": ("power_grid_model", "ac"), "html": ("plotly", "html")}

@@ -12,10 +12,10 @@ from pathlib import Path
 import click
 
 from popdispatch.cli.analyses import Analyses, analysis_options
+from popdispatch.cli.clock import Failure, stamp, start_clock
 from popdispatch.cli.options import (
     MODE_CHOICE,
     WARM_START_CHOICE,
-    EventType,
     MinutesType,
     accuracy_options,
     build,
@@ -35,7 +35,6 @@ from popdispatch.cli.options import (
     settings_from,
     steps_options,
 )
-from popdispatch.cli.process import Failure, stamp, start_clock
 from popdispatch.cli.render import (
     announce_compile,
     emit,
@@ -43,8 +42,9 @@ from popdispatch.cli.render import (
     write_day,
     write_snapshot,
 )
+from popdispatch.notation import EventType
+from popdispatch.progress import Progress
 from popdispatch.report.output import json_text, staged_folder
-from popdispatch.report.progress import Progress
 from popdispatch.report.text import (
     cases_summary,
     cases_text,
@@ -77,7 +77,7 @@ def _note(message, category, filename, lineno, file=None, line=None) -> None:
 @quiet_option
 def cases(as_json: bool, quiet: bool) -> None:
     """The built-in cases (--case NAME): buses, lines, loads, total load, source."""
-    from popdispatch.feeder.cases import list_cases
+    from popdispatch.cases.builtin import list_cases
 
     with Progress(quiet).step("listing the built-in cases"):
         table = list_cases()
@@ -92,8 +92,8 @@ def feeder(source, as_json: bool, quiet: bool) -> None:
     """What the feeder is: buses, the source, key nodes, loads (names, kW), fixed injections,
     lines (ratings, impedances), load shapes, generators. Any network, with or without a
     fleet (a dispatch needs one)."""
+    from popdispatch.cases.sources import load_feeder
     from popdispatch.feeder import reduce_feeder
-    from popdispatch.feeder.sources import load_feeder
     from popdispatch.report.describe import feeder_summary, feeder_text
 
     with Progress(quiet).step(f"loading {source.label}"):
@@ -264,7 +264,7 @@ def reproduce(profiles, out, mode, minutes, html, as_json, quiet) -> None:
     import numpy as np
 
     from popdispatch import runs
-    from popdispatch.report.reproduce import run_reproduction, write_reproduction
+    from popdispatch.reproduce import run_reproduction, write_reproduction
 
     progress = Progress(quiet)
     check_out(out)

@@ -37,56 +37,15 @@ from collections.abc import Sequence
 
 import click
 
+from popdispatch.cli.clock import (
+    EXIT_INTERRUPTED,
+    EXIT_PROBLEM,
+    EXIT_USAGE,
+    CommandClock,
+    Failure,
+    process_age_seconds,
+)
 from popdispatch.errors import OptionError, PopdispatchError
-
-EXIT_PROBLEM, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
-
-
-class Failure(Exception):
-    """A problem to report on one line with exit code 1 (after any ``--json`` output)."""
-
-
-# -- the command's own clock --------------------------------------------------------------------
-
-
-def process_age_seconds() -> float | None:
-    """Seconds since this process started (Linux ``/proc/self/stat``), None where unknown."""
-    try:
-        with open("/proc/self/stat", "rb") as handle:
-            stat = handle.read()
-        start_ticks = int(stat[stat.rindex(b")") + 2 :].split()[19])  # field 22, starttime
-        age = time.clock_gettime(time.CLOCK_BOOTTIME) - start_ticks / os.sysconf("SC_CLK_TCK")
-    except (OSError, ValueError, IndexError, AttributeError):
-        return None
-    return age if 0.0 <= age < 3600.0 else None  # anything else is not this command's start
-
-
-class _Clock:
-    """``perf_counter()`` value at which the running command started (None: not running)."""
-
-    start: float | None = None
-
-
-def command_seconds() -> float:
-    """Seconds since the command started (see the module docstring)."""
-    if _Clock.start is None:
-        _Clock.start = time.perf_counter()
-    return time.perf_counter() - _Clock.start
-
-
-def start_clock(ctx: click.Context) -> None:
-    """Start the clock of a command invoked without :func:`main` (e.g. click's test runner)."""
-    if _Clock.start is None:
-        _Clock.start = time.perf_counter()
-        ctx.call_on_close(lambda: setattr(_Clock, "start", None))
-
-
-def stamp(summary: dict) -> dict:
-    """Add ``command_seconds`` to a summary once, when its output is complete."""
-    if summary.get("command_seconds") is None:
-        summary["command_seconds"] = command_seconds()
-    return summary
-
 
 # -- entry point --------------------------------------------------------------------------------
 
@@ -111,11 +70,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0, 1 problem, 2 usage, 130 interrupted)."""
     entered = time.perf_counter()
     age = process_age_seconds() if argv is None else None
-    _Clock.start = entered - (age or 0.0)
+    CommandClock.start = entered - (age or 0.0)
     try:
         return _main(argv)
     finally:
-        _Clock.start = None
+        CommandClock.start = None
         if argv is None:  # run as the program: the interpreter exits next
             _spare_the_exit()
 

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import click
 
-from popdispatch.cli.process import stamp
+from popdispatch.cli.clock import stamp
+from popdispatch.progress import Progress
 from popdispatch.report.output import json_text, staged_folder
-from popdispatch.report.progress import Progress
 
 
 def emit(summary: dict, as_json: bool, text: str) -> None:

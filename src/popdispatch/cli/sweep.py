@@ -12,8 +12,8 @@ from pathlib import Path
 
 import click
 
+from popdispatch.cli.clock import EXIT_INTERRUPTED, Failure
 from popdispatch.cli.options import option, profiles_option, quiet_option
-from popdispatch.cli.process import EXIT_INTERRUPTED, Failure
 
 #: Columns of ``--dry-run``'s listing.
 LISTED = ("id", "case", "steps", "mode", "dynamics", "graph", "limits", "events", "assignment")

@@ -1,18 +1,15 @@
-"""Radial feeders: the model, built-in cases, synthetic feeders, key-node reduction, DC flows.
+"""Radial feeders: the model, synthetic feeders, key-node reduction, DC flows (the built-in
+cases and the networks a run reads: :mod:`popdispatch.cases`).
 
 The submodules are imported when a name is first used (PEP 562), so that importing one of
-them (``popdispatch.feeder.profiles``, say) does not import the built-in cases, the synthetic
-feeders and the reduction with it.
+them (``popdispatch.feeder.profiles``, say) does not import the synthetic feeders and the reduction
+with it.
 """
 
 from popdispatch.lazy import lazy_namespace
 
 #: Where each public name lives (module under ``popdispatch.feeder``).
 _HOMES = {
-    "elv_snapshot_566_kw": "cases",
-    "ieee_elv": "cases",
-    "list_cases": "cases",
-    "load_case": "cases",
     "make_fleet": "generators",
     "paper_fleet": "generators",
     "read_fleet": "generators",

@@ -248,7 +248,7 @@ def _check_radial(feeder: Feeder) -> None:
             "meshed (popdispatch supports radial feeders only)"
         )
     # imported here: scipy.sparse.csgraph imports scipy.linalg (about 0.2 s), which a run on a
-    # cached problem (popdispatch.feeder.cached) never needs
+    # cached problem (popdispatch.cases.cached) never needs
     from scipy.sparse.csgraph import connected_components
 
     graph = csr_array((np.ones(len(lines), dtype=np.int8), (ends_a, ends_b)), shape=(n, n))

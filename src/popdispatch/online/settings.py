@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
@@ -138,8 +139,6 @@ class RunSettings:
         """Limits in (0, 2) with ``vmin < vmax``, only in the voltage mode (exact mode becomes
         it), which needs them (``--vmin``/``--vmax``, ``--mode``)."""
         if self.voltage_limited:
-            from popdispatch.ac.lindistflow import check_voltage_limits
-
             check_voltage_limits(self.vmin_pu, self.vmax_pu)
             if mode.name != "voltage":
                 raise OptionError(
@@ -264,3 +263,16 @@ def initial_shares(problem: DispatchProblem, x0: str | dict[str, float], minute:
     if x.sum() <= 0:
         raise ValueError("initial shares are all zero on the online generators")
     return x / x.sum()
+
+
+def check_voltage_limits(vmin_pu: float | None, vmax_pu: float | None) -> tuple[float, float]:
+    """``(vmin, vmax)`` in p.u. (a missing one: 0 or 2, i.e. no bound), or :class:`OptionError`
+    naming the option for a value outside (0, 2) or ``vmin >= vmax``."""
+    for value, option in ((vmin_pu, "--vmin"), (vmax_pu, "--vmax")):
+        if value is not None and not (math.isfinite(value) and 0.0 < value < 2.0):
+            raise OptionError(f"voltage limit {option} {value} p.u. is outside (0, 2)", option)
+    low = 0.0 if vmin_pu is None else float(vmin_pu)
+    high = 2.0 if vmax_pu is None else float(vmax_pu)
+    if low >= high:
+        raise OptionError(f"--vmin {low:g} p.u. is not below --vmax {high:g} p.u.", "--vmin")
+    return low, high

@@ -19,7 +19,6 @@ _HOMES = {
     "read_opendss_master": "opendss_direct",
     "read_pandapower": "pandapower",
     "read_load_table": "series",
-    "simbench_profiles": "series",
 }
 
 __getattr__, __dir__, __all__ = lazy_namespace(__name__, _HOMES)

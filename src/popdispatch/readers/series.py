@@ -184,30 +184,3 @@ def _loads_by_bus(feeder: Feeder) -> dict[str, np.ndarray]:
     return groups
 
 
-def simbench_profiles(code: str, feeder: Feeder) -> LoadProfiles:
-    """SimBench grid ``code``'s bundled year (15-minute steps, absolute kW) for ``feeder``'s
-    loads and fixed injections (the feeder read from the same grid: its loads are
-    ``load<index>``, its static generators ``sgen<index>``, produced kW negative)."""
-    import simbench
-
-    from popdispatch.feeder.cases import simbench_net
-
-    net = simbench_net(code)
-    values = simbench.get_absolute_values(net, profiles_instead_of_study_cases=True)
-    p_mw = values[("load", "p_mw")]
-    kw = pd.DataFrame(p_mw.to_numpy(float) * 1000.0, columns=[f"load{i}" for i in p_mw.columns])
-    injected = [n for n in feeder.loads.index if str(n).startswith("sgen")]
-    if injected and ("sgen", "p_mw") in values:
-        sgen = values[("sgen", "p_mw")]
-        produced = pd.DataFrame(
-            -sgen.to_numpy(float) * 1000.0, columns=[f"sgen{i}" for i in sgen.columns]
-        )  # fixed injections: negative load
-        kw = pd.concat([kw, produced[[c for c in produced.columns if c in injected]]], axis=1)
-    # Local German time: the hour of 27 March is missing, 30 October's 02:00-02:45 repeated.
-    times = pd.DatetimeIndex(
-        pd.to_datetime(net.profiles["load"]["time"], format="%d.%m.%Y %H:%M")
-    ).tz_localize(SIMBENCH_ZONE, ambiguous="infer")
-    timeline = Timeline.from_times(times)
-    kw.index = pd.RangeIndex(1, len(kw) + 1, name="minute")
-    profiles = LoadProfiles(kw, f"SimBench {code} year profiles (15 min, absolute)", timeline)
-    return profiles.for_loads(feeder.loads.index)

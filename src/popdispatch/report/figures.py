@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import textwrap
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -17,12 +18,15 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from popdispatch.compare import DayComparison, SnapshotComparison
 from popdispatch.feeder.profiles import Timeline
 from popdispatch.feeder.reduction import ReducedFeeder
 from popdispatch.game.controllers import broadcast_signals, overflow_signal
 from popdispatch.game.fitness import FitnessParameters, barrier
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
-from popdispatch.scenarios import DayComparison, ExtinctionResult, SnapshotComparison
+
+if TYPE_CHECKING:  # drawn here, run by the paper's scenarios above this package
+    from popdispatch.scenarios import ExtinctionResult
 
 SINGLE = 3.5  # inches: one column of a two-column paper
 DOUBLE = 7.16  # inches: full page width

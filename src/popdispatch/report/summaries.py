@@ -18,12 +18,12 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
+from popdispatch.compare import DayComparison, SnapshotComparison
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.profiles import Timeline, day_timeline
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.opf import OpfResult
 from popdispatch.report.infeasibility import diagnose
-from popdispatch.scenarios import DayComparison, SnapshotComparison
 
 #: Set points closer than this to the DC-OPF count as "on the DC-OPF", kW.
 MATCH_KW = 0.1

@@ -178,7 +178,7 @@ def _as_list(spec: dict, key: str, where: str) -> list | None:
 
 def parse_steps(value, where: str, key: str = "steps") -> StepRange:
     """``"START-END"`` (1-based minutes, both included), ``"day"`` (1-1440) or one minute."""
-    from popdispatch.cli.options import MinutesType
+    from popdispatch.notation import MinutesType
 
     if value == "day":
         return StepRange(1, MINUTES_PER_DAY)
@@ -237,7 +237,7 @@ def _sample(scenarios: list[Scenario], value, where: str) -> list[Scenario]:
 
 def _feeders(spec: dict, where: str, base: Path) -> list[tuple[str | None, str | None]]:
     """``(case, network path)`` pairs; networks are relative to the spec's folder."""
-    from popdispatch.feeder.cases import CASES, SIMBENCH_PREFIX
+    from popdispatch.cases.builtin import CASES, SIMBENCH_PREFIX
 
     cases = _as_list(spec, "cases", where) or []
     networks = _as_list(spec, "networks", where) or []
@@ -270,7 +270,7 @@ def parse_spec(spec: dict, where: str = "spec", base: Path | None = None) -> Swe
         parse_steps(v, where, f"steps[{k}]")
         for k, v in enumerate(_as_list(spec, "steps", where) or ["day"])
     ]
-    from popdispatch.cli.options import EventType, LimitType
+    from popdispatch.notation import EventType, LimitType
 
     limits = [
         _parse_each(v, LimitType(), where, f"limits[{k}]")

@@ -17,8 +17,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from popdispatch.compare import DayComparison, SnapshotComparison
 from popdispatch.feeder.profiles import LoadProfiles
 from popdispatch.game.problem import DispatchProblem
+from popdispatch.report.interactive.page import EXTRA, require_plotly  # noqa: F401 (EXTRA re-exported)
 from popdispatch.report.interactive.steps import (
     Steps,
     day_steps,
@@ -27,7 +29,6 @@ from popdispatch.report.interactive.steps import (
     snapshot_steps,
     step_name,
 )
-from popdispatch.scenarios import DayComparison, SnapshotComparison
 
 #: About this many regular map frames (a full day: every 5th minute, 288 frames).
 TARGET_FRAMES = 288
@@ -35,18 +36,6 @@ TARGET_FRAMES = 288
 FRAMES_BUDGET_BYTES = 4_000_000
 #: At most this many map frames (a slider of more steps is not usable anyway).
 MAX_FRAMES = 1000
-EXTRA = 'pip install "popdispatch[html]"'
-
-
-def require_plotly():
-    """``plotly.io``, or an ImportError naming the extra to install."""
-    try:
-        import plotly.io as pio
-    except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError(f"the HTML report needs plotly: {EXTRA} ({exc})") from exc
-    return pio
-
-
 def within_budget(steps: Steps, problem: DispatchProblem, every: int) -> tuple[np.ndarray, int]:
     """``(rows, every)``: the map frames of :func:`frame_rows`, with ``every`` doubled until
     they fit :data:`FRAMES_BUDGET_BYTES` and :data:`MAX_FRAMES`; if the changes alone are too
@@ -96,7 +85,11 @@ def day_report_html(
     minutes between regular map frames (default: about :data:`TARGET_FRAMES` frames).
     """
     from popdispatch.report.interactive.feeder_map import map_figure
-    from popdispatch.report.interactive.page import frame_count_note, header_html, page_html
+    from popdispatch.report.interactive.page import (
+        frame_count_note,
+        header_html,
+        page_html,
+    )
     from popdispatch.report.interactive.panels import panel_figure, panel_rows
 
     require_plotly()

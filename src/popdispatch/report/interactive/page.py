@@ -47,6 +47,18 @@ details { font-size: 12px; margin: 4px 0 10px 0; }
 """
 
 
+EXTRA = 'pip install "popdispatch[html]"'
+
+
+def require_plotly():
+    """``plotly.io``, or an ImportError naming the extra to install."""
+    try:
+        import plotly.io as pio
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError(f"the HTML report needs plotly: {EXTRA} ({exc})") from exc
+    return pio
+
+
 def format_value(key: str, value) -> str:
     """A summary value as header text (lists of limits and events spelled out)."""
     if key == "limits":
@@ -121,8 +133,6 @@ def link_script(frame_names: list[str]) -> str:
 
 def page_html(title: str, header: str, map_fig: dict, panel_fig: dict) -> str:
     """The whole page: plotly.js embedded once (with the map), then the panels and the link."""
-    from popdispatch.report.interactive import require_plotly
-
     pio = require_plotly()
     config = {"displaylogo": False, "responsive": True}
     map_div = pio.to_html(map_fig, full_html=False, include_plotlyjs=True, div_id=MAP_ID,

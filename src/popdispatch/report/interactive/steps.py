@@ -14,11 +14,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 
+from popdispatch.compare import DayComparison, SnapshotComparison
 from popdispatch.errors import FeederError
 from popdispatch.feeder.profiles import LoadProfiles
 from popdispatch.feeder.tree import line_flows
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
-from popdispatch.scenarios import DayComparison, SnapshotComparison
 
 #: A limited line within this of its limit is binding; beyond it, overloaded (kW).
 BINDING_TOL_KW = 0.01

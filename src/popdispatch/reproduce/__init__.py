@@ -31,8 +31,8 @@ import pandas as pd
 from popdispatch.feeder.profiles import LoadProfiles
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 from popdispatch.online import RunSettings
+from popdispatch.progress import Progress
 from popdispatch.report.output import StagedFolder
-from popdispatch.report.progress import Progress
 from popdispatch.report.summaries import (
     day_summary,
     day_table,
@@ -229,7 +229,7 @@ def write_reproduction(
 ) -> dict:  # fmt: skip
     """Write figures, time series, ``summary.json`` and ``report.md``; returns the summary.
     With ``html_profiles`` (the base day's profiles) also the interactive reports."""
-    from popdispatch.report.markdown import reproduction_report
+    from popdispatch.reproduce.markdown import reproduction_report
 
     stems = make_figures(rep, folder, progress)
     if rep.voltage is not None:

@@ -38,6 +38,8 @@ import pandas as pd
 from popdispatch import cache
 from popdispatch.feeder.generators import paper_fleet
 from popdispatch.feeder.model import Feeder
+from popdispatch.feeder.profiles import LoadProfiles, Timeline
+from popdispatch.readers.series import SIMBENCH_ZONE
 
 #: Cache entry of the ieee-elv tables, and the version of its layout (bump on any change).
 ELV_CACHE, ELV_FORMAT = "ieee-elv", 1
@@ -187,10 +189,10 @@ def _pandapower_net(factory: str, kwargs: tuple = ()):
 
 def _pandapower_case(name: str, factory: str, root: int | None = None, **kwargs) -> Callable:
     def loader(fleet: pd.DataFrame | None) -> Feeder:
-        from popdispatch.readers.pandapower import _read
+        from popdispatch.readers.pandapower import read_pandapower
 
         net = _pandapower_net(factory, tuple(sorted(kwargs.items())))
-        return _read(net, fleet, root, True, name)
+        return read_pandapower(net, fleet=fleet, root=root, ratings=True, name=name)
 
     return loader
 
@@ -280,13 +282,13 @@ def _simbench_case(name: str, fleet: pd.DataFrame | None) -> Feeder:
         raise FeederError(
             f"case {name!r} needs the optional simbench package (pip install simbench)"
         )
-    from popdispatch.readers.pandapower import _read
+    from popdispatch.readers.pandapower import read_pandapower
 
     try:
         net = simbench_net(code)
     except Exception as exc:  # simbench raises plain exceptions for unknown codes
         raise FeederError(f"unknown SimBench code {code!r}: {exc}") from None
-    return _read(net, fleet, None, True, name)
+    return read_pandapower(net, fleet=fleet, root=None, ratings=True, name=name)
 
 
 #: Cache entry of the :func:`list_cases` counts, and the version of its layout.
@@ -431,6 +433,10 @@ def ieee_elv() -> Feeder:
     return _feeder(_elv_arrays())
 
 
+#: The minute of the ELV's official load snapshot (pandapower's ``on_peak_566``).
+PEAK_MINUTE = 566
+
+
 def elv_snapshot_566_kw() -> pd.Series:
     """Per-load demand (kW) of minute 566 from pandapower's ``on_peak_566`` snapshot.
 
@@ -542,3 +548,30 @@ def elv_arrays_from_pandapower() -> dict[str, np.ndarray]:
         "load_p_kw": (load.p_a_mw + load.p_b_mw + load.p_c_mw).to_numpy(dtype=float) * 1000.0,
         "source_bus": np.array(int(bus_id[net.trafo.lv_bus.iloc[0]]), dtype=np.int64),
     }
+
+
+def simbench_profiles(code: str, feeder: Feeder) -> LoadProfiles:
+    """SimBench grid ``code``'s bundled year (15-minute steps, absolute kW) for ``feeder``'s
+    loads and fixed injections (the feeder read from the same grid: its loads are
+    ``load<index>``, its static generators ``sgen<index>``, produced kW negative)."""
+    import simbench
+
+    net = simbench_net(code)
+    values = simbench.get_absolute_values(net, profiles_instead_of_study_cases=True)
+    p_mw = values[("load", "p_mw")]
+    kw = pd.DataFrame(p_mw.to_numpy(float) * 1000.0, columns=[f"load{i}" for i in p_mw.columns])
+    injected = [n for n in feeder.loads.index if str(n).startswith("sgen")]
+    if injected and ("sgen", "p_mw") in values:
+        sgen = values[("sgen", "p_mw")]
+        produced = pd.DataFrame(
+            -sgen.to_numpy(float) * 1000.0, columns=[f"sgen{i}" for i in sgen.columns]
+        )  # fixed injections: negative load
+        kw = pd.concat([kw, produced[[c for c in produced.columns if c in injected]]], axis=1)
+    # Local German time: the hour of 27 March is missing, 30 October's 02:00-02:45 repeated.
+    times = pd.DatetimeIndex(
+        pd.to_datetime(net.profiles["load"]["time"], format="%d.%m.%Y %H:%M")
+    ).tz_localize(SIMBENCH_ZONE, ambiguous="infer")
+    timeline = Timeline.from_times(times)
+    kw.index = pd.RangeIndex(1, len(kw) + 1, name="minute")
+    profiles = LoadProfiles(kw, f"SimBench {code} year profiles (15 min, absolute)", timeline)
+    return profiles.for_loads(feeder.loads.index)

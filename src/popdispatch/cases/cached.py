@@ -42,9 +42,10 @@ PROBLEM_CACHE, PROBLEM_FORMAT = "problem", 1
 KEEP = 16
 #: The modules whose code a built problem depends on (relative to the package).
 BUILD_MODULES = (
-    "feeder/cases.py", "feeder/cached.py", "feeder/generators.py", "feeder/model.py",
+    "cases/builtin.py", "cases/cached.py", "feeder/generators.py", "feeder/model.py",
     "feeder/profiles.py", "feeder/reduction.py", "feeder/tree.py", "game/problem.py",
-    "game/flows.py", "scenarios.py", "runs.py", "constants.py", "readers/pandapower.py",
+    "game/flows.py", "compare.py", "runs.py", "constants.py", "readers/pandapower.py",
+    "cases/sources.py",
 )  # fmt: skip
 
 
@@ -65,7 +66,7 @@ def problem_key(
     """What the built ieee-elv problem of ``profiles`` and path ``limits`` depends on
     (``source``: the feeder's description, e.g. the run's feeder options)."""
     from popdispatch import __version__
-    from popdispatch.feeder.cases import elv_cache_key
+    from popdispatch.cases.builtin import elv_cache_key
 
     return {
         "source": source,

@@ -25,7 +25,7 @@ class FeederSource:
     time step, or an OpenDSS circuit's load shapes) with its own priced generators, or ``fleet``
     (a CSV or TOML fleet file, see :func:`popdispatch.feeder.generators.read_fleet`; buses as
     the network names them) in their place. ``case``: a built-in case by name
-    (:func:`popdispatch.feeder.cases. list_cases`; also ``simbench:CODE``, ``matpower:NAME``,
+    (:func:`popdispatch.cases.builtin. list_cases`; also ``simbench:CODE``, ``matpower:NAME``,
     ``opendss:NAME``); other than ieee-elv it runs on its own loads like a network. ``root``:
     the source bus, as the network names it (a MATPOWER number, a pandapower index, an OpenDSS
     name), in place of its own source(s). ``ratings``: line limits from the network's own
@@ -45,7 +45,7 @@ class FeederSource:
         if len(given) > 1:
             raise OptionError(f"give one of {', '.join(given)}, not several", given[0])
         if self.case is not None:
-            from popdispatch.feeder.cases import (
+            from popdispatch.cases.builtin import (
                 CASES,
                 MATPOWER_PREFIX,
                 OPENDSS_PREFIX,
@@ -138,7 +138,7 @@ def _read_feeder(source: FeederSource, fleet: pd.DataFrame | None) -> Feeder:
     if source.net is not None:
         return read_network(source.net, fleet, source.root, source.ratings)
     if source.case is not None:
-        from popdispatch.feeder.cases import load_case
+        from popdispatch.cases.builtin import load_case
 
         return load_case(source.case, fleet=fleet)
     if source.opendss is not None:
@@ -146,7 +146,7 @@ def _read_feeder(source: FeederSource, fleet: pd.DataFrame | None) -> Feeder:
 
         feeder = read_opendss_feeder(source.opendss)
     else:
-        from popdispatch.feeder.cases import ieee_elv
+        from popdispatch.cases.builtin import ieee_elv
 
         feeder = ieee_elv()
     return feeder if fleet is None else feeder.with_generators(fleet)

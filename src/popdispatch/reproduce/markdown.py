@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # the report is written without importing the engine
-    from popdispatch.report.reproduce import Reproduction
+    from popdispatch.reproduce import Reproduction
 
 PAPER = {
     "minute_566": "Smith dynamics converge to the DC-OPF",
