@@ -373,12 +373,11 @@ MODE = Mode(
     ModeCode.EXACT,
     lambda problem: 2 * len(problem.limit),
     bounded=True,
-    # rtol 1e-5 (Integrator's 1e-4 otherwise): measured after issue 13's warm start, the
-    # congestion minute 566 takes 19 iterations instead of 71 and the congested ELV day at most
-    # 48 per minute instead of 104, for 0-20 % more engine time on the day (docs/exact-mode.md)
+    # the adaptive Heun pair's error control (docs/exact-mode.md, "Choosing the constants");
+    # the stopping tolerances follow the run's accuracy (RunSettings.stepping)
     integrator_options={
         "method": "heun",
-        "rtol": 1e-5,
+        "rtol": 1e-4,
         "tol_kw": 1e-6,
         "tol_rel": 1e-6,
         "window": 5,
