@@ -25,10 +25,12 @@ CONFIGURATIONS = [
     {"mode": "exact", "dynamics": "distributed-smith", "graph": "ring"},
     {"mode": "paper", "dynamics": "local-replicator", "graph": "path"},
     {"mode": "exact", "warm_start": "setpoints"},
+    {"mode": "paper", "dynamics": "bnn"},
+    {"mode": "exact", "dynamics": "logit", "eta": 0.1},
 ]
 
 
-@pytest.mark.parametrize("options", CONFIGURATIONS, ids=lambda o: "-".join(o.values()))
+@pytest.mark.parametrize("options", CONFIGURATIONS, ids=lambda o: "-".join(map(str, o.values())))
 def test_the_notice_checks_the_classes_the_engine_passes(options):
     settings = RunSettings(**options)
     engine = Engine(elv_problem(limits=[CONGESTION_PATH]), settings)
