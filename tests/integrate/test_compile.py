@@ -92,10 +92,10 @@ def test_an_exact_run_compiles_its_own_kernels_only(tmp_path):
     assert report["paper"] is False
     assert report["day_loops"] == 1
     compiled = set(report["compiled"])
-    assert {"advance_heun", "_sort_for.<locals>.complete"} <= compiled
+    assert {"advance_heun", "_order_for.<locals>.complete"} <= compiled
     assert "_start_minute.<locals>.setpoints" in compiled
-    unused = {"advance_euler", "_sort_for.<locals>.sparse",
-              "_graph_flows_of.<locals>.sparse", "_start_minute.<locals>.free",
+    unused = {"advance_euler", "_order_for.<locals>.unsorted", "_law_flows.<locals>.sparse",
+              "_law_flows.<locals>.target", "_start_minute.<locals>.free",
               "_start_minute.<locals>.shares"}  # fmt: skip
     assert not compiled & unused, compiled & unused
     assert report["status"] == ["converged", "converged"]

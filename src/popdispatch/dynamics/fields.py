@@ -10,8 +10,9 @@ The engine picks a field's kernels at compile time: the field travels into the k
 its record (:func:`field_tag`), one small class per weight kernel, and the stubs below
 (:func:`weights`, :func:`local_receivers`, :func:`order_for`, :func:`law_flows`) have numba
 ``@overload`` implementations that return, when numba types the call, the kernels the
-record's class names: its weights, and the sums of its kernel on the run's graph (pairwise
-comparison: :mod:`popdispatch.dynamics.pairwise`; target: :mod:`popdispatch.dynamics.targets`).
+record's class names: its weights, and the sums of its kernel on the run's graph (the
+records' classes of law and graph together: pairwise comparison,
+:mod:`popdispatch.dynamics.pairwise`; target, :mod:`popdispatch.dynamics.targets`).
 A run thus compiles one law's kernels, not all of them. A class no law names has no kernels:
 numba refuses to type the call (never a fallback to another law).
 
@@ -30,7 +31,14 @@ from popdispatch.dynamics import bnn, capacity, logit, newton, replicator, smith
 from popdispatch.dynamics.capacity import CapacitySmithTag, capacity_smith_weights
 from popdispatch.dynamics.law import Dynamics, FieldTag, FlowLaw, Kernel
 from popdispatch.dynamics.newton import CapacityNewtonTag
-from popdispatch.dynamics.pairwise import SparseGraph, graph_flows_of, sort_for
+from popdispatch.dynamics.pairwise import (
+    CompleteGraph,
+    SparseGraph,
+    complete_graph_flows,
+    graph_flows,
+    relay_flows,
+    sort_by_fitness,
+)
 from popdispatch.dynamics.replicator import ReplicatorTag, replicator_weights
 from popdispatch.dynamics.smith import SmithTag, smith_weights
 from popdispatch.dynamics.targets import target_flows
@@ -136,49 +144,63 @@ def _local_receivers(tag, graph, rate, w, room, mass):
 
 def order_for(tag, graph, f, order):
     """Sort ``order`` by fitness where the law's sums read it (a comparison law on the
-    complete graph, :func:`~popdispatch.dynamics.pairwise.sort_for`); nothing otherwise.
-    Compiled code only."""
+    complete graph, :func:`~popdispatch.dynamics.pairwise.sort_by_fitness`); nothing
+    otherwise. Compiled code only."""
     raise TypeError("order_for() runs in compiled code only")
+
+
+def _graph_class(graph) -> type | None:
+    cls = getattr(graph, "instance_class", None)
+    return cls if cls in (CompleteGraph, SparseGraph) else None
 
 
 @overload(order_for, inline="always")
 def _order_for(tag, graph, f, order):
-    law = _law(tag)
-    if law is None:
+    law, cls = _law(tag), _graph_class(graph)
+    if law is None or cls is None:
         return None
-    if law.kernel == Kernel.COMPARISON:
+    if law.kernel == Kernel.COMPARISON and cls is CompleteGraph:
 
-        def comparison(tag, graph, f, order):
-            sort_for(graph, f, order)
+        def complete(tag, graph, f, order):
+            sort_by_fitness(f, order)
 
-        return comparison
+        return complete
 
-    def target(tag, graph, f, order):
+    def unsorted(tag, graph, f, order):
         pass
 
-    return target
+    return unsorted
 
 
 def law_flows(tag, graph, f, w, v, mass, room, order, inflow, outflow):
     """The raw ``inflow``/``outflow`` (shares/s) of the law of ``tag`` on ``graph`` from the
     weights ``w``, ``v`` (``mass``, ``room``: who is blocked, for the relay of a comparison
-    law on a sparse graph; ``order``: sorted by :func:`order_for`). Compiled code only: the
-    sums are chosen by the classes of the records when numba types the call."""
+    law on a sparse graph; ``order``: sorted by :func:`order_for`, the relay's scratch on a
+    sparse graph). Compiled code only: the sums are chosen by the classes of the records when
+    numba types the call."""
     raise TypeError("law_flows() runs in compiled code only")
 
 
 @overload(law_flows, inline="always")
 def _law_flows(tag, graph, f, w, v, mass, room, order, inflow, outflow):
-    law = _law(tag)
-    if law is None:
+    law, cls = _law(tag), _graph_class(graph)
+    if law is None or cls is None:
         return None
+    if law.kernel == Kernel.COMPARISON and cls is CompleteGraph:
+
+        def complete(tag, graph, f, w, v, mass, room, order, inflow, outflow):
+            complete_graph_flows(f, w, v, order, inflow, outflow)
+
+        return complete
     if law.kernel == Kernel.COMPARISON:
 
-        def comparison(tag, graph, f, w, v, mass, room, order, inflow, outflow):
-            graph_flows_of(graph, f, w, v, mass, room, order, inflow, outflow)
+        def sparse(tag, graph, f, w, v, mass, room, order, inflow, outflow):
+            indptr, indices = graph.indptr, graph.indices
+            graph_flows(f, w, v, indptr, indices, inflow, outflow)
+            relay_flows(f, w, v, mass, room, indptr, indices, order, inflow, outflow)
 
-        return comparison
-    if getattr(graph, "instance_class", None) is SparseGraph:
+        return sparse
+    if cls is SparseGraph:
         return None  # a target needs the whole population (Dynamics.uses_graph is false)
 
     def target(tag, graph, f, w, v, mass, room, order, inflow, outflow):
