@@ -54,9 +54,11 @@ class SnapshotResult:
     ``max(accuracy_kw, accuracy_rel * demand)``). A run that came to rest (the stopping rule of
     :mod:`popdispatch.integrate`) without that proof is ``stalled``: ``converged_at`` is then
     None, ``rest_at`` the iteration it came to rest and ``stall_reason`` says why (a KKT
-    condition that fails, :func:`kkt_violations`, else the bound). Paper mode claims only a
-    rest point of the paper's dynamics (its rules do not land on the DC-OPF,
-    docs/paper-mode.md): its ``converged`` is that rest, and it has no bound (``None``).
+    condition that fails, :func:`kkt_violations`, else the bound). Logit dynamics rest at their
+    own equilibrium, not the DC-OPF's: in exact mode they are never ``converged``, a rest is
+    ``stalled`` with the bound (docs/dynamics.md). Paper mode claims only a rest point of the
+    paper's dynamics (its rules do not land on the DC-OPF, docs/paper-mode.md): its
+    ``converged`` is that rest, and it has no bound (``None``).
     """
 
     minute: int
@@ -200,8 +202,9 @@ def verdicts(
 ) -> Verdict:
     """Each minute's verdict: in a mode that claims the DC-OPF, certified when the distance
     certificate proves the accuracy (and the run was not infeasible); a minute at rest that
-    is not certified gets the reason (a failing KKT condition, else the bound). Paper mode:
-    certified means at rest."""
+    is not certified gets the reason (a failing KKT condition, else the bound). Dynamics whose
+    rest points are not the game's equilibria (logit) are never certified; their minutes at
+    rest are stalled with the bound. Paper mode: certified means at rest."""
     certificates = engine.certificates(minutes, p_mw, z)
     if certificates is None:
         return Verdict(rested & ~infeasible, [None] * len(minutes), None, None)
@@ -209,10 +212,24 @@ def verdicts(
     demand = engine.problem.demand[np.asarray(minutes) - 1]
     accuracy = np.atleast_1d(engine.settings.accuracy_mw(demand)) * KW_PER_MW
     certified = (bound <= accuracy) & ~infeasible
+    own_rest = not engine.dynamics.rests_at_optimum  # logit: never the DC-OPF's, by design
+    if own_rest:
+        certified[:] = False
     pending = rested & ~certified & ~infeasible
     reasons = engine.stall_reasons(minutes, p_mw, z, pending)
     for r in np.flatnonzero(pending):
-        if reasons[r] is None:
+        if own_rest:
+            distance = (
+                f"the distance to it is bounded by {bound[r]:.3g} kW"
+                if np.isfinite(bound[r])
+                else "the certificate bounds no distance to it"
+            )
+            reasons[r] = (
+                f"{engine.dynamics.name} dynamics rest at their own equilibrium, not in general "
+                f"the DC-OPF (docs/dynamics.md): {distance}"
+                + (f"; {reasons[r]}" if reasons[r] else "")
+            )  # fmt: skip
+        elif reasons[r] is None:
             why = certificates[r].reason
             reasons[r] = (
                 f"the distance to the DC-OPF is bounded only by {bound[r]:.3g} kW, above the "
