@@ -26,6 +26,7 @@ from popdispatch.agents.schedule import TICKS_PER_ROUND
 from popdispatch.agents.source import SOURCE_ID, SourceAgent
 from popdispatch.constants import KW_PER_MW
 from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.dynamics.fields import field_of
 from popdispatch.errors import OptionError
 from popdispatch.game.controllers import NodeControllers
 from popdispatch.game.parameters import MinuteInputs, PriceLaw
@@ -373,7 +374,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     check_settings(settings)
     mode = get_mode(settings.mode)
     dynamics = get_dynamics(settings.dynamics)
-    field_code = dynamics.bounded_field if mode.bounded else dynamics.field
+    field_code = field_of(dynamics, mode.bounded)
     fp = game_constants(problem, settings)
     demand = float(problem.demand[minute - 1])
     network = LossyNetwork(faults)

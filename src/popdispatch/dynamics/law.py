@@ -114,23 +114,6 @@ class Dynamics:
     rests_at_optimum: bool = True
     parameters: tuple[str, ...] = ()
 
-    @property
-    def field(self) -> IntEnum:
-        """The :class:`~popdispatch.dynamics.fields.Field` of :attr:`law` (run-time code)."""
-        return _field(self.law)
-
-    @property
-    def bounded_field(self) -> IntEnum | None:
-        """The :class:`~popdispatch.dynamics.fields.Field` of :attr:`bounded_law`, or None."""
-        return None if self.bounded_law is None else _field(self.bounded_law)
-
-
-def _field(law: FlowLaw) -> IntEnum:
-    # the registry imports every law's module, and each module this one: import it on use
-    from popdispatch.dynamics.fields import Field
-
-    return Field[law.name]
-
 
 @nb.njit(cache=True, inline="always")
 def copy_into(source, target):
