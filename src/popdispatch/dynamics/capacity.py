@@ -11,8 +11,8 @@ fitness instead (see :mod:`popdispatch.modes`). As a pairwise flow
 (:mod:`popdispatch.dynamics.pairwise`): receiver weight ``1[x_i < hi_i]``, sender weight
 ``x_j - lo_j``; the integrator's flux limiter stops a receiver exactly at ``hi``.
 
-Why an indicator and not the room fraction ``(hi_i - x_i) / (hi_i - lo_i)`` (the rule until
-issue 10): with the fraction, the inflow into a generator vanishes with the room it has left.
+Why an indicator and not the room fraction ``(hi_i - x_i) / (hi_i - lo_i)``: with the
+fraction, the inflow into a generator vanishes with the room it has left.
 At a degenerate optimum (demand equal to the capacity of the cheap generators, so the dear
 one's movable mass ``x_j - lo_j`` equals the room left, or a generator optimal exactly at
 ``Pmax`` with zero reduced cost, so the fitness gap vanishes with the room) both factors of the
@@ -66,7 +66,7 @@ def project_to_box(x, lo, hi):
     Used when the demand changes between minutes: ``hi = Pmax / P_d`` moves, and a warm-started
     share may sit above its new limit. Written as loops (the same operations in the same order
     as ``np.minimum(np.maximum(x - shift, lo), hi).sum()``): numba compiles array expressions
-    with their broadcasting checks several times slower (first run, issue 13).
+    with their broadcasting checks several times slower (on the first run).
     """
     n = x.shape[0]
     low = np.inf

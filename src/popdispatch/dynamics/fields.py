@@ -11,7 +11,7 @@ here and a branch below; the integrator does not change.
 The engine picks the weights at compile time instead (:func:`weights`): the field travels into
 the kernels as a :class:`FieldTag`, one small record class per weight kernel, and numba
 compiles for each class only the kernel it names. A run thus compiles one dynamic's weights,
-not all of them (issue 13: the first run compiled every field, mode and graph at once).
+not all of them (a run-time choice would compile every field, mode and graph at once).
 :func:`field_weights` keeps the integer code for callers that choose at run time (the agents).
 """
 

@@ -34,7 +34,7 @@ class Term(NamedTuple):
     Each is a small record whose *class* names the kernel (one class per weight kernel, mode
     and kind of graph): numba compiles the term once per combination of classes and, in each,
     only the kernels it names, where a branch on an integer code compiled every mode, field
-    and graph into every run (issue 13: the first run's compilation). Build it with
+    and graph into every run (and the first run compiled them all). Build it with
     :meth:`of`.
     """
 
@@ -120,8 +120,8 @@ def evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term,
         p[i] = x[i] * demand
     # the mode's payoff map, the field's weights and the graph's sums, each chosen by its
     # record's class when numba compiles (Term): no branch, nothing else compiled, and each
-    # inlined (overload inline="always"; called, each call reference-counted the records'
-    # arrays: the paper minute took 2.5 ms instead of 1.5 ms)
+    # inlined (overload inline="always"; called, each call would reference-count the
+    # records' arrays, a large share of a paper-mode minute)
     congestion, residual = payoff(term.mode, p, z, params, minute, work, f, z_rate)
     weights(term.field, x, minute.lo, minute.hi, minute.active, params.revision_rate, w, v, room,
             mass)  # fmt: skip
