@@ -72,7 +72,7 @@ def run_classes(settings: RunSettings) -> set[type] | None:
     :class:`~popdispatch.online.engine.Engine` builds them), None for settings that cannot
     run."""
     from popdispatch.dynamics import get_dynamics
-    from popdispatch.dynamics.fields import field_tag
+    from popdispatch.dynamics.fields import law_of
     from popdispatch.dynamics.pairwise import CompleteGraph, SparseGraph
     from popdispatch.integrate.steppers import method_tag
     from popdispatch.modes import get_mode, mode_tag
@@ -86,7 +86,7 @@ def run_classes(settings: RunSettings) -> set[type] | None:
     complete = not dynamics.uses_graph or settings.graph == "complete"
     policy = WARM_STARTS[settings.warm_start_policy]
     return {
-        type(field_tag(field)), type(mode_tag(mode.code, settings.exact.price_law)),
+        law_of(field).tag, type(mode_tag(mode.code, settings.exact.price_law)),
         CompleteGraph if complete else SparseGraph,
         type(method_tag(settings.stepping.method_code)), type(start_tag(policy, mode.bounded)),
     }  # fmt: skip

@@ -17,9 +17,8 @@ from __future__ import annotations
 import networkx as nx
 import numpy as np
 
-from popdispatch.dynamics import communication_graph, get_dynamics
-from popdispatch.dynamics.capacity import ROOM_ULPS
-from popdispatch.dynamics.fields import Field
+from popdispatch.dynamics import Kernel, communication_graph, get_dynamics
+from popdispatch.dynamics.fields import field_tag, law_of
 from popdispatch.dynamics.pairwise import RELAY_MASS
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
 from popdispatch.game.parameters import MinuteInputs
@@ -103,44 +102,25 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
     return fitness(problem, p, signal, fp, fp.gain, False), z_rate, congestion, residual
 
 
-def weights(field: Field, x, lo, hi, active, rate=None):
-    """Receiver weight, sender weight, room and movable mass of a field (see
-    :mod:`popdispatch.dynamics`; ``rate``: the revision rates of the curvature-scaled field)."""
-    if field == Field.SMITH:
-        v = np.where(active, np.maximum(x, 0.0), 0.0)
-        return active * 1.0, v, np.full(len(x), np.inf), v
-    if field in (Field.CAPACITY_SMITH, Field.CAPACITY_NEWTON):
-        width = hi - lo
-        part = active & (width > 0.0)
-        near = ROOM_ULPS * np.spacing(hi)
-        room = np.where(part, np.maximum(hi - x, 0.0), 0.0)
-        room = np.where(room <= near, 0.0, room)  # at its limit
-        mass = np.where(part, np.maximum(x - lo, 0.0), 0.0)
-        if field == Field.CAPACITY_SMITH:
-            return np.where(room > 0.0, 1.0, 0.0), mass, room, mass
-        mass = np.where(mass <= near, 0.0, mass)
-        inside = ((room > 0.0) & (mass > 0.0)).any()
-        total = rate[(room > 0.0) & (mass > 0.0)].sum() if inside else rate[room > 0.0].sum()
-        return np.where(room > 0.0, rate / total, 0.0), np.where(mass > 0.0, rate, 0.0), room, mass
-    share = np.where(active, np.maximum(x, 0.0), 0.0)
-    return share, share, np.full(len(x), np.inf), share
+def weights(field, x, f, lo, hi, active, rate=None):
+    """Receiver weight, sender weight, room and movable mass of a field (a
+    :class:`~popdispatch.dynamics.fields.Field` whose law takes no parameters, or its record)
+    at shares ``x`` and fitness ``f``: the plain-numpy statement in the law's own module
+    (:attr:`~popdispatch.dynamics.law.FlowLaw.reference`; ``rate``: the revision rates of the
+    curvature-scaled field)."""
+    tag = field_tag(field)
+    rate = np.ones(len(x)) if rate is None else rate
+    return law_of(tag).reference(tag, x, f, lo, hi, active, rate)
 
 
-def neighbourhood_weights(graph, rate, w, room, mass) -> np.ndarray:
-    """The curvature-scaled receiver weights on a communication graph: ``r_i / R_i``, ``R_i``
-    the rates of ``i``'s closed neighbourhood inside their limits (else with room)."""
-    closed = (graph + np.eye(len(w))) > 0
-    inside = closed @ np.where((room > 0) & (mass > 0), rate, 0.0)
-    receivers = closed @ np.where(room > 0, rate, 0.0)
-    total = np.where(inside > 0, inside, receivers)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(w > 0, rate / total, 0.0)
-
-
-def pair_flows(f, w, v, graph, mass=None, room=None):
-    """``(inflow, outflow)``: ``T[i, j] = g_ij w_i v_j [f_i - f_j]_+`` plus the relay
-    (:func:`relay_matrix`; ``mass``, ``room``: the movable masses and rooms that say who is
-    blocked, default the sender weights and no upper limits), summed over j / over i."""
+def pair_flows(f, w, v, graph, mass=None, room=None, kernel=Kernel.COMPARISON):
+    """``(inflow, outflow)``: ``T[i, j] = g_ij w_i v_j K(f_i, f_j)`` summed over j / over i,
+    with ``K = [f_i - f_j]_+`` (a comparison ``kernel``, plus the relay:
+    :func:`relay_matrix`; ``mass``, ``room``: the movable masses and rooms that say who is
+    blocked, default the sender weights and no upper limits) or ``K = 1`` (a target)."""
+    if kernel == Kernel.TARGET:
+        T = graph * w[:, None] * v[None, :]
+        return T.sum(axis=1), T.sum(axis=0)
     T = graph * w[:, None] * v[None, :] * np.maximum(f[:, None] - f[None, :], 0.0)
     mass = v if mass is None else mass
     room = np.full(len(f), np.inf) if room is None else room
@@ -180,9 +160,11 @@ class ReferenceMinute:
         self.price_scale = settings.price_scale(problem)
         self.mode = get_mode(settings.mode)
         dynamics = get_dynamics(settings.dynamics)
-        self.field = settings.field
+        self.tag = settings.field_tag(problem)
+        self.law = law_of(self.tag)
         kind = settings.graph if dynamics.uses_graph else "complete"
         self.graph = communication_graph(kind, list(problem.generators))
+        self.sparse = not (self.graph + np.eye(len(problem.generators)) > 0).all()
         inputs = MinuteInputs.of(problem, minute)
         self.active, self.demand, self.lo, self.hi = (
             inputs.active,
@@ -198,11 +180,16 @@ class ReferenceMinute:
         f, z_rate, congestion, residual = game(
             self.mode.code, x * self.demand, z, self.problem, self.minute, self.fp
         )
-        w, v, room, mass = weights(self.field, x, self.lo, self.hi, self.active, self.rate)
-        if self.field == Field.CAPACITY_NEWTON and not (self.graph + np.eye(len(x)) > 0).all():
-            w = neighbourhood_weights(self.graph, self.rate, w, room, mass)
-        inflow, outflow = pair_flows(f, w, v, self.graph, mass, room)
+        law = self.law
+        w, v, room, mass = law.reference(self.tag, x, f, self.lo, self.hi, self.active, self.rate)
+        if law.reference_local is not None and self.sparse:
+            w = law.reference_local(self.graph, self.rate, w, room, mass)
+        inflow, outflow = self.flows(f, w, v, mass, room)
         return (f, w, v, room, mass, inflow, outflow, z_rate), congestion, residual
+
+    def flows(self, f, w, v, mass, room):
+        """``(inflow, outflow)`` of the law's kernel on the run's graph (:func:`pair_flows`)."""
+        return pair_flows(f, w, v, self.graph, mass, room, self.law.kernel)
 
     def limited_stage(self, h, x, z, point):
         f, w, v, room, mass, inflow, outflow, z_rate = point
@@ -210,10 +197,10 @@ class ReferenceMinute:
             alpha = np.where(h * outflow > mass, mass / (h * outflow), 1.0)
             # the receivers from the flows of the limited senders
             limited = (alpha < 1.0).any()
-            into = pair_flows(f, w, alpha * v, self.graph, mass, room)[0] if limited else inflow
+            into = self.flows(f, w, alpha * v, mass, room)[0] if limited else inflow
             beta = np.where(h * into > room, room / (h * into), 1.0)
         if (alpha < 1.0).any() or (beta < 1.0).any():
-            inflow, outflow = pair_flows(f, beta * w, alpha * v, self.graph, mass, room)
+            inflow, outflow = self.flows(f, beta * w, alpha * v, mass, room)
         return x + h * (inflow - outflow), np.maximum(z + h * z_rate, 0.0)
 
     def heun_combination(self, h, x, z, one, two):
@@ -225,13 +212,13 @@ class ReferenceMinute:
             alpha = np.where(out > mass1, mass1 / out, 1.0)
             if (alpha < 1.0).any():  # the receivers from the flows of the limited senders
                 into = half * (
-                    pair_flows(f1, w1, alpha * v1, self.graph, mass1, room1)[0]
-                    + pair_flows(f2, w2, alpha * v2, self.graph, mass2, room2)[0]
+                    self.flows(f1, w1, alpha * v1, mass1, room1)[0]
+                    + self.flows(f2, w2, alpha * v2, mass2, room2)[0]
                 )
             beta = np.where(into > room1, room1 / into, 1.0)
         if (alpha < 1.0).any() or (beta < 1.0).any():
-            in1, out1 = pair_flows(f1, beta * w1, alpha * v1, self.graph, mass1, room1)
-            in2, out2 = pair_flows(f2, beta * w2, alpha * v2, self.graph, mass2, room2)
+            in1, out1 = self.flows(f1, beta * w1, alpha * v1, mass1, room1)
+            in2, out2 = self.flows(f2, beta * w2, alpha * v2, mass2, room2)
         return x + half * (in1 - out1 + in2 - out2), np.maximum(z + half * (zr1 + zr2), 0.0)
 
     def advance(self, x, z, h_try):

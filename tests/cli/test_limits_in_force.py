@@ -104,7 +104,7 @@ def test_ieee13_binding_rating_in_json_and_text(tmp_path):
     rows = {row["element"]: row for row in summary["limits_in_force"]}
     assert len(rows) == 12 and {row["source"] for row in rows.values()} == {"rating"}
     row = rows["650632"]
-    assert (row["from_bus"], row["to_bus"]) == ("rg60", 632)
+    assert (row["from_bus"], row["to_bus"]) == ("rg60", "632")  # OpenDSS names: text
     assert row["limit_kw"] == pytest.approx(rating_kw, rel=1e-9)
     assert row["binding_minutes"] == 1
     assert sum(r["binding_minutes"] for r in rows.values()) == 1

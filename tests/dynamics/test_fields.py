@@ -1,5 +1,6 @@
-"""Vector fields by name: every dynamic names a :class:`Field`, and each field's compiled
-weights equal the plain-numpy reference's."""
+"""Flow laws by name: the registry builds every field from the laws' modules, each law's
+compiled weights and sums equal its plain-numpy statement and the dense all-pairs sum of the
+reference, and a field no law names has no kernels (no fallback)."""
 
 from __future__ import annotations
 
@@ -7,39 +8,113 @@ import dataclasses
 
 import numpy as np
 import pytest
+from numba.core.errors import TypingError
 
-from popdispatch.dynamics import DYNAMICS, Dynamics, Field, field_rate
-from popdispatch.dynamics.fields import rated_field_weights
+from popdispatch.dynamics import DYNAMICS, Dynamics, Field, Kernel, field_rate
+from popdispatch.dynamics.fields import LAWS, MODULES, field_tag, field_weights, law_of
+from popdispatch.dynamics.law import FieldTag
 from popdispatch.reference import pair_flows, weights
 
+#: The logit's parameters in the tests: noise level (fitness units) and revision rate (1/s).
+LOGIT = {"eta": 0.7, "gain": 3.0}
 
-def test_every_dynamic_names_fields_and_nothing_unread():
+
+def test_the_registry_builds_every_field_from_the_laws_modules():
+    assert [law.name for law in LAWS] == [f.name for f in Field]
+    assert [law for module in MODULES for law in module.LAWS] == list(LAWS)
+    # the codes of the fields the agents pass at run time are kept
+    kept = ("SMITH", "REPLICATOR", "LOCAL_REPLICATOR", "CAPACITY_SMITH", "CAPACITY_NEWTON")
+    assert [int(Field[name]) for name in kept] == [0, 1, 2, 3, 4]
+    assert {"smith", "distributed-smith", "replicator", "local-replicator", "bnn",
+            "logit"} <= set(DYNAMICS)  # fmt: skip
     names = {f.name for f in dataclasses.fields(Dynamics)}
-    assert names == {"name", "field", "uses_graph", "bounded_field"}
-    used = {d.field for d in DYNAMICS.values()} | {d.bounded_field for d in DYNAMICS.values()}
-    # exact mode's curvature-scaled revision replaces the bounded fields (RunSettings.field)
-    assert used - {None} | {Field.CAPACITY_NEWTON} == set(Field)
+    assert names == {"name", "law", "uses_graph", "scope", "bounded_law", "refusal",
+                     "rests_at_optimum", "parameters"}  # fmt: skip
+    used = {d.law for d in DYNAMICS.values()} | {d.bounded_law for d in DYNAMICS.values()}
+    # exact mode's curvature-scaled revision replaces capacity Smith (RunSettings.field)
+    assert used - {None} | {law_of(Field.CAPACITY_NEWTON)} == set(LAWS)
+    for dynamics in DYNAMICS.values():
+        assert (dynamics.bounded_law is None) == bool(dynamics.refusal), dynamics.name
+        assert dynamics.field == Field[dynamics.law.name]
 
 
-@pytest.mark.parametrize("field", list(Field))
-def test_compiled_weights_equal_the_reference(field):
-    rng = np.random.default_rng(int(field))
-    n = 7
+def random_state(seed: int, n: int = 7):
+    rng = np.random.default_rng(seed)
     x = rng.dirichlet(np.ones(n))
     lo, hi = x * rng.uniform(0, 1, n), x + rng.uniform(0, 1, n)
-    lo[0] = hi[0] = x[0]  # no width: takes no part in the capacity field
+    lo[0] = hi[0] = x[0]  # no width: takes no part in the fields with limits
     active = rng.random(n) < 0.8
+    active[1] = True
+    x = np.where(active, x, 0.0)
     rates = 10.0 ** rng.uniform(-3, 2, n)  # revision rates (read by the curvature-scaled field)
-    w, v, room, mass = (np.empty(n) for _ in range(4))
-    rated_field_weights(int(field), x, lo, hi, active, rates, w, v, room, mass)
-    expected = weights(field, x, lo, hi, active, rates)
-    for compiled, value in zip((w, v, room, mass), expected, strict=True):
-        np.testing.assert_allclose(compiled, value, rtol=1e-15, atol=0)
+    return rng, x, lo, hi, active, rates
+
+
+@pytest.mark.parametrize("field", list(Field), ids=lambda f: f.name)
+def test_compiled_weights_and_flows_equal_the_reference(field):
+    rng, x, lo, hi, active, rates = random_state(int(field))
+    n = len(x)
     f = rng.normal(0, 1, n)
+    tag = field_tag(field, **LOGIT)
+    expected = weights(tag, x, f, lo, hi, active, rates)
     complete = np.ones((n, n)) - np.eye(n)
-    inflow, outflow = pair_flows(f, *expected[:2], complete)
-    rate = field_rate(field, x, f, complete, lo, hi, active, rates)
+    kernel = law_of(field).kernel
+    inflow, outflow = pair_flows(f, *expected[:2], complete, expected[3], expected[2], kernel)
+    rate = field_rate(field, x, f, complete, lo, hi, active, rates, **LOGIT)
     np.testing.assert_allclose(rate, inflow - outflow, rtol=0, atol=1e-13)
+    assert abs(rate.sum()) < 1e-13  # mass moves between strategies only
+
+
+@pytest.mark.parametrize("field", list(Field), ids=lambda f: f.name)
+def test_compiled_weights_equal_the_laws_numpy_statement(field):
+    from popdispatch.dynamics import fields
+
+    rng, x, lo, hi, active, rates = random_state(100 + int(field))
+    f = rng.normal(0, 1, len(x))
+    tag = field_tag(field, **LOGIT)
+    compiled = _compiled_weights(fields, tag, x, f, lo, hi, active, rates)
+    for got, want in zip(compiled, weights(tag, x, f, lo, hi, active, rates), strict=True):
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+
+
+def _compiled_weights(fields, tag, x, f, lo, hi, active, rates):
+    import numba as nb
+
+    @nb.njit
+    def run(tag, x, f, lo, hi, active, rates, w, v, room, mass):
+        fields.weights(tag, x, f, lo, hi, active, rates, w, v, room, mass)
+
+    out = tuple(np.empty(len(x)) for _ in range(4))
+    run(tag, x, f, lo, hi, active, rates, *out)
+    return out
+
+
+class UnknownTag(FieldTag):
+    """A field record no law names."""
+
+    __slots__ = ()
+
+
+def test_a_field_no_law_names_has_no_kernels():
+    """The compiled stubs have no implementation for a record class no law names (numba
+    refuses to type the call), and the run-time weights raise for codes they do not know:
+    never another law's weights instead."""
+    x = np.full(3, 1 / 3)
+    with pytest.raises(TypingError):
+        field_rate(UnknownTag(99), x, np.zeros(3), np.ones((3, 3)) - np.eye(3), x * 0, x * 0 + 1)
+    w, v, room = (np.empty(3) for _ in range(3))
+    with pytest.raises(ValueError, match="no run-time weights"):
+        field_weights(int(Field.BNN), x, x * 0, x * 0 + 1, np.ones(3, dtype=bool), w, v, room)
+    field_weights(int(Field.CAPACITY_SMITH), x, x * 0, x * 0 + 1, np.ones(3, dtype=bool), w, v,
+                  room)  # fmt: skip
+    np.testing.assert_array_equal(v, x)
+
+
+def test_a_law_with_parameters_needs_them():
+    with pytest.raises(ValueError, match="eta"):
+        field_tag(Field.LOGIT, gain=1.0)
+    assert field_tag(Field.LOGIT, eta=2.0, gain=1.0, other=5.0)[1:] == (2.0, 1.0)
+    assert law_of(field_tag(Field.BOX_LOGIT, **LOGIT)).kernel == Kernel.TARGET
 
 
 def test_a_strategy_a_few_ulp_below_its_upper_limit_is_at_it():

@@ -25,10 +25,12 @@ CONFIGURATIONS = [
     {"mode": "exact", "dynamics": "distributed-smith", "graph": "ring"},
     {"mode": "paper", "dynamics": "local-replicator", "graph": "path"},
     {"mode": "exact", "warm_start": "setpoints"},
+    {"mode": "paper", "dynamics": "bnn"},
+    {"mode": "exact", "dynamics": "logit", "eta": 0.1},
 ]
 
 
-@pytest.mark.parametrize("options", CONFIGURATIONS, ids=lambda o: "-".join(o.values()))
+@pytest.mark.parametrize("options", CONFIGURATIONS, ids=lambda o: "-".join(map(str, o.values())))
 def test_the_notice_checks_the_classes_the_engine_passes(options):
     settings = RunSettings(**options)
     engine = Engine(elv_problem(limits=[CONGESTION_PATH]), settings)
@@ -90,10 +92,10 @@ def test_an_exact_run_compiles_its_own_kernels_only(tmp_path):
     assert report["paper"] is False
     assert report["day_loops"] == 1
     compiled = set(report["compiled"])
-    assert {"advance_heun", "_sort_for.<locals>.complete"} <= compiled
+    assert {"advance_heun", "_order_for.<locals>.complete"} <= compiled
     assert "_start_minute.<locals>.setpoints" in compiled
-    unused = {"advance_euler", "_sort_for.<locals>.sparse",
-              "_graph_flows_of.<locals>.sparse", "_start_minute.<locals>.free",
+    unused = {"advance_euler", "_order_for.<locals>.unsorted", "_law_flows.<locals>.sparse",
+              "_law_flows.<locals>.target", "_start_minute.<locals>.free",
               "_start_minute.<locals>.shares"}  # fmt: skip
     assert not compiled & unused, compiled & unused
     assert report["status"] == ["converged", "converged"]

@@ -16,7 +16,7 @@ from popdispatch.integrate.steppers import euler_steps, heun_combination
 from popdispatch.modes import ModeCode, mode_tag
 
 EMPTY = np.zeros(0, dtype=np.int64)
-#: The term of a complete graph (field and mode are not read by the stages).
+#: Smith on the complete graph (the stages read the field's sums, not the mode).
 RULES = Term.of(Field.SMITH, mode_tag(ModeCode.PAPER), True, EMPTY, EMPTY)
 
 
@@ -154,7 +154,7 @@ def test_heun_combination_matches_numpy_and_stays_in_the_domain(n, seed, h):
     one, two = ws.first, ws.second
     heun_combination(h, x.copy(), np.zeros(0), *one[1:], two.f, two.w, two.v, two.room, two.mass,
                      two.inflow, two.outflow, two.z_rate, two.order, ws.first_limited,
-                     ws.second_limited, *RULES[2:], x_out, np.zeros(0))  # fmt: skip
+                     ws.second_limited, RULES.field, RULES.graph, x_out, np.zeros(0))  # fmt: skip
     half = 0.5 * h
     out, into = half * (out1 + out2), half * (in1 + in2)
     alpha = np.where(out > v1, v1 / np.where(out > 0, out, 1.0), 1.0)

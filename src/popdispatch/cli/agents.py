@@ -73,7 +73,7 @@ from popdispatch.progress import Progress
 @click.pass_context
 def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, duplicate, noise_kw,
            seed, trips, crashes, controller_crashes, step_s, max_rounds, pace, profiles, source,
-           as_json, quiet, constants=None, price_law="plain") -> int:  # fmt: skip
+           as_json, quiet, constants=None, price_law="plain", eta=None) -> int:  # fmt: skip
     """One minute dispatched by agents: one per generator, one per node controller and the
     plant, exchanging messages in mango's simulated world with seeded loss, delay and
     duplication; power moves only in pairwise transactions (offer, accept, commit), compared
@@ -85,7 +85,7 @@ def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, dupl
     if minute is None:
         raise click.MissingParameter(param_hint="'--minute'", param_type="option")
     progress = Progress(quiet)
-    settings = settings_from(dynamics, mode, x0, graph, None, constants, price_law)
+    settings = settings_from(dynamics, mode, x0, graph, None, constants, price_law, eta=eta)
     events = {"trip": trips, "crash": crashes, "controller-crash": controller_crashes}
     faults = _faults(loss, delay_max, duplicate, noise_kw, seed, events)
     from popdispatch.agents.system import check_settings

@@ -137,8 +137,8 @@ def opf(minute: int, limits, profiles, source, as_json: bool, quiet: bool) -> in
 @json_option
 @quiet_option
 def snapshot(
-    minute, limits, dynamics, mode, x0, graph, constants, price_law, accuracy, profiles, source,
-    out, analyses, as_json, quiet,
+    minute, limits, dynamics, eta, mode, x0, graph, constants, price_law, accuracy, profiles,
+    source, out, analyses, as_json, quiet,
 ) -> int:  # fmt: skip
     """One minute of dynamics: trajectory, convergence, comparison with the DC-OPF.
 
@@ -151,7 +151,7 @@ def snapshot(
     progress = Progress(quiet)
     check_out(out)
     settings = analyses.settings(settings_from(dynamics, mode, x0, graph, None, constants,
-                                                price_law, accuracy))  # fmt: skip
+                                                price_law, accuracy, eta))  # fmt: skip
     check_shares(x0, progress, source)
     announce_compile(progress, settings)
     problem, series = build(source, profiles, minute, limits, progress)
@@ -196,8 +196,8 @@ def snapshot(
 @json_option
 @quiet_option
 def day(
-    limits, dynamics, mode, x0, graph, constants, price_law, accuracy, events, minutes, warm_start,
-    profiles, source, out, analyses, as_json, quiet,
+    limits, dynamics, eta, mode, x0, graph, constants, price_law, accuracy, events, minutes,
+    warm_start, profiles, source, out, analyses, as_json, quiet,
 ) -> int:  # fmt: skip
     """The online day: every minute continues from the last (warm start), against the DC-OPF.
 
@@ -219,7 +219,7 @@ def day(
     progress = Progress(quiet)
     check_out(out)
     settings = analyses.settings(settings_from(dynamics, mode, x0, graph, warm_start,
-                                                constants, price_law, accuracy))  # fmt: skip
+                                                constants, price_law, accuracy, eta))  # fmt: skip
     check_shares(x0, progress, source)
     announce_compile(progress, settings)
     problem, series = build(source, profiles, None, limits, progress, events, minutes)

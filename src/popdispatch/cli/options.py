@@ -98,7 +98,7 @@ class EngineChoice(click.Choice):
 
 DYNAMICS_CHOICE = EngineChoice(
     "popdispatch.dynamics:DYNAMICS",
-    shown=("smith", "replicator", "local-replicator", "distributed-smith"),
+    shown=("smith", "distributed-smith", "replicator", "local-replicator", "bnn", "logit"),
 )
 MODE_CHOICE = EngineChoice("popdispatch.modes:MODES", shown=("paper", "exact", "voltage"))
 GRAPH_CHOICE = EngineChoice(
@@ -233,7 +233,7 @@ out_option = option(
 
 
 def run_options(func):
-    """``--dynamics``, ``--mode``, ``--x0``, ``--graph``, ``--constants`` and
+    """``--dynamics``, ``--eta``, ``--mode``, ``--x0``, ``--graph``, ``--constants`` and
     ``--price-law``."""
     decorators = [
         option(
@@ -241,7 +241,14 @@ def run_options(func):
             type=DYNAMICS_CHOICE,
             default="smith",
             show_default=True,
-            help="Population dynamics (paper eqs. 9-14).",
+            help="Population dynamics: the paper's (eqs. 9-14), Brown-von Neumann-Nash (bnn; "
+            "paper mode) or logit (needs --eta); docs/dynamics.md.",
+        ),
+        option(
+            "--eta",
+            type=click.FloatRange(min=0.0, min_open=True),
+            help="Logit dynamics' noise level, EUR/MWh (> 0; smaller: closer to the best "
+            "response); logit only.",
         ),
         option(
             "--mode",
@@ -373,19 +380,21 @@ def feeder_options(func):
 def settings_from(
     dynamics: str, mode: str, x0, graph: str, warm_start: str | None = None, constants=None,
     price_law: str = "plain", accuracy: tuple[float, float] = (1e-3, 1e-6),
+    eta: float | None = None,
 ):  # fmt: skip
     """The run's :class:`~popdispatch.online.RunSettings`; ``constants`` (``--constants``, a
     :class:`~popdispatch.game.fitness.FitnessParameters`) replace the default ones;
     ``price_law`` (``--price-law``) is exact mode's
     (:class:`~popdispatch.game.parameters.PriceLaw`); ``accuracy`` (``--accuracy-kw``,
-    ``--accuracy-rel``) what a converged minute must prove."""
+    ``--accuracy-rel``) what a converged minute must prove; ``eta`` (``--eta``, EUR/MWh) the
+    logit dynamics' noise level."""
     from popdispatch.errors import OptionError
     from popdispatch.modes.exact import ExactConstants
     from popdispatch.online import RunSettings
 
     settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph, x0=x0, warm_start=warm_start,
                            exact=ExactConstants(price_law=price_law), accuracy_kw=accuracy[0],
-                           accuracy_rel=accuracy[1])  # fmt: skip
+                           accuracy_rel=accuracy[1], eta=eta)  # fmt: skip
     if constants is not None and mode != "paper":
         raise OptionError(  # exact mode reads settings.exact: the constants would be ignored
             f"--constants sets paper mode's constants (EUR/MW); {mode} mode's are dimensionless "

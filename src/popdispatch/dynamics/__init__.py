@@ -1,56 +1,48 @@
 """Mean dynamics as vector fields on the population shares ``x`` (``x_i = p_i / P_d``).
 
-Every dynamic is a pairwise-comparison flow (:mod:`popdispatch.dynamics.pairwise`) fixed by
-its receiver and sender weights. Each is a :class:`Dynamics` record naming its compiled
-weights, so the integrator never needs to know which one it runs, and adding one never touches
-the integrator.
+Every dynamic is one module stating its flow law (:mod:`popdispatch.dynamics.law`: mass moves
+from ``j`` to ``i`` at ``g_ij w_i v_j K(f_i, f_j)``, ``K`` a fitness comparison or 1), listed in
+the registry :data:`popdispatch.dynamics.fields.MODULES`:
+
+- :mod:`~popdispatch.dynamics.smith`: Smith and distributed Smith (pairwise comparison);
+- :mod:`~popdispatch.dynamics.replicator`: replicator and local replicator (imitation);
+- :mod:`~popdispatch.dynamics.capacity`, :mod:`~popdispatch.dynamics.newton`: Smith inside
+  the generator limits, plain or curvature-scaled (exact mode);
+- :mod:`~popdispatch.dynamics.bnn`: Brown-von Neumann-Nash (excess payoff, a target);
+- :mod:`~popdispatch.dynamics.logit`: logit with noise ``eta`` (perturbed best response).
+
+The integrator, its flux limiter and the plain-numpy reference read the laws, never a
+particular dynamic (docs/dynamics.md).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
+import numba as nb
 import numpy as np
 from scipy import sparse
 
 from popdispatch.dynamics.capacity import project_to_box
-from popdispatch.dynamics.fields import Field, rated_field_weights
+from popdispatch.dynamics.fields import NAMED, Field, field_tag, law_flows, order_for
+from popdispatch.dynamics.fields import local_receivers as _local
+from popdispatch.dynamics.fields import weights as _weights
 from popdispatch.dynamics.graph import GRAPHS, communication_graph
-from popdispatch.dynamics.pairwise import pairwise_flows, sort_by_fitness
+from popdispatch.dynamics.law import Dynamics, FlowLaw, Kernel
+from popdispatch.dynamics.pairwise import graph_of
+
+#: The dynamics people name (``--dynamics``), by name.
+DYNAMICS: dict[str, Dynamics] = {d.name: d for d in NAMED}
 
 
-@dataclass(frozen=True)
-class Dynamics:
-    """A mean dynamic.
-
-    Attributes
-    ----------
-    name : CLI name.
-    field : its vector field (weights in :func:`popdispatch.dynamics.fields.field_weights`).
-    uses_graph : whether the communication graph matters (else the complete graph is used).
-    bounded_field : the capacity-constrained variant used by the exact mode (None if there is
-        none: imitative dynamics, whose zero shares stay at zero).
-    """
-
-    name: str
-    field: Field
-    uses_graph: bool
-    bounded_field: Field | None = None
-
-
-DYNAMICS = {
-    d.name: d
-    for d in (
-        Dynamics("smith", Field.SMITH, False, Field.CAPACITY_SMITH),  # eq. 13
-        Dynamics("replicator", Field.REPLICATOR, False),  # eq. 9
-        Dynamics("local-replicator", Field.LOCAL_REPLICATOR, True),  # eq. 12
-        Dynamics("distributed-smith", Field.SMITH, True, Field.CAPACITY_SMITH),  # eq. 14
-    )
-}
+@nb.njit(cache=True)
+def _field_rate(tag, graph, x, f, lo, hi, active, rate, w, v, room, mass, order, inflow, outflow):
+    _weights(tag, x, f, lo, hi, active, rate, w, v, room, mass)
+    _local(tag, graph, rate, w, room, mass)
+    order_for(tag, graph, f, order)
+    law_flows(tag, graph, f, w, v, mass, room, order, inflow, outflow)
 
 
 def field_rate(
-    field: Field,
+    field: Field | tuple,
     x: np.ndarray,
     f: np.ndarray,
     adjacency: np.ndarray,
@@ -58,24 +50,24 @@ def field_rate(
     hi: np.ndarray,
     active: np.ndarray | None = None,
     rate: np.ndarray | None = None,
+    **parameters: float,
 ) -> np.ndarray:
-    """``x'`` of the field ``field`` at shares ``x`` and fitness ``f``, on a dense 0/1
-    ``adjacency``, with the compiled kernels (``rate``: the per-generator revision rates of
-    the curvature-scaled field)."""
+    """``x'`` (shares/s) of the field ``field`` (a :class:`Field`, or its record) at shares
+    ``x`` and fitness ``f`` (EUR/MW), on a dense 0/1 ``adjacency``, by the engine's own
+    compiled kernels (``rate``: the per-generator revision rates of the curvature-scaled
+    field; ``parameters``: the law's, e.g. ``eta`` and ``gain`` of the logit, in fitness units
+    and 1/s)."""
     n = len(x)
     x, f = np.asarray(x, dtype=float), np.asarray(f, dtype=float)
     active = np.ones(n, dtype=bool) if active is None else np.asarray(active, dtype=bool)
     rate = np.ones(n) if rate is None else np.asarray(rate, dtype=float)
-    w, v, room, mass, inflow, outflow = (np.empty(n) for _ in range(6))
-    rated_field_weights(int(field), x, np.asarray(lo, float), np.asarray(hi, float), active, rate,
-                        w, v, room, mass)  # fmt: skip
+    tag = field_tag(field, **parameters)
     complete = bool((adjacency + np.eye(n) > 0).all())
     csr = sparse.csr_matrix(adjacency)
-    order = np.arange(n, dtype=np.int64)
-    if complete:
-        sort_by_fitness(f, order)
-    indptr, indices = csr.indptr.astype(np.int64), csr.indices.astype(np.int64)
-    pairwise_flows(f, w, v, mass, room, complete, indptr, indices, order, inflow, outflow)
+    graph = graph_of(complete, csr.indptr.astype(np.int64), csr.indices.astype(np.int64))
+    w, v, room, mass, inflow, outflow = (np.empty(n) for _ in range(6))
+    _field_rate(tag, graph, x, f, np.asarray(lo, float), np.asarray(hi, float), active, rate, w,
+                v, room, mass, np.arange(n, dtype=np.int64), inflow, outflow)  # fmt: skip
     return inflow - outflow
 
 
@@ -92,6 +84,8 @@ __all__ = [
     "GRAPHS",
     "Dynamics",
     "Field",
+    "FlowLaw",
+    "Kernel",
     "communication_graph",
     "field_rate",
     "get_dynamics",

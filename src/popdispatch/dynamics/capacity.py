@@ -7,9 +7,10 @@ lower limit ``lo`` (shares ``x = p / P_d``; ``lo = Pmin / P_d``, ``hi = Pmax / P
 Its rest points are exactly the box-constrained equilibria: interior strategies have equal
 fitness, a strategy at ``hi`` may be better and one at ``lo`` worse. That is the KKT condition
 of the economic dispatch with generator limits. ``kappa`` = 1 here; the exact mode scales the
-fitness instead (see :mod:`popdispatch.modes`). As a pairwise flow
-(:mod:`popdispatch.dynamics.pairwise`): receiver weight ``1[x_i < hi_i]``, sender weight
-``x_j - lo_j``; the integrator's flux limiter stops a receiver exactly at ``hi``.
+fitness instead (see :mod:`popdispatch.modes`). As a flow law
+(:mod:`popdispatch.dynamics.law`, summed by :mod:`~popdispatch.dynamics.pairwise`): receiver
+weight ``1[x_i < hi_i]``, sender weight ``x_j - lo_j``; the integrator's flux limiter stops a
+receiver exactly at ``hi``.
 
 Why an indicator and not the room fraction ``(hi_i - x_i) / (hi_i - lo_i)``: with the
 fraction, the inflow into a generator vanishes with the room it has left.
@@ -32,6 +33,8 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+
+from popdispatch.dynamics.law import FieldTag, FlowLaw, copy_into
 
 #: Room (in units in the last place of the upper limit) below which a strategy counts as at its
 #: upper limit.
@@ -57,6 +60,40 @@ def capacity_smith_weights(x, lo, hi, active, w, v, room):
             room[i] = 0.0  # a few ulp below its limit: at it (not a receiver)
         w[i] = 1.0 if room[i] > 0.0 else 0.0
         v[i] = max(x[i] - lo[i], 0.0)
+
+
+@nb.njit(cache=True, inline="always")
+def weights(tag, x, f, lo, hi, active, rate, w, v, room, mass):
+    """The law's weights (:class:`~popdispatch.dynamics.law.FlowLaw`):
+    :func:`capacity_smith_weights`, the sender weight being the movable mass."""
+    capacity_smith_weights(x, lo, hi, active, w, v, room)
+    copy_into(v, mass)
+
+
+def box(x, lo, hi, active):
+    """Plain numpy: ``(room, mass)`` of the strategies taking part (online, ``hi > lo``):
+    ``hi - x`` (none within :data:`ROOM_ULPS` ulp of ``hi``) and ``x - lo``; 0 elsewhere."""
+    part = active & (hi - lo > 0.0)
+    room = np.where(part, np.maximum(hi - x, 0.0), 0.0)
+    room = np.where(room <= ROOM_ULPS * np.spacing(hi), 0.0, room)  # at its limit
+    return room, np.where(part, np.maximum(x - lo, 0.0), 0.0)
+
+
+def reference(tag, x, f, lo, hi, active, rate):
+    """Plain numpy: receiver weight ``1[room > 0]``, sender weight and mass ``x - lo``."""
+    room, mass = box(x, lo, hi, active)
+    return np.where(room > 0.0, 1.0, 0.0), mass, room, mass
+
+
+class CapacitySmithTag(FieldTag):
+    """Capacity-constrained Smith weights (:func:`capacity_smith_weights`)."""
+
+    __slots__ = ()
+
+
+LAW = FlowLaw("CAPACITY_SMITH", CapacitySmithTag, weights, reference)
+LAWS = (LAW,)
+DYNAMICS = ()  # exact mode's variant of smith (dynamics/smith.py)
 
 
 @nb.njit(cache=True)

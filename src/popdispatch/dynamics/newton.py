@@ -36,7 +36,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from popdispatch.dynamics.capacity import ROOM_ULPS
+from popdispatch.dynamics.capacity import ROOM_ULPS, box
+from popdispatch.dynamics.law import FieldTag, FlowLaw
 
 #: Largest revision rate, as a fraction of ``1 / (2 c)`` at the curvature ``S / P`` (a
 #: generator whose marginal cost climbs the whole spread of marginal costs over the reference
@@ -109,3 +110,43 @@ def neighbourhood_receivers(indptr, indices, rate, w, room, mass):
                 if mass[j] > 0.0:
                     inside += rate[j]
         w[i] = rate[i] / (inside if inside > 0.0 else receivers)
+
+
+@nb.njit(cache=True, inline="always")
+def weights(tag, x, f, lo, hi, active, rate, w, v, room, mass):
+    """The law's weights (:class:`~popdispatch.dynamics.law.FlowLaw`): :func:`newton_weights`."""
+    newton_weights(x, lo, hi, active, rate, w, v, room, mass)
+
+
+def reference(tag, x, f, lo, hi, active, rate):
+    """Plain numpy: receiver weight ``r_i / R`` below ``hi``, sender weight ``r_j`` above
+    ``lo`` (``R``: the rates strictly inside their limits, else of those with room)."""
+    room, mass = box(x, lo, hi, active)
+    mass = np.where(mass <= ROOM_ULPS * np.spacing(hi), 0.0, mass)
+    inside = (room > 0.0) & (mass > 0.0)
+    total = rate[inside].sum() if inside.any() else rate[room > 0.0].sum()
+    return np.where(room > 0.0, rate / total, 0.0), np.where(mass > 0.0, rate, 0.0), room, mass
+
+
+def reference_local(adjacency, rate, w, room, mass):
+    """Plain numpy: the receiver weights on a communication graph, ``r_i / R_i`` with ``R_i``
+    the rates of ``i``'s closed neighbourhood inside their limits (else with room)."""
+    closed = (adjacency + np.eye(len(w))) > 0
+    inside = closed @ np.where((room > 0) & (mass > 0), rate, 0.0)
+    receivers = closed @ np.where(room > 0, rate, 0.0)
+    total = np.where(inside > 0, inside, receivers)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(w > 0, rate / total, 0.0)
+
+
+class CapacityNewtonTag(FieldTag):
+    """Curvature-scaled capacity-constrained Smith weights (:func:`newton_weights`), which
+    read the game's per-generator revision rates."""
+
+    __slots__ = ()
+
+
+LAW = FlowLaw("CAPACITY_NEWTON", CapacityNewtonTag, weights, reference,
+              local=neighbourhood_receivers, reference_local=reference_local)  # fmt: skip
+LAWS = (LAW,)
+DYNAMICS = ()  # exact mode's curvature-scaled revision of smith (RunSettings.field)

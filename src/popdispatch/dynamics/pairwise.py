@@ -1,9 +1,10 @@
-"""Pairwise-comparison flows: the common kernel of every dynamic in this package.
+"""Pairwise-comparison flows: the sums of the flow laws whose kernel compares fitness.
 
-All of the paper's dynamics move mass from a strategy ``j`` to a better strategy ``i`` at the
-rate ``g_ij * w_i * v_j * [f_i - f_j]_+``: ``g`` is the communication graph, ``w_i`` the
-receiver weight and ``v_j`` the sender weight (the *movable* mass of ``j``). Each dynamic only
-chooses ``w`` and ``v`` (see :mod:`popdispatch.dynamics.fields`); this module sums the flows:
+The paper's dynamics (Smith, the replicators) and their capacity-constrained variants move
+mass from a strategy ``j`` to a better strategy ``i`` at the rate
+``g_ij * w_i * v_j * [f_i - f_j]_+`` (:mod:`popdispatch.dynamics.law`): ``g`` is the
+communication graph, ``w_i`` the receiver weight and ``v_j`` the sender weight. Each law only
+chooses ``w`` and ``v``; this module sums the flows:
 
     inflow_i  = w_i * sum_j g_ij [f_i - f_j]_+ v_j,
     outflow_j = v_j * sum_i g_ij [f_i - f_j]_+ w_i,     x' = inflow - outflow.
@@ -14,8 +15,9 @@ The running sums add only non-negative terms (fitness steps times partial sums),
 fitness gives exactly zero flow and there is no cancellation.
 
 The engine passes the graph as a :class:`CompleteGraph` or :class:`SparseGraph` record; the
-record's class picks the kernel when numba compiles (:func:`graph_flows_of`,
-:func:`sort_for`), so a run compiles the sums of its own graph only.
+record's class (with the law's) picks the sums when numba compiles
+(:func:`popdispatch.dynamics.fields.law_flows`), so a run compiles the sums of its own graph
+only.
 """
 
 from __future__ import annotations
@@ -24,13 +26,12 @@ from typing import NamedTuple
 
 import numba as nb
 import numpy as np
-from numba.extending import overload
 
 
 class Graph(NamedTuple):
     """The communication graph as the compiled kernels take it: its symmetric adjacency in
     CSR form (``indptr``, ``indices``; empty for the complete graph). The class says which
-    sums run (see :func:`graph_flows_of`)."""
+    sums run (see :func:`popdispatch.dynamics.fields.law_flows`)."""
 
     indptr: np.ndarray
     indices: np.ndarray
@@ -282,71 +283,3 @@ def relay_flows(f, w, v, mass, room, indptr, indices, label, inflow, outflow):
                     seen = True
             if not seen:
                 relay_send(f, w, v, label, a, r, inflow, outflow)
-
-
-@nb.njit(cache=True, inline="always")
-def pairwise_flows(f, w, v, mass, room, complete, indptr, indices, order, inflow, outflow):
-    """Dispatch to :func:`complete_graph_flows` (``order`` already sorted) or
-    :func:`graph_flows` plus the relay (:func:`relay_flows`, ``order`` as its scratch: the
-    order by fitness is only read on the complete graph)."""
-    if complete:
-        complete_graph_flows(f, w, v, order, inflow, outflow)
-    else:
-        graph_flows(f, w, v, indptr, indices, inflow, outflow)
-        relay_flows(f, w, v, mass, room, indptr, indices, order, inflow, outflow)
-
-
-def graph_flows_of(graph, f, w, v, mass, room, order, inflow, outflow):
-    """:func:`pairwise_flows` on ``graph`` (a :class:`CompleteGraph`, ``order`` already
-    sorted, or a :class:`SparseGraph`), the kernel chosen by the record's class when numba
-    types the call; compiled code only."""
-    raise TypeError("graph_flows_of() runs in compiled code only; use pairwise_flows")
-
-
-def sort_for(graph, f, order):
-    """:func:`sort_by_fitness` where ``graph`` is complete (the only graph whose sums read the
-    order), nothing on a :class:`SparseGraph`; compiled code only."""
-    raise TypeError("sort_for() runs in compiled code only; use sort_by_fitness")
-
-
-def _graph_class(graph) -> type | None:
-    cls = getattr(graph, "instance_class", None)
-    return cls if cls in (CompleteGraph, SparseGraph) else None
-
-
-@overload(graph_flows_of, inline="always")
-def _graph_flows_of(graph, f, w, v, mass, room, order, inflow, outflow):
-    cls = _graph_class(graph)
-    if cls is CompleteGraph:
-
-        def complete(graph, f, w, v, mass, room, order, inflow, outflow):
-            complete_graph_flows(f, w, v, order, inflow, outflow)
-
-        return complete
-    if cls is SparseGraph:
-
-        def sparse(graph, f, w, v, mass, room, order, inflow, outflow):
-            indptr, indices = graph.indptr, graph.indices
-            graph_flows(f, w, v, indptr, indices, inflow, outflow)
-            relay_flows(f, w, v, mass, room, indptr, indices, order, inflow, outflow)
-
-        return sparse
-    return None
-
-
-@overload(sort_for, inline="always")
-def _sort_for(graph, f, order):
-    cls = _graph_class(graph)
-    if cls is CompleteGraph:
-
-        def complete(graph, f, order):
-            sort_by_fitness(f, order)
-
-        return complete
-    if cls is SparseGraph:
-
-        def sparse(graph, f, order):
-            pass
-
-        return sparse
-    return None

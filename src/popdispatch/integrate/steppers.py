@@ -1,15 +1,16 @@
 """Steppers: one iteration (``dt`` seconds) of the flux-limited Euler or Heun scheme.
 
-Domain, by flux limiting: every dynamic moves mass along pairs (:mod:`popdispatch.dynamics.
-pairwise`). An Euler stage of length ``h`` would move ``h * outflow_j`` out of strategy ``j``
-and ``h * inflow_i`` into ``i``; where that exceeds the movable mass of ``j`` (or the room
-left below the upper limit of ``i``), the sender's (receiver's) weight is scaled down so that
-it exactly empties (fills), and the flows are summed again. Mass is conserved pair by pair and
-every stage stays in its domain for any ``h``; Heun is a convex combination of two such stages,
-so it does too. A stage that needs no limiting is the plain Euler stage, so away from the
-limits this is the textbook scheme. (Shortening the step instead, to ``1 / rate``, cost exact
-mode 10-17 steps per iteration even at rest, since the rate of a strategy sitting at its limit
-stays large.)
+Domain, by flux limiting: every dynamic moves mass along pairs (its flow law,
+:mod:`popdispatch.dynamics.law`: ``T_ij = g_ij w_i v_j K(f_i, f_j)``). An Euler stage of
+length ``h`` would move ``h * outflow_j`` out of strategy ``j`` and ``h * inflow_i`` into
+``i``; where that exceeds the movable mass of ``j`` (or the room left below the upper limit of
+``i``), the sender's (receiver's) weight is scaled down so that it exactly empties (fills),
+and the flows are summed again by the law's own sums. Mass is conserved pair by pair and
+every stage stays in its domain for any ``h``; Heun is a convex combination of two such
+stages, so it does too. A stage that needs no limiting is the plain Euler stage, so away from
+the limits this is the textbook scheme. (Shortening the step instead, to ``1 / rate``, cost
+exact mode 10-17 steps per iteration even at rest, since the rate of a strategy sitting at its
+limit stays large.)
 
 - :attr:`Method.EULER`: ``substeps`` limited Euler steps per iteration (paper mode: its barrier
   is discontinuous, generators slide along their limits and an explicit step chatters around
@@ -44,7 +45,7 @@ import numba as nb
 import numpy as np
 from numba.extending import overload
 
-from popdispatch.dynamics.pairwise import graph_flows_of
+from popdispatch.dynamics.fields import law_flows
 from popdispatch.game.parameters import GameWork
 from popdispatch.integrate.term import Stage, evaluate
 
@@ -174,11 +175,11 @@ def evaluate_stage(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order,
 
 
 @nb.njit(cache=True)
-def limited_flows(f, w, v, mass, room, graph, order, inflow, outflow):
-    """:func:`~popdispatch.dynamics.pairwise.graph_flows_of` of limited weights on ``graph``,
-    compiled once and called by the limiter's four sites (inlined, numba typed and LLVM
-    optimised a copy at each)."""
-    graph_flows_of(graph, f, w, v, mass, room, order, inflow, outflow)
+def limited_flows(field, graph, f, w, v, mass, room, order, inflow, outflow):
+    """:func:`~popdispatch.dynamics.fields.law_flows` of limited weights: the flows of the law
+    of ``field`` (its record) on ``graph``, compiled once and called by the limiter's four
+    sites (inlined, numba typed and LLVM optimised a copy at each)."""
+    law_flows(field, graph, f, w, v, mass, room, order, inflow, outflow)
 
 
 @nb.njit(cache=True, inline="always")
@@ -198,7 +199,7 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
     about 1400 steps on 6 generators) a quarter of its time when the limiter was a function.
     """
     lim_w, lim_v, lim_in, lim_out = lim.w, lim.v, lim.inflow, lim.outflow
-    graph = term.graph
+    field, graph = term.field, term.graph
     congested = 0.0
     residual = 0.0
     for step in range(steps):
@@ -219,7 +220,7 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
                 senders = True
         into = inflow
         if senders:
-            limited_flows(f, w, lim_v, mass, room, graph, order, lim_in, lim_out)
+            limited_flows(field, graph, f, w, lim_v, mass, room, order, lim_in, lim_out)
             into = lim_in
         limited_any = senders
         for i in range(x.shape[0]):
@@ -228,7 +229,7 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
                 lim_w[i] = w[i] * (room[i] / (h * into[i]))
                 limited_any = True
         if limited_any:
-            limited_flows(f, lim_w, lim_v, mass, room, graph, order, lim_in, lim_out)
+            limited_flows(field, graph, f, lim_w, lim_v, mass, room, order, lim_in, lim_out)
             for i in range(x.shape[0]):
                 x_out[i] = x[i] + h * (lim_in[i] - lim_out[i])
         else:
@@ -265,7 +266,7 @@ def advance_euler(method, x, z, term, params, minute, ws, stepper, h_try):
 
 @nb.njit(cache=True, inline="always")
 def heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, f2, w2, v2,
-                     room2, mass2, in2, out2, zr2, order2, lim1, lim2, graph, x_out,
+                     room2, mass2, in2, out2, zr2, order2, lim1, lim2, field, graph, x_out,
                      z_out):  # fmt: skip
     """``x_out = x + h/2 (k1 + k2)`` from the raw flows at both points, flux-limited as one step.
 
@@ -276,8 +277,8 @@ def heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, 
     ``order1``, ``f2`` .. ``order2``: the arrays of the :class:`Stage` of each point that are
     read (taken apart once per iteration by :func:`advance_heun`: numba reference-counts
     every array of a record handed to an inlined function, at every step); ``lim1``,
-    ``lim2``: scratch :class:`Limited`; ``graph``: the
-    :class:`~popdispatch.integrate.term.Term`'s graph.
+    ``lim2``: scratch :class:`Limited`; ``field``, ``graph``: the
+    :class:`~popdispatch.integrate.term.Term`'s field record and graph.
     """
     sw1, sv1, sin1, sout1 = lim1.w, lim1.v, lim1.inflow, lim1.outflow
     sw2, sv2, sin2, sout2 = lim2.w, lim2.v, lim2.inflow, lim2.outflow
@@ -293,8 +294,8 @@ def heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, 
             senders = True
         sv1[i], sv2[i] = alpha * v1[i], alpha * v2[i]
     if senders:
-        limited_flows(f1, w1, sv1, mass1, room1, graph, order1, sin1, sout1)
-        limited_flows(f2, w2, sv2, mass2, room2, graph, order2, sin2, sout2)
+        limited_flows(field, graph, f1, w1, sv1, mass1, room1, order1, sin1, sout1)
+        limited_flows(field, graph, f2, w2, sv2, mass2, room2, order2, sin2, sout2)
     limited = senders
     for i in range(x.shape[0]):
         beta = 1.0
@@ -304,8 +305,8 @@ def heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, 
             limited = True
         sw1[i], sw2[i] = beta * w1[i], beta * w2[i]
     if limited:
-        limited_flows(f1, sw1, sv1, mass1, room1, graph, order1, sin1, sout1)
-        limited_flows(f2, sw2, sv2, mass2, room2, graph, order2, sin2, sout2)
+        limited_flows(field, graph, f1, sw1, sv1, mass1, room1, order1, sin1, sout1)
+        limited_flows(field, graph, f2, sw2, sv2, mass2, room2, order2, sin2, sout2)
         for i in range(x.shape[0]):
             x_out[i] = x[i] + half * (sin1[i] - sout1[i] + sin2[i] - sout2[i])
     else:
@@ -361,7 +362,7 @@ def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
     mass1, zr1, order1 = one.mass, one.z_rate, one.order
     p2, f2, w2, v2, room2, mass2 = two.p, two.f, two.w, two.v, two.room, two.mass
     in2, out2, zr2, order2 = two.inflow, two.outflow, two.z_rate, two.order
-    graph = term.graph
+    field, graph = term.field, term.graph
     remaining = dt
     congested = 0.0
     residual = 0.0
@@ -383,7 +384,7 @@ def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
         evaluate_stage(x1, z1, p2, f2, w2, v2, room2, mass2, in2, out2, zr2, order2, term, params,
                        minute, work)  # fmt: skip
         heun_combination(h, x, z, f1, w1, v1, room1, mass1, in1, out1, zr1, order1, f2, w2, v2,
-                         room2, mass2, in2, out2, zr2, order2, lim1, lim2, graph, x2,
+                         room2, mass2, in2, out2, zr2, order2, lim1, lim2, field, graph, x2,
                          z2)  # fmt: skip
         err = error_norm(x2, x1, z2, z1, rtol, atol, price_atol)
         rate = stiffness(h, x, z, mass1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,

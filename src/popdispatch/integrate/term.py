@@ -1,10 +1,11 @@
-"""The ODE term: evaluation of the vector field at a state (game + weights + pairwise flows).
+"""The ODE term: evaluation of the vector field at a state (game + weights + flows).
 
-``x' = inflow - outflow`` of the pairwise flows (:mod:`popdispatch.dynamics.pairwise`) whose
+``x' = inflow - outflow`` of the dynamic's flow law (:mod:`popdispatch.dynamics.law`) whose
 fitness is the mode's payoff map (``payoff`` of the mode's module in :mod:`popdispatch.modes`,
 reached by its :class:`~popdispatch.modes.mechanism.ModeTag`, :func:`payoff`) and whose
-weights are the dynamic's (:func:`popdispatch.dynamics.fields.weights`); ``z' = z_rate``, the mode's
-controller-state map. One evaluation fills a :class:`Stage`; the steppers combine stages.
+weights and sums are the law's (:func:`popdispatch.dynamics.fields.weights`,
+:func:`~popdispatch.dynamics.fields.law_flows`); ``z' = z_rate``, the mode's controller-state
+map. One evaluation fills a :class:`Stage`; the steppers combine stages.
 """
 
 from __future__ import annotations
@@ -15,38 +16,41 @@ import numba as nb
 import numpy as np
 from numba.extending import overload
 
-from popdispatch.dynamics.fields import Field, FieldTag, field_tag, local_receivers, weights
-from popdispatch.dynamics.pairwise import (
-    CompleteGraph,
-    Graph,
-    graph_flows_of,
-    graph_of,
-    sort_for,
+from popdispatch.dynamics.fields import (
+    Field,
+    field_tag,
+    law_flows,
+    local_receivers,
+    order_for,
+    weights,
 )
+from popdispatch.dynamics.pairwise import CompleteGraph, Graph, graph_of
 
 
 class Term(NamedTuple):
-    """Which field and game: the dynamic's :class:`~popdispatch.dynamics.fields.FieldTag`, the
-    mode's :class:`~popdispatch.modes.mechanism.ModeTag` and the communication
+    """Which field and game: the dynamic's field record
+    (:class:`~popdispatch.dynamics.law.FieldTag`, or its law's own record with parameters),
+    the mode's :class:`~popdispatch.modes.mechanism.ModeTag` and the communication
     :class:`~popdispatch.dynamics.pairwise.Graph` (complete, else its symmetric adjacency in
     CSR form).
 
     Each is a small record whose *class* names the kernel (one class per weight kernel, mode
     and kind of graph): numba compiles the term once per combination of classes and, in each,
-    only the kernels it names, where a branch on an integer code compiled every mode, field
-    and graph into every run (and the first run compiled them all). Build it with
-    :meth:`of`.
+    only the kernels it names, where a branch on an integer code would compile every mode,
+    field and graph into every run. Build it with :meth:`of`.
     """
 
-    field: FieldTag
+    field: tuple  # a FieldTag, or a law's own record (code first)
     mode: tuple  # a ModeTag record: its class carries the payoff kernel
     graph: Graph
 
     @classmethod
-    def of(cls, field: Field, mode, complete: bool, indptr, indices) -> Term:
-        """The term of ``field`` and the mode's record ``mode`` (a
-        :class:`~popdispatch.modes.mechanism.ModeTag`: :func:`popdispatch.modes.mode_tag`) on
-        the complete graph, else on the graph of CSR adjacency ``indptr``, ``indices``."""
+    def of(cls, field: Field | tuple, mode, complete: bool, indptr, indices) -> Term:
+        """The term of ``field`` (a :class:`~popdispatch.dynamics.fields.Field` whose law takes
+        no parameters, or its record, :meth:`popdispatch.online.RunSettings.field_tag`) and the
+        mode's record ``mode`` (a :class:`~popdispatch.modes.mechanism.ModeTag`:
+        :func:`popdispatch.modes.mode_tag`) on the complete graph, else on the graph of CSR
+        adjacency ``indptr``, ``indices``."""
         return cls(field_tag(field), mode, graph_of(complete, indptr, indices))
 
     @property
@@ -83,7 +87,7 @@ class Stage(NamedTuple):
     ``inflow``/``outflow`` (shares/s), the controllers' ``z_rate`` and the strategies'
     ``order`` by fitness (kept between evaluations: a nearly sorted order sorts in O(n)).
     ``v`` is the sender weight and ``mass`` the movable mass the flux limiter empties (the
-    same array values for the dynamics whose sender weight is their movable mass)."""
+    same values for the laws whose sender weight is their movable mass)."""
 
     p: np.ndarray
     f: np.ndarray
@@ -105,7 +109,7 @@ class Stage(NamedTuple):
 @nb.njit(cache=True, inline="always")
 def evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term, params, minute,
              work):  # fmt: skip
-    """Fitness, weights and raw pairwise flows at ``(x, z)`` into the arrays of one
+    """Fitness, weights and raw flows at ``(x, z)`` into the arrays of one
     :class:`Stage` (``p`` .. ``order``, its fields by name; the steppers take them out of the
     record once per iteration, since numba reference-counts every array of a record each time
     the record is handed to an inlined function).
@@ -118,15 +122,15 @@ def evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term,
     demand = minute.demand
     for i in range(x.shape[0]):
         p[i] = x[i] * demand
-    # the mode's payoff map, the field's weights and the graph's sums, each chosen by its
+    # the mode's payoff map, the law's weights and its sums on the graph, each chosen by its
     # record's class when numba compiles (Term): no branch, nothing else compiled, and each
     # inlined (overload inline="always"; called, each call would reference-count the
     # records' arrays, a large share of a paper-mode minute)
     congestion, residual = payoff(term.mode, p, z, params, minute, work, f, z_rate)
-    weights(term.field, x, minute.lo, minute.hi, minute.active, params.revision_rate, w, v, room,
+    field, graph = term.field, term.graph
+    weights(field, x, f, minute.lo, minute.hi, minute.active, params.revision_rate, w, v, room,
             mass)  # fmt: skip
-    graph = term.graph
-    local_receivers(term.field, graph, params.revision_rate, w, room, mass)
-    sort_for(graph, f, order)
-    graph_flows_of(graph, f, w, v, mass, room, order, inflow, outflow)
+    local_receivers(field, graph, params.revision_rate, w, room, mass)
+    order_for(field, graph, f, order)
+    law_flows(field, graph, f, w, v, mass, room, order, inflow, outflow)
     return congestion, residual

@@ -374,12 +374,11 @@ MODE = Mode(
     ModeCode.EXACT,
     lambda problem: 2 * len(problem.limit),
     bounded=True,
-    # rtol 1e-5 (Integrator's 1e-4 otherwise): a tighter error control takes far fewer
-    # iterations on congested minutes for a little more engine time on a day
-    # (docs/exact-mode.md)
+    # the adaptive Heun pair's error control (docs/exact-mode.md, "Choosing the constants");
+    # the stopping tolerances follow the run's accuracy (RunSettings.stepping)
     integrator_options={
         "method": "heun",
-        "rtol": 1e-5,
+        "rtol": 1e-4,
         "tol_kw": 1e-6,
         "tol_rel": 1e-6,
         "window": 5,

@@ -54,9 +54,11 @@ class SnapshotResult:
     ``max(accuracy_kw, accuracy_rel * demand)``). A run that came to rest (the stopping rule of
     :mod:`popdispatch.integrate`) without that proof is ``stalled``: ``converged_at`` is then
     None, ``rest_at`` the iteration it came to rest and ``stall_reason`` says why (a KKT
-    condition that fails, :func:`kkt_violations`, else the bound). Paper mode claims only a
-    rest point of the paper's dynamics (its rules do not land on the DC-OPF,
-    docs/paper-mode.md): its ``converged`` is that rest, and it has no bound (``None``).
+    condition that fails, :func:`kkt_violations`, else the bound). Logit dynamics rest at their
+    own equilibrium, not the DC-OPF's: in exact mode they are never ``converged``, a rest is
+    ``stalled`` with the bound (docs/dynamics.md). Paper mode claims only a rest point of the
+    paper's dynamics (its rules do not land on the DC-OPF, docs/paper-mode.md): its
+    ``converged`` is that rest, and it has no bound (``None``).
     """
 
     minute: int
@@ -112,11 +114,9 @@ def run_snapshot(
     x = initial_shares(problem, settings.x0, minute)
     engine.warm_up(x, minute)
     evaluated = engine.evaluations
-    start = time.perf_counter()
-    run = _run_until_proved(engine, x, minute)
+    run, wall = _run_until_proved(engine, x, minute)
     setpoints, converged_at = run.trajectory, run.converged_at
     first_congestion = run.first_congestion
-    wall = time.perf_counter() - start
     final = setpoints[-1]
     flows = limited_flows_mw(problem, final, minute)
     rested = run.status == Status.CONVERGED
@@ -148,13 +148,16 @@ def run_snapshot(
     )
 
 
-def _run_until_proved(engine: Engine, x: np.ndarray, minute: int) -> MinuteRun:
+def _run_until_proved(engine: Engine, x: np.ndarray, minute: int) -> tuple[MinuteRun, float]:
     """:meth:`Engine.run_minute`, continued from each rest that the certificate does not prove
     within the accuracy while the proved bound keeps halving and the horizon allows (see
-    :func:`run_snapshot`); the rest iteration counts from the start."""
+    :func:`run_snapshot`); the rest iteration counts from the start. Also the seconds spent in
+    the engine (the certificates' checks not counted: they are the audit, not the dispatch)."""
+    began = time.perf_counter()
     run = engine.run_minute(x, minute)
+    seconds = time.perf_counter() - began
     if not engine.mode.claims_dc_opf:
-        return run
+        return run, seconds
     horizon = engine.settings.stepping.max_iterations
     accuracy = float(engine.settings.accuracy_mw(engine.problem.demand[minute - 1]))
     pieces, done, last_bound = [run.trajectory], run.iterations, np.inf
@@ -165,15 +168,17 @@ def _run_until_proved(engine: Engine, x: np.ndarray, minute: int) -> MinuteRun:
         if bound <= accuracy or not bound < 0.5 * last_bound:
             break
         last_bound = bound
+        began = time.perf_counter()
         more = engine.run_minute(run.x, minute, max_iterations=horizon - done)
+        seconds += time.perf_counter() - began
         pieces.append(more.trajectory[1:])
         converged_at = done + more.converged_at if more.converged_at >= 0 else -1
         done += more.iterations
         run = more._replace(converged_at=converged_at)
     if len(pieces) == 1:
-        return run
+        return run, seconds
     return run._replace(trajectory=np.concatenate(pieces), iterations=done,
-                        first_congestion=first)  # fmt: skip
+                        first_congestion=first), seconds  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -197,8 +202,9 @@ def verdicts(
 ) -> Verdict:
     """Each minute's verdict: in a mode that claims the DC-OPF, certified when the distance
     certificate proves the accuracy (and the run was not infeasible); a minute at rest that
-    is not certified gets the reason (a failing KKT condition, else the bound). Paper mode:
-    certified means at rest."""
+    is not certified gets the reason (a failing KKT condition, else the bound). Dynamics whose
+    rest points are not the game's equilibria (logit) are never certified; their minutes at
+    rest are stalled with the bound. Paper mode: certified means at rest."""
     certificates = engine.certificates(minutes, p_mw, z)
     if certificates is None:
         return Verdict(rested & ~infeasible, [None] * len(minutes), None, None)
@@ -206,10 +212,24 @@ def verdicts(
     demand = engine.problem.demand[np.asarray(minutes) - 1]
     accuracy = np.atleast_1d(engine.settings.accuracy_mw(demand)) * KW_PER_MW
     certified = (bound <= accuracy) & ~infeasible
+    own_rest = not engine.dynamics.rests_at_optimum  # logit: never the DC-OPF's, by design
+    if own_rest:
+        certified[:] = False
     pending = rested & ~certified & ~infeasible
     reasons = engine.stall_reasons(minutes, p_mw, z, pending)
     for r in np.flatnonzero(pending):
-        if reasons[r] is None:
+        if own_rest:
+            distance = (
+                f"the distance to it is bounded by {bound[r]:.3g} kW"
+                if np.isfinite(bound[r])
+                else "the certificate bounds no distance to it"
+            )
+            reasons[r] = (
+                f"{engine.dynamics.name} dynamics rest at their own equilibrium, not in general "
+                f"the DC-OPF (docs/dynamics.md): {distance}"
+                + (f"; {reasons[r]}" if reasons[r] else "")
+            )  # fmt: skip
+        elif reasons[r] is None:
             why = certificates[r].reason
             reasons[r] = (
                 f"the distance to the DC-OPF is bounded only by {bound[r]:.3g} kW, above the "

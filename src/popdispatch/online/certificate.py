@@ -299,8 +299,12 @@ def polish(batch: Batch, p, mu, margin, where) -> tuple[np.ndarray, np.ndarray, 
 
 def _solve_active_set(batch: Batch, p, held_value, fixed, held, chosen):
     """The least-squares solution (nearest ``p``) of one active set's KKT system for the
-    minutes ``chosen``: ``(y, prices, lambda)``."""
+    minutes ``chosen``: ``(y, prices, lambda)``. Held rows with the same coefficients (series
+    lines with the same generators below, at different limits) are one row, the tightest of
+    them each minute (the largest ``e0``), which carries their price."""
     free = np.flatnonzero(~fixed)
+    held_all = held
+    held, tightest = _distinct_rows(batch, held, chosen)
     m, k = len(free), len(held)
     A_free = batch.A[np.ix_(held, free)]
     K = np.zeros((m + 1 + k, m + 1 + k))
@@ -314,7 +318,7 @@ def _solve_active_set(batch: Batch, p, held_value, fixed, held, chosen):
         [
             -batch.b[free] - 2.0 * batch.c[free] * p[np.ix_(chosen, free)],
             (batch.demand[chosen] - base.sum(axis=1))[:, None],
-            -(batch.e0[np.ix_(chosen, held)] + base @ batch.A[held].T),
+            -(tightest + base @ batch.A[held].T),
         ],
         axis=1,
     )  # the free generators' deviations from p, lambda, the held rows' prices
@@ -330,12 +334,31 @@ def _solve_active_set(batch: Batch, p, held_value, fixed, held, chosen):
         widest = free[np.argmax(room, axis=1)]
         y[np.arange(len(chosen)), widest] += batch.demand[chosen] - y.sum(axis=1)
     prices = np.zeros((len(chosen), batch.e0.shape[1]))
-    prices[:, held] = solution[:, m + 1 :]
+    for h, group in enumerate(_groups(batch, held_all)):
+        which = group[np.argmax(batch.e0[np.ix_(chosen, group)], axis=1)]
+        prices[np.arange(len(chosen)), which] = solution[:, m + 1 + h]
     lam = solution[:, m] if m + k else np.zeros(len(chosen))
     residual = np.abs(solution @ K.T - rhs).max(axis=1, initial=0.0)
     scale = np.maximum(np.abs(rhs).max(axis=1, initial=0.0), 1.0)
     lam = np.where(residual <= 1e-9 * scale, lam, np.nan)  # an inconsistent active set
     return y, prices, lam
+
+
+def _distinct_rows(batch: Batch, held, chosen) -> tuple[np.ndarray, np.ndarray]:
+    """``held`` without repeated rows (one per set of equal coefficients) and each kept row's
+    tightest offset per minute ``chosen`` (minutes x kept rows, MW)."""
+    groups = _groups(batch, held)
+    kept = np.array([group[0] for group in groups], dtype=np.int64)
+    tightest = np.stack([batch.e0[np.ix_(chosen, group)].max(axis=1) for group in groups],
+                        axis=1) if groups else np.zeros((len(chosen), 0))  # fmt: skip
+    return kept, tightest
+
+
+def _groups(batch: Batch, held) -> list[np.ndarray]:
+    """The held rows grouped by equal coefficients, in the order of their first members."""
+    _, first, inverse = np.unique(batch.A[held], axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    return [np.asarray(held)[inverse.ravel() == g] for g in order]
 
 
 def _is_kkt_point(batch: Batch, y, prices, lam, at_lo, at_hi, chosen) -> np.ndarray:

@@ -45,13 +45,10 @@ class Engine:
         self.settings = settings
         self.dynamics = get_dynamics(settings.dynamics)
         self.mode = get_mode(settings.mode)
-        field = settings.field
+        field = settings.field_tag(problem)
         if field is None:
-            raise ValueError(
-                f"{self.mode.name} mode cannot run {self.dynamics.name} dynamics: they are "
-                "imitative, so a generator at zero share stays at zero (extinction) and the "
-                "DC-OPF is out of reach whenever it uses one; use smith or distributed-smith"
-            )
+            raise ValueError(f"{self.mode.name} mode cannot run {self.dynamics.name} dynamics: "
+                             f"{self.dynamics.refusal}")  # fmt: skip
         self.term = Term.of(field, mode_tag(self.mode.code, settings.exact.price_law),
                             *self._graph())  # fmt: skip
         self.constants = settings.game_constants(problem)  # EUR/MW

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from popdispatch.dynamics import DYNAMICS, GRAPHS, Field, get_dynamics
+from popdispatch.dynamics.fields import field_of, field_tag
 from popdispatch.errors import OptionError
 from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.parameters import PriceLaw
@@ -43,7 +44,9 @@ class RunSettings:
     run takes must carry the same limits (:func:`popdispatch.runs.with_voltage`).
     ``accuracy_kw`` and ``accuracy_rel``: the accuracy a mode that claims the DC-OPF must
     prove to call a minute converged, ``max(accuracy_kw, accuracy_rel * demand)`` (kW) on every
-    set point (the distance certificate, :mod:`popdispatch.online.certificate`).
+    set point (the distance certificate, :mod:`popdispatch.online.certificate`). ``eta``: the
+    logit dynamics' noise level, EUR/MWh (a marginal cost; required by logit, refused by every
+    other dynamic; docs/dynamics.md).
 
     Construction validates the combination without touching any data, so a command line can
     check its options before loading a feeder: bad values or combinations raise
@@ -64,6 +67,7 @@ class RunSettings:
     vmax_pu: float | None = None
     accuracy_kw: float = 1e-3
     accuracy_rel: float = 1e-6
+    eta: float | None = None
 
     def __post_init__(self) -> None:
         if self.voltage_limited and self.mode == "exact":
@@ -81,21 +85,25 @@ class RunSettings:
 
         - unknown ``dynamics`` (``--dynamics``), ``mode`` (``--mode``), ``graph``
           (``--graph``), ``x0`` name (``--x0``) or ``warm_start`` (``--warm-start``);
-        - exact mode with imitative dynamics (replicator, local replicator): a generator at
-          zero share stays there (extinction), so the DC-OPF is out of reach (``--mode``);
-        - a graph other than ``complete`` with dynamics that ignore it (smith, replicator:
-          paper eqs. 9 and 13 compare every pair) (``--graph``);
+        - exact mode with dynamics that have no law inside the generator limits
+          (:attr:`~popdispatch.dynamics.Dynamics.refusal`: the replicators' extinction, BNN's
+          shifted mean) (``--mode``);
+        - a graph other than ``complete`` with dynamics that ignore it (smith, replicator,
+          bnn, logit) (``--graph``);
+        - ``eta`` missing for logit, given for any other dynamic, or not finite and > 0
+          (``--eta``);
         - a price law other than plain outside exact (voltage) mode (``--price-law``);
         - the ``setpoints`` warm start in a mode without generator limits in its revision rule
           (paper mode continues the shares, eq. 10's ``x``; ``--warm-start``).
         """
         dynamics = _lookup(get_dynamics, self.dynamics, "--dynamics")
         mode = _lookup(get_mode, self.mode, "--mode")
-        if mode.bounded and dynamics.bounded_field is None:
+        if mode.bounded and dynamics.bounded_law is None:
+            names = [d.name for d in DYNAMICS.values() if d.bounded_law is not None]
+            users = ", ".join(names[:-1]) + f" or {names[-1]}"
             raise OptionError(
-                f"{mode.name} mode cannot run {dynamics.name} dynamics: they are imitative, so a "
-                "generator at zero share stays at zero (extinction) and the DC-OPF is out of "
-                "reach whenever it uses one; use smith or distributed-smith",
+                f"{mode.name} mode cannot run {dynamics.name} dynamics: {dynamics.refusal}; "
+                f"use {users}",
                 "--mode",
             )
         graph = self.graph if isinstance(self.graph, str) else "custom"
@@ -106,10 +114,11 @@ class RunSettings:
         if graph != "complete" and not dynamics.uses_graph:
             users = " or ".join(d.name for d in DYNAMICS.values() if d.uses_graph)
             raise OptionError(
-                f"graph {graph!r} has no effect on {dynamics.name} dynamics, which compare every "
-                f"pair of generators; use it with {users}, or leave the graph complete",
+                f"graph {graph!r} has no effect on {dynamics.name} dynamics, {dynamics.scope}; "
+                f"use it with {users}, or leave the graph complete",
                 "--graph",
             )
+        self._validate_eta(dynamics)
         if isinstance(self.x0, str) and self.x0 not in X0_CHOICES:
             raise OptionError(
                 f"unknown initial state {self.x0!r} (known: {', '.join(X0_CHOICES)}, or "
@@ -134,6 +143,25 @@ class RunSettings:
             raise OptionError(
                 f"tolerance floor must be positive, got {self.tol_floor_kw} kW", "--tol-floor-kw"
             )
+
+    def _validate_eta(self, dynamics) -> None:
+        """``eta`` given exactly to the dynamics that take it, finite and > 0 (``--eta``)."""
+        takes = "eta" in dynamics.parameters
+        if self.eta is None:
+            if takes:
+                raise OptionError(f"{dynamics.name} dynamics need their noise level: --eta ETA "
+                                  "(EUR/MWh, > 0; docs/dynamics.md)", "--eta")  # fmt: skip
+            return
+        if not takes:
+            raise OptionError(f"eta is the logit dynamics' noise level; {dynamics.name} dynamics "
+                              "have none", "--eta")  # fmt: skip
+        try:
+            value = float(self.eta)
+        except (TypeError, ValueError):
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise OptionError(f"eta must be a finite number > 0 EUR/MWh, got {self.eta!r}",
+                              "--eta")  # fmt: skip
 
     def _validate_voltage(self, mode) -> None:
         """Limits in (0, 2) with ``vmin < vmax``, only in the voltage mode (exact mode becomes
@@ -171,16 +199,28 @@ class RunSettings:
 
     @property
     def field(self) -> Field | None:
-        """The vector field a run integrates: the dynamic's own; in a mode with generator
-        limits its capacity-constrained variant, scaled by each generator's curvature under
-        exact mode's ``newton`` revision (dynamics/newton.py); ``None`` where the dynamic has
-        no such variant (imitative dynamics)."""
-        dynamics = get_dynamics(self.dynamics)
-        if not get_mode(self.mode).bounded:
-            return dynamics.field
-        if dynamics.bounded_field is None:
+        """The vector field a run integrates: the dynamic's own law; in a mode with generator
+        limits its law inside the limits (capacity-constrained Smith, scaled by each
+        generator's curvature under exact mode's ``newton`` revision, dynamics/newton.py; the
+        logit inside the box); ``None`` where the dynamic has none (imitative dynamics, BNN)."""
+        field = field_of(get_dynamics(self.dynamics), get_mode(self.mode).bounded)
+        if field == Field.CAPACITY_SMITH and self.exact.revision == "newton":
+            return Field.CAPACITY_NEWTON
+        return field
+
+    def field_tag(self, problem: DispatchProblem) -> tuple | None:
+        """The compile-time record of :attr:`field` for ``problem`` (``None`` as the field),
+        with the parameters its law takes: the logit's ``eta`` in the mode's fitness units
+        (EUR/MWh times the fitness gain: 1 in paper mode, exact mode's ``gain / S``) and its
+        revision rate ``gain`` (1/s: 1 in paper mode, exact mode's ``gain``; dynamics/logit.py)."""
+        field = self.field
+        if field is None:
             return None
-        return Field.CAPACITY_NEWTON if self.exact.revision == "newton" else dynamics.bounded_field
+        bounded = get_mode(self.mode).bounded
+        scale = self.game_constants(problem).gain if bounded else 1.0
+        gain = self.exact.gain if bounded else 1.0
+        eta = math.nan if self.eta is None else self.eta * scale
+        return field_tag(field, eta=eta, gain=gain)
 
     def revision_rates(self, problem: DispatchProblem) -> np.ndarray:
         """The per-generator revision rates of the field in force (dimensionless; empty for a
