@@ -9,6 +9,11 @@
   official ELV profiles, an optional extra); it is skipped with that reason where it is
   absent. A block marked ``<!-- file: NAME -->`` is a file the page's examples read: it is
   written into that folder first. Text that is not meant to run is a ```text block.
+- Every ```console block (``$ command``, then what it prints; ``...`` stands for anything)
+  runs in bash in such a folder and must print the lines shown. A ```bash block is run by
+  tests/test_readme.py (the README's marked ones) or says why it is not run, in a
+  ``<!-- not run: REASON -->`` comment on the line before it (it installs software, starts
+  servers, reads the user's own files, or runs long and is run by the test it names).
 - The numbers and messages the pages quote are the commands' own (official day, IEEE 13).
 """
 
@@ -50,6 +55,7 @@ class Block:
     code: str
     needs: tuple[str, ...]
     file: str | None
+    not_run: str | None = None
 
     def __str__(self) -> str:
         return f"{self.page.relative_to(ROOT)}:{self.line}"
@@ -71,9 +77,11 @@ def blocks(page: Path) -> list[Block]:
         before = lines[k - 1].strip() if k else ""
         needs = re.fullmatch(r"<!--\s*needs:\s*(.*?)\s*-->", before)
         file = re.fullmatch(r"<!--\s*file:\s*(\S+)\s*-->", before)
+        not_run = re.fullmatch(r"<!--\s*not run:\s*(.*?)\s*-->", before)
         found.append(Block(page, k + 1, language, code,
                            tuple(w.strip() for w in needs[1].split(",")) if needs else (),
-                           file[1] if file else None))  # fmt: skip
+                           file[1] if file else None,
+                           not_run[1] if not_run else None))  # fmt: skip
         k = end + 1
     return found
 
@@ -139,9 +147,62 @@ def test_markers_name_a_block() -> None:
     for page in PAGES:
         lines = page.read_text().splitlines()
         for k, line in enumerate(lines):
-            if re.match(r"\s*<!--\s*(needs|file):", line):
+            if re.match(r"\s*<!--\s*(needs|file|not run):", line):
                 following = lines[k + 1] if k + 1 < len(lines) else ""
                 assert following.lstrip().startswith("```"), f"{page.name}:{k + 1}"
+
+
+CONSOLE_BLOCKS = [block for block in ALL_BLOCKS if block.language == "console"]
+#: The README's bash blocks tests/test_readme.py runs as printed (it names them with this).
+README_RUNS = "tests/test_readme.py runs this block"
+
+
+def console_command(block: Block) -> tuple[str, list[str]]:
+    """The command of a ```console block (``$ `` and its continuation lines) and the lines
+    shown as its output."""
+    lines = block.code.splitlines()
+    assert lines[0].startswith("$ "), f"{block}: a console block starts with '$ command'"
+    k = 0
+    while lines[k].endswith("\\"):
+        k += 1
+    command = "\n".join(lines[: k + 1]).removeprefix("$ ")
+    return command, lines[k + 1 :]
+
+
+@pytest.mark.parametrize("block", CONSOLE_BLOCKS, ids=str)
+def test_console_block_prints_what_it_shows(block: Block, tmp_path: Path) -> None:
+    if block.not_run:
+        pytest.skip(f"{block}: not run: {block.not_run}")
+    env = environment(block)
+    for other in blocks(block.page):
+        if other.file is not None:
+            (tmp_path / other.file).write_text(other.code)
+    command, shown = console_command(block)
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    done = subprocess.run(["bash", "-eu", "-o", "pipefail", "-c", command], cwd=tmp_path,
+                          env=env, capture_output=True, text=True, timeout=600)  # fmt: skip
+    printed = done.stdout.splitlines()
+    for line in shown:
+        if line.strip() == "...":
+            continue
+        pattern = ".*".join(re.escape(part) for part in line.split("..."))
+        assert any(re.fullmatch(pattern, got) for got in printed), (str(block), line,
+                                                                     done.stdout, done.stderr)
+
+
+def test_every_shell_block_runs_or_says_why_not() -> None:
+    """A ```bash/```console block is run (test_readme.py's marked README blocks, the console
+    blocks above) or names why it is not; no shell example hides under another fence."""
+    readme = (ROOT / "README.md").read_text().splitlines()
+    silent = []
+    for b in ALL_BLOCKS:
+        if b.language in ("sh", "shell", "zsh") or (b.language == "" and b.code.startswith("$ ")):
+            silent.append(f"{b} (use ```bash or ```console)")
+        elif b.language == "bash" and not b.not_run:
+            marked = b.page.name == "README.md" and README_RUNS in readme[b.line - 2]
+            if not marked:
+                silent.append(str(b))
+    assert not silent, silent
 
 
 # -- the site --------------------------------------------------------------------------------
