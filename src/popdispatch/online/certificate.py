@@ -35,8 +35,6 @@ of their intersection from ``p_i``. Powers MW, costs EUR/h, prices EUR/MWh.
 
 The minutes of a day are certified together: the active sets repeat from minute to minute, so
 each distinct one's KKT matrix is solved once for all its minutes.
-:mod:`popdispatch.online.certificate_reference` is the same one minute at a time, written for
-clarity (the tests' yardstick).
 """
 
 from __future__ import annotations
