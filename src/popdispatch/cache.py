@@ -2,7 +2,7 @@
 
 What is cached: tables that take seconds to derive but never change for a given installation,
 e.g. the ieee-elv feeder's buses, lines, loads and minute-566 snapshot, which otherwise need
-``import pandapower`` (about 1-2 s) and its JSON network (about 1 s) in every process.
+``import pandapower`` and its JSON network in every process.
 
 Where: ``$POPDISPATCH_CACHE_DIR`` if set and not empty, else ``$XDG_CACHE_HOME/popdispatch``,
 else ``~/.cache/popdispatch``. ``POPDISPATCH_CACHE_DIR=off`` disables the cache (nothing is

@@ -117,8 +117,7 @@ def day_vs_opf(
     """Run the online day and solve the DC-OPF of each minute (with ``progress`` bars).
 
     One DC-OPF solver serves the whole day (:func:`popdispatch.opf.solve_opf_day`: only its
-    bounds change from minute to minute); building a solver per minute cost about 2 ms each,
-    i.e. seconds per day, for the same results.
+    bounds change from minute to minute), not one solver per minute.
     """
     settings = settings or RunSettings()
     progress = progress or Progress(quiet=True)

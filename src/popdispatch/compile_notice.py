@@ -3,12 +3,9 @@
 The engine's kernels are compiled by numba on first use and cached on disk (``cache=True``):
 the first run after installing or updating popdispatch (or with an empty ``NUMBA_CACHE_DIR``)
 compiles the kernels of its own run configuration (mode, dynamic, graph, stepper, warm start:
-:mod:`popdispatch.integrate.term`). Measured 2026-12-02 on the 2-core machine (load 1,
-``benchmarks/bench_first_run.py``, whole commands, CPU seconds, before issue 13's second round
-in brackets, same run): ``popdispatch day --mode exact`` 19.9 s (61.0 s), ``popdispatch day``
-16.5 s (65.9 s), the exact congestion snapshot 25.6 s (52.7 s). A run of another
-configuration later compiles its own once more. Later processes load them in under half a
-second.
+:mod:`popdispatch.integrate.term`); a run of another configuration later compiles its own
+once more, and later processes load them from the cache (``benchmarks/bench_first_run.py``
+measures both; docs/performance.md).
 The CLI calls :func:`kernels_cached` before the engine runs so that it can say so on stderr
 instead of staying silent.
 
@@ -41,9 +38,8 @@ DAY_LOOP = "popdispatch.online.day:integrate_day"
 
 COMPILE_NOTICE = (
     "compiling the engine's kernels (first run after installing or updating popdispatch, or "
-    "an empty numba cache, or a mode, dynamic or graph not run before): about 15-20 s per "
-    "configuration on a 2-core machine, once; "
-    "later runs load them from numba's disk cache"
+    "an empty numba cache, or a mode, dynamic or graph not run before): this run takes longer, "
+    "once per configuration; later runs load them from numba's disk cache"
 )
 
 

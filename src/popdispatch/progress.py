@@ -1,8 +1,8 @@
 """Progress on stderr (tqdm): bars for loops, an elapsed-time spinner for long single calls.
 
 Nothing is shown for steps shorter than one second, nor at all when ``quiet``. Standard output
-is never touched (it carries ``--json``). tqdm itself (about 40 ms to import) is imported only
-once a bar is due, i.e. after its first second, so quick commands never import it.
+is never touched (it carries ``--json``). tqdm itself is imported only once a bar is due,
+i.e. after its first second, so quick commands never import it.
 """
 
 from __future__ import annotations

@@ -156,7 +156,7 @@ class ReferenceMinute:
 
     def __init__(self, problem: DispatchProblem, settings, minute: int):
         self.problem, self.minute = problem, minute
-        self.fp = settings.game_constants(problem)  # EUR/MW (exact mode: scaled, issue 12)
+        self.fp = settings.game_constants(problem)  # EUR/MW (exact mode: scaled)
         self.price_scale = settings.price_scale(problem)
         self.mode = get_mode(settings.mode)
         dynamics = get_dynamics(settings.dynamics)

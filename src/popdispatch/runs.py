@@ -298,7 +298,7 @@ def _elv_run_problem(
 ) -> DispatchProblem:
     """The problem of the ieee-elv feeder (built in, or from OpenDSS files) with ``series``
     and path ``limits``, from the on-disk cache where the built-in case was built before
-    (:mod:`popdispatch.cases.cached`: skips reading and reducing the feeder, ~0.25 s)."""
+    (:mod:`popdispatch.cases.cached`: skips reading and reducing the feeder)."""
 
     def build() -> DispatchProblem:
         with progress.step(f"loading {source.label}"):

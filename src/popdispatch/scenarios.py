@@ -5,7 +5,7 @@
   The paper reports detection at iteration 53 and convergence at iteration 201.
 - ``extinction``: replicator dynamics never use an efficient generator that starts at zero
   share (here Generator 2, bus 114, the cheapest), while Smith dynamics reach the optimum.
-- ``voltage`` (issue 14): ``case33bw`` with the source and four DGs whose cheapest dispatch
+- ``voltage``: ``case33bw`` with the source and four DGs whose cheapest dispatch
   (all from the source) leaves the far end below 0.95 p.u.; the DC exact dispatch, the
   voltage-aware dispatch (voltage mode, against the LinDistFlow OPF) and pandapower's AC OPF,
   each checked in AC (docs/voltage.md).

@@ -4,7 +4,7 @@ chromium-headless-shell).
 
 The browser tests skip with a reason where no browser (or playwright) is present, except under
 CI (``CI`` set), where a missing browser fails. ``POPDISPATCH_REPORT_SCREENSHOT=docs/img/
-report.png`` also writes the ELV screenshot shown in the README and docs/report.md.
+report.png`` also writes the ELV screenshot shown in docs/report.md.
 """
 
 from __future__ import annotations
@@ -569,7 +569,7 @@ def test_a_bus_shows_the_colour_the_colour_bar_gives_its_voltage(browser, small,
 
 
 def test_docs_screenshot(browser, elv_day, tmp_path) -> None:
-    """The README's screenshot: the ELV around the peak with the map at minute 566. Written to
+    """docs/report.md's screenshot: the ELV around the peak with the map at minute 566. Written to
     ``$POPDISPATCH_REPORT_SCREENSHOT`` when set (docs/img/report.png), else to a tmp path."""
     problem, profiles, comparison = elv_day
     summary = day_summary(problem, comparison, [CONGESTION_PATH])

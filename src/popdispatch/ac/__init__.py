@@ -1,4 +1,4 @@
-"""The AC check of a dispatch (issue 14, part 1): an AC power flow of the full feeder.
+"""The AC check of a dispatch: an AC power flow of the full feeder.
 
 power-grid-model (optional extra ``ac``: ``pip install "popdispatch[ac]"``, imported only when
 a check runs) builds the positive-sequence network straight from the feeder's tables

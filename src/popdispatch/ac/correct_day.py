@@ -15,9 +15,9 @@ online controller would:
 
 The penalty factors change every generator's cost at every step, which the compiled day loop
 holds fixed for a day, so each round runs one step on an :class:`~popdispatch.online.Engine`
-of its corrected problem (building one costs about 0.3 ms; its kernels are the day's,
-compiled once). Each step's status is the distance certificate's verdict against its
-corrected problem's LinDistFlow OPF, as for a minute of a day.
+of its corrected problem (cheap to build; its kernels are the day's, compiled once). Each
+step's status is the distance certificate's verdict against its corrected problem's
+LinDistFlow OPF, as for a minute of a day.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""LinDistFlow voltage sensitivities of a radial feeder (the building block of issue 14 part 2).
+"""LinDistFlow voltage sensitivities of a radial feeder (the building block of voltage mode).
 
 LinDistFlow (Baran and Wu's DistFlow with the losses dropped) writes, along each line ``k``
 from its upstream bus to its downstream bus, in p.u.::

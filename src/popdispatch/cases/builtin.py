@@ -12,7 +12,7 @@ fleet=...)`` (:class:`~popdispatch.errors.FleetError` without one). There is no 
 default fleet. SimBench's PV and other static generators have no cost data: they are fixed
 injections following their profiles.
 
-pandapower is slow to import and to load the network (about 2-4 s together), so the tables
+pandapower is slow to import and to load the network, so the tables
 popdispatch derives from it (buses, lines, loads, source bus, the minute-566 loads) are kept in
 the on-disk cache (:mod:`popdispatch.cache`); a process that finds them there never imports
 pandapower. The cache key holds :data:`ELV_FORMAT`, the pandapower and popdispatch versions and
@@ -267,8 +267,8 @@ def simbench_available() -> bool:
 
 @functools.cache
 def simbench_net(code: str):
-    """``simbench.get_simbench_net(code)``, read once per process (13-16 s each on the 2-core
-    machine: simbench parses its whole CSV database). Callers must not modify it."""
+    """``simbench.get_simbench_net(code)``, read once per process (simbench parses its whole
+    CSV database: seconds). Callers must not modify it."""
     import simbench
 
     return simbench.get_simbench_net(code)
@@ -300,8 +300,8 @@ def list_cases() -> pd.DataFrame:
     ``total_load_kw`` (the loads of the net's own snapshot; ieee-elv: minute 566), ``size``
     and ``source``.
 
-    The counts come from reading every case (about 20 s on a shared 2-core machine:
-    pandapower's network builders are slow, the reads take under 0.05 s each), so they are
+    The counts come from reading every case (pandapower's network builders are slow; the
+    reads themselves are quick), so they are
     kept in the on-disk cache under a key of the case names, the pandapower, simbench and
     popdispatch versions and the code of this module and of the pandapower reader.
     """

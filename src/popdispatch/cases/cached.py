@@ -1,9 +1,9 @@
-"""The built ieee-elv dispatch problem of a run, kept in the on-disk cache (issue 13).
+"""The built ieee-elv dispatch problem of a run, kept in the on-disk cache.
 
 Building the problem of the built-in feeder (its tables, the key-node reduction, the engine
-arrays) needs scipy's graph code (``scipy.sparse.csgraph``, which imports ``scipy.linalg``:
-about 0.2 s) and about 40 ms of pandas work in every process, for a result that only changes
-with its inputs. :func:`cached_build` stores the problem as a pickle in the cache
+arrays) needs scipy's graph code (``scipy.sparse.csgraph``, which imports ``scipy.linalg``)
+and pandas work in every process, a noticeable share of a command's start-up, for a result
+that only changes with its inputs. :func:`cached_build` stores the problem as a pickle in the cache
 folder of :mod:`popdispatch.cache` (``$POPDISPATCH_CACHE_DIR``, ``$XDG_CACHE_HOME/popdispatch``
 or ``~/.cache/popdispatch``; ``POPDISPATCH_CACHE_DIR=off`` disables it) under a key of
 everything the build depends on:

@@ -72,8 +72,8 @@ class EngineChoice(click.Choice):
     """A choice among names the engine defines (``"module:ATTRIBUTE"``), looked up only when
     click parses a value: importing the CLI must not import the engine (numba).
 
-    ``shown``: the names the help lists without importing the engine (``--help`` of a command
-    took about 1 s of numba and pandas imports for three lists of names); parsing always
+    ``shown``: the names the help lists without importing the engine (numba and pandas would
+    be imported for three lists of names); parsing always
     checks against the engine's own names, and tests/cli/test_startup.py checks the two agree.
     """
 

@@ -1,7 +1,7 @@
 """The ``popdispatch`` command line (click): process plumbing (clock, signals, exit codes).
 
 Commands: ``feeder``, ``opf``, ``snapshot``, ``day``, ``reproduce``, ``export``. With ``--json``
-a command prints exactly one JSON object on stdout (see README, "JSON output"); progress and
+a command prints exactly one JSON object on stdout (see docs/cli.md, "JSON output"); progress and
 notes go to stderr. Exit codes: 0 success, 1 a problem (bad data, infeasible dispatch, cannot
 write), 2 bad usage (malformed or unknown option values, checked before any data is read),
 130 interrupted. Every error is one line on stderr, without traceback (set
@@ -82,7 +82,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _spare_the_exit() -> None:
     """Move every live object out of the cyclic garbage collector's reach before the
     interpreter exits: its final collections would otherwise scan all of numba's, pandas' and
-    scipy's objects, about 0.3-0.6 s after the work is done. Nothing is skipped (atexit handlers
+    scipy's objects after the work is done. Nothing is skipped (atexit handlers
     and finalisers run as usual); only call this when the process is about to end, since frozen
     objects are never collected."""
     import gc

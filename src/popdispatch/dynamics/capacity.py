@@ -12,17 +12,18 @@ fitness instead (see :mod:`popdispatch.modes`). As a flow law
 weight ``1[x_i < hi_i]``, sender weight ``x_j - lo_j``; the integrator's flux limiter stops a
 receiver exactly at ``hi``.
 
-Why an indicator and not the room fraction ``(hi_i - x_i) / (hi_i - lo_i)``: with the fraction, the
-inflow into a generator vanishes with the room it has left. At a degenerate optimum (demand equal to
-the capacity of the cheap generators, so the dear one's movable mass ``x_j - lo_j`` equals the room
-left, or a generator optimal exactly at ``Pmax`` with zero reduced cost, so the fitness gap vanishes
-with the room) both factors of the rate vanish together, the distance to the optimum obeys ``d' = -k
-d^2`` and decays like ``1 / t``: a 5-bus feeder with 20 kW of demand on 10 + 10 kW of cheap
-generators ran 6000 iterations unconverged. With the indicator the rate is linear in the distance,
-``d' = -k d``, and the limit is reached (the flux limiter lands on it exactly): that case converges
-at iteration 10. Sender side: Smith's mass-proportional weight ``x_j - lo_j`` is kept, so a
-generator optimal exactly at ``Pmin`` with *zero* reduced cost (gap vanishing with its mass) is
-still approached like ``1 / t``.
+Why an indicator and not the room fraction ``(hi_i - x_i) / (hi_i - lo_i)``: with the
+fraction, the inflow into a generator vanishes with the room it has left.
+At a degenerate optimum (demand equal to the capacity of the cheap generators, so the dear
+one's movable mass ``x_j - lo_j`` equals the room left, or a generator optimal exactly at
+``Pmax`` with zero reduced cost, so the fitness gap vanishes with the room) both factors of the
+rate vanish together, the distance to the optimum obeys ``d' = -k d^2`` and decays like
+``1 / t``: a 5-bus feeder with 20 kW of demand on 10 + 10 kW of cheap generators ran 6000
+iterations unconverged. With the indicator the rate is linear in the distance, ``d' = -k d``,
+and the limit is reached (the flux limiter lands on it exactly): that case converges at
+iteration 10. Sender side: Smith's mass-proportional weight ``x_j - lo_j`` is kept, so a
+generator optimal exactly at ``Pmin`` with *zero* reduced cost (gap vanishing with its mass)
+is still approached like ``1 / t``.
 
 Cf. the capacity-constrained pairwise-comparison protocols of the popgames library and
 Martinez-Piazuelo, Quijano and Ocampo-Martinez (primal-dual evolutionary dynamics).
@@ -102,7 +103,7 @@ def project_to_box(x, lo, hi):
     Used when the demand changes between minutes: ``hi = Pmax / P_d`` moves, and a warm-started
     share may sit above its new limit. Written as loops (the same operations in the same order
     as ``np.minimum(np.maximum(x - shift, lo), hi).sum()``): numba compiles array expressions
-    with their broadcasting checks several times slower (first run).
+    with their broadcasting checks several times slower (on the first run).
     """
     n = x.shape[0]
     low = np.inf

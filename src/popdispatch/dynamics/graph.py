@@ -1,7 +1,7 @@
 """Communication graphs between generators (strategies), as adjacency matrices.
 
 The named graphs are built with numpy (connected by construction); networkx is imported only
-for a user's own graph (it cost every command about 0.17 s of start-up).
+for a user's own graph (importing it would weigh on every command's start-up).
 """
 
 from __future__ import annotations

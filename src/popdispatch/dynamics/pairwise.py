@@ -80,8 +80,8 @@ def sort_by_fitness(f, order):
 @nb.njit(cache=True)
 def merge_sort(f, order):
     """``order[:] = np.argsort(f, kind="mergesort")`` (the same permutation: a stable sort of
-    ``0..n-1`` by ``f``), bottom-up. numba's ``argsort`` compiled for about 3 s of every first
-    run for this fallback, which a run rarely takes."""
+    ``0..n-1`` by ``f``), bottom-up. numba's ``argsort`` would add seconds to every first
+    run's compilation for this fallback, which a run rarely takes."""
     n = order.shape[0]
     for k in range(n):
         order[k] = k

@@ -117,7 +117,7 @@ class Feeder:
 
     def graph(self) -> nx.Graph:
         """The feeder as an undirected networkx graph; edges carry the line name as ``line``."""
-        import networkx as nx  # only here: importing networkx costs about 0.2 s
+        import networkx as nx  # only here: importing networkx is slow and most runs never need it
 
         g = nx.Graph()
         g.add_nodes_from(self.buses.index.tolist())
@@ -247,8 +247,8 @@ def _check_radial(feeder: Feeder) -> None:
             f"line {lines.index[parallel.argmax()]!r} is parallel to another line: feeder is "
             "meshed (popdispatch supports radial feeders only)"
         )
-    # imported here: scipy.sparse.csgraph imports scipy.linalg (about 0.2 s), which a run on a
-    # cached problem (popdispatch.cases.cached) never needs
+    # imported here: scipy.sparse.csgraph imports scipy.linalg (slow to import), which a run on
+    # a cached problem (popdispatch.cases.cached) never needs
     from scipy.sparse.csgraph import connected_components
 
     graph = csr_array((np.ones(len(lines), dtype=np.int8), (ends_a, ends_b)), shape=(n, n))

@@ -172,7 +172,7 @@ def _merge_lines(
     group = reduced_line[kept]
     on_base = feeder.lines_on_base()  # ohms summed on one base: the source's
     # Series lines merge: impedances and lengths add, the tightest limit holds (numpy rather
-    # than a pandas groupby, which cost about 25 ms of every command's start-up).
+    # than a pandas groupby, whose set-up would weigh on every command's start-up).
     merged = pd.DataFrame(
         {
             column: np.bincount(

@@ -72,8 +72,8 @@ def build_tree(n_nodes: int, ends_a: np.ndarray, ends_b: np.ndarray, root: int =
     ends = np.concatenate([ends_a, ends_b])
     if len(ends) and (ends.min() < 0 or ends.max() >= n_nodes):
         raise FeederError("lines do not form a tree: network is meshed or disconnected")
-    # imported here: scipy.sparse.csgraph imports scipy.linalg (about 0.2 s), which a run on a
-    # cached problem (popdispatch.cases.cached) never needs
+    # imported here: scipy.sparse.csgraph imports scipy.linalg (slow to import), which a run on
+    # a cached problem (popdispatch.cases.cached) never needs
     from scipy.sparse.csgraph import depth_first_order
 
     graph = csr_array(

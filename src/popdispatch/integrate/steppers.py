@@ -22,18 +22,18 @@ limit stays large.)
 Controller states ``z`` are integrated alongside and kept non-negative. Everything here is
 compiled and allocation-free. The records (:class:`Workspace`, :class:`Stage`, ...) are taken
 apart once per iteration and the per-substep kernels take their arrays: numba reference-counts
-every array of a record each time the record is handed to an inlined function, which made the
-paper-mode minute 1.5x slower when the records went down to the innermost loop.
+every array of a record each time the record is handed to an inlined function, which slows
+the innermost loop noticeably when the records go down to it.
 
 Compilation: the game and field (:func:`evaluate_stage`) and the limiter's flows
 (:func:`limited_flows`) are compiled once each and called; inlined, numba typed and LLVM
-optimised a copy at every call site (the first run's compilation more than doubled), and the
+optimised a copy at every call site, which multiplies the first run's compilation, and the
 calls cost nothing measurable per step. The steppers themselves
 (:func:`advance_euler`, :func:`advance_heun`) are the implementations numba compiles for
 :func:`advance`, with :func:`euler_steps` inlined: numba inlines a function by copying its
 IR, at a cost that grows with the square of its size, and every compiled level below the
 day loop is optimised again by LLVM in each level above it, so the fewest levels with the
-fewest copies compile fastest (measured: ``benchmarks/bench_first_run.py``, README "First run").
+fewest copies compile fastest (``benchmarks/bench_first_run.py`` measures it; docs/performance.md).
 """
 
 from __future__ import annotations
@@ -154,7 +154,7 @@ def workspace(n: int, n_lines: int, n_states: int, window: int) -> Workspace:
 @nb.njit(cache=True, inline="always")
 def copy_into(source, target):
     """``target[:] = source`` as a loop (same length): numba compiles an array assignment
-    with its broadcasting checks, seconds of the first run (issue 13)."""
+    with its broadcasting checks, which adds to the first run's compilation."""
     for i in range(source.shape[0]):
         target[i] = source[i]
 
@@ -167,7 +167,7 @@ def evaluate_stage(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order,
 
     Inlined, the game and field (every mode's payoff, every field's weights, both pairwise
     sums) were copied into each of four call sites, and LLVM optimised every copy again in
-    each function that links them: 60-90 s of compilation on the first run. Called, they are
+    each function that links them, the bulk of the first run's compilation. Called, they are
     compiled once; the call costs a few reference counts per evaluation.
     """
     return evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term, params,

@@ -121,7 +121,7 @@ def check(rule, ring, k, z, residual, calm, demand, still):
     tol = tolerance(rule, demand)
     # the residual within tolerance over the whole last window, not at one sample: the
     # price loop can oscillate with a period of 2-3 iterations whose window means agree
-    # while every other sample overflows (issue 10: 1e-4 kW on random feeders)
+    # while every other sample overflows (by 1e-4 kW on random feeders)
     calm = calm + 1 if residual <= tol else 0
     window = rule.window
     need = (3 if rule.extrapolate else 2) * window

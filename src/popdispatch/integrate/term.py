@@ -124,8 +124,8 @@ def evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term,
         p[i] = x[i] * demand
     # the mode's payoff map, the law's weights and its sums on the graph, each chosen by its
     # record's class when numba compiles (Term): no branch, nothing else compiled, and each
-    # inlined (overload inline="always"; called, each call reference-counted the records'
-    # arrays: the paper minute took 2.5 ms instead of 1.5 ms)
+    # inlined (overload inline="always"; called, each call would reference-count the
+    # records' arrays, a large share of a paper-mode minute)
     congestion, residual = payoff(term.mode, p, z, params, minute, work, f, z_rate)
     field, graph = term.field, term.graph
     weights(field, x, f, minute.lo, minute.hi, minute.active, params.revision_rate, w, v, room,

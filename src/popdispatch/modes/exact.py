@@ -1,11 +1,12 @@
 """Exact mode: line prices that integrate the overflow (dual ascent), no barrier.
 
-Capacity-constrained revision keeps the generator limits; a non-negative price per limited
-line and direction integrates its overflow and is broadcast like the paper's signals. Its
-equilibria are the KKT points of the DC-OPF (docs/exact-mode.md).
+A capacity-constrained revision (by default scaled by each generator's own cost curvature)
+keeps the generator limits; a non-negative price per limited line and direction integrates
+its overflow and is broadcast like the paper's signals. Its equilibria are the KKT points of
+the DC-OPF (docs/exact-mode.md).
 
-Exact mode is dimensionless (issue 12): fitness is counted in units of the marginal-cost
-spread ``S`` (EUR/MW) and powers in units of the reference demand ``P`` (MW) (:func:`scales`),
+Exact mode is dimensionless: fitness is counted in units of the marginal-cost spread ``S``
+(EUR/MW) and powers in units of the reference demand ``P`` (MW) (:func:`scales`),
 so its constants (:class:`ExactConstants`) are pure rates and the same feeder scaled by 100
 takes the same iterations. :func:`game_constants` turns them into the engine's EUR/MW units.
 """

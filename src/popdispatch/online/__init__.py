@@ -258,9 +258,10 @@ class DayResult:
     ``wall_seconds`` is the engine's own time (no imports, data loading or DC-OPF).
 
     Per minute, as for a snapshot (:class:`SnapshotResult`): ``converged`` means at rest and,
-    in a mode that claims the DC-OPF, passing its KKT check; ``stalled`` means at rest but
-    failing it (``stall_reasons`` maps such 1-based minutes to the reason). A stalled minute
-    is never counted as converged.
+    in a mode that claims the DC-OPF, proved within ``accuracy_kw`` of it by the distance
+    certificate (``distance_bound_kw``); ``stalled`` means at rest without that proof
+    (``stall_reasons`` maps such 1-based minutes to the reason). A stalled minute is never
+    counted as converged.
 
     ``line_price_eur_per_mwh`` (minutes, limited lines) and ``voltage_price_eur_per_mwh``
     (minutes, monitored buses): the engine's broadcast prices at each minute's end, EUR/MWh,

@@ -166,7 +166,7 @@ class Engine:
     ) -> None:
         """The compiled day loop over ``minutes`` with ``integrator`` and warm start ``policy``
         (as its :class:`~popdispatch.warm_start.StartTag`: numba types an IntEnum member
-        slowly, about 40 us a call, and the tag's class lets it compile this policy only)."""
+        slowly at every call, and the tag's class lets it compile this policy only)."""
         problem = self.problem
         rows = np.asarray(minutes) - 1
         day = DayInputs(

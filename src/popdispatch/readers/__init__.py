@@ -2,8 +2,8 @@
 Feeder's OpenDSS files and load profiles, load time series (CSV/Parquet tables, SimBench).
 
 The readers are imported when first used (``popdispatch.readers.read_matpower`` imports
-:mod:`popdispatch.readers.matpower` then): importing them all cost about 0.1 s of every
-command's start-up, and most commands use one.
+:mod:`popdispatch.readers.matpower` then): most commands use one, and importing them all
+would add to every command's start-up.
 """
 
 from popdispatch.lazy import lazy_namespace

@@ -5,7 +5,7 @@ A cached table is stored under a key naming what was read (e.g. the absolute pro
 and the code that read it; beside the arrays, the entry keeps the *manifest* of the inputs:
 every file and folder the read looked at, with its size (bytes) and modification time (ns).
 A cached entry is used only when every input still has the same size and modification time
-(re-checked on every use: about 0.1 ms per file); any change, removal or unreadable input is a
+(re-checked on every use, one ``stat`` per input); any change, removal or unreadable input is a
 miss, and the caller reads the files afresh and replaces the entry. Folders are in the manifest
 because a file added next to the ones read (e.g. a second ``loads.txt`` that makes a name
 ambiguous) changes the folder's modification time.

@@ -640,6 +640,8 @@ def read_matpower(
 ) -> Feeder:
     """Read a MATPOWER case file into a radial :class:`~popdispatch.feeder.Feeder`.
 
+    See the module docstring for the statements understood and the unit conversions.
+
     Parameters
     ----------
     path : the ``.m`` case file; the feeder is named after its stem (e.g. ``case33bw``).
@@ -648,8 +650,6 @@ def read_matpower(
     root : the source bus (MATPOWER bus number); default the reference bus (``BUS_TYPE`` 3).
     ratings : take line limits from ``RATE_A`` (1 MVA -> 1000 kW, 0 = unlimited); ``False``
         leaves every line unlimited.
-
-    See the module docstring for the statements understood and the unit conversions.
     """
     path = Path(path)
     fleet = as_fleet(fleet)

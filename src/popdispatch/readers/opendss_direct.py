@@ -137,6 +137,8 @@ def read_opendss_master(
 ) -> Feeder:
     """Read the radial circuit of an OpenDSS master file or run script as a :class:`Feeder`.
 
+    Conversion rules: see :mod:`popdispatch.readers.opendss_direct`.
+
     Parameters
     ----------
     master_path : the ``.dss`` file (compiled in place: see the module docstring).
@@ -146,8 +148,6 @@ def read_opendss_master(
     root : the source bus (OpenDSS bus name, or an int spelling it); default the Vsource's bus.
     ratings : line limits from ``NormAmps`` and transformer limits from kVA (else ``inf``).
     name : the feeder's case name; default the OpenDSS circuit's name.
-
-    Conversion rules: see :mod:`popdispatch.readers.opendss_direct`.
     """
     fleet = as_fleet(fleet)
     path = Path(master_path)

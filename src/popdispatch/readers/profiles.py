@@ -57,8 +57,8 @@ def read_profiles(folder: str | Path, use_cache: bool = True) -> LoadProfiles:
     ``use_cache``: take the table from the on-disk cache (:mod:`popdispatch.cache`) when an
     entry for this folder exists and every file and folder the read looked at still has the
     size and modification time it had then (:mod:`popdispatch.readers.manifest`); otherwise
-    read the files and store the table for the next process. A warm read of the official
-    folder takes about 5 ms instead of about 0.15 s.
+    read the files and store the table for the next process (a warm read is much quicker
+    than parsing the folder).
     """
     root = Path(folder).expanduser()
     if not root.is_dir():
@@ -358,8 +358,7 @@ def default_profiles() -> LoadProfiles:
     57.358 kW (the official feeder's peak, below the paper fleet's 65 kW); stored rounded to 1 W.
     ``source`` is the file's first comment line, e.g.
     ``"synthetic default (richardsonpy CREST, seed 20240566, scaled to a 57.358 kW peak)"``.
-    Kept in the on-disk cache like a profile folder (:func:`read_profiles`; about 3 ms warm
-    instead of 25 ms).
+    Kept in the on-disk cache like a profile folder (:func:`read_profiles`).
     """
     resource = resources.files("popdispatch") / "data" / DEFAULT_PROFILES_FILE
     try:

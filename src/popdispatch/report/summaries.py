@@ -1,7 +1,7 @@
 """Summaries of results as plain dicts (the CLI's ``--json`` objects) and time-series tables.
 
 Powers are in kW, energies in kWh, costs in EUR (a day) or EUR/h (one minute's dispatch, Table
-I's coefficients applied to MW). Key names carry their units. See README, "JSON output".
+I's coefficients applied to MW). Key names carry their units. See docs/cli.md, "JSON output".
 
 Deprecated keys: ``cost``, ``opf_cost`` and ``cost_all_minutes`` meant EUR/h in a snapshot or
 DC-OPF summary and EUR in a day summary (with ``cost_unit`` saying which). Their unit-named
