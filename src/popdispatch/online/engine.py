@@ -52,8 +52,8 @@ class Engine:
                 "imitative, so a generator at zero share stays at zero (extinction) and the "
                 "DC-OPF is out of reach whenever it uses one; use smith or distributed-smith"
             )
-        self.term = Term.of(field, mode_tag(self.mode.code, settings.exact.price_law),
-                            *self._graph())  # fmt: skip
+        tag = mode_tag(self.mode.code, settings.exact.price_law, problem.meshed)
+        self.term = Term.of(field, tag, *self._graph())
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
         self.params = GameParameters.of(problem, self.constants, settings.revision_rates(problem))
@@ -184,6 +184,8 @@ class Engine:
 
 def limited_flows_mw(problem: DispatchProblem, p_mw: np.ndarray, minute: int) -> np.ndarray:
     """Flows (MW) on the limited lines for set points ``p_mw`` (MW) at a 1-based minute."""
+    if problem.meshed:
+        return problem.flows(np.asarray(p_mw, dtype=float), minute)
     flow = np.empty(len(problem.limit))
     limited_line_flows(
         problem.load_flow[minute - 1], np.ascontiguousarray(p_mw, dtype=float),
