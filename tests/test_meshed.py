@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import warnings
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -226,7 +227,7 @@ def test_phase_shifter_and_parallel_branches_match_a_dense_dc_flow():
 def test_a_piecewise_linear_cost_is_refused_in_one_line(tmp_path):
     from popdispatch.readers.matpower import read_matpower_network
 
-    text = open(os.path.join(DATA, "case9.m")).read()
+    text = Path(DATA, "case9.m").read_text()
     start = text.index("mpc.gencost = [")
     end = text.index("];", start)
     rows = "\n".join(["\t1\t1500\t0\t2\t0\t0\t100\t2000;"] * 3)

@@ -107,8 +107,10 @@ def validate_network(net: DcNetwork) -> None:
     _, part = connected_components(graph, directed=False)
     apart = part != part[index.get_loc(net.slack_bus)]
     if apart.any():
-        raise FeederError(f"network {net.name!r}: bus {index[apart.argmax()]} is not connected "
-                          f"to slack bus {net.slack_bus} (the network is in several parts)")  # fmt: skip
+        raise FeederError(
+            f"network {net.name!r}: bus {index[apart.argmax()]} is not connected to slack bus "
+            f"{net.slack_bus} (the network is in several parts)"
+        )
 
 
 @dataclass(frozen=True)

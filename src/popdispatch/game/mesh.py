@@ -1,4 +1,4 @@
-"""The dispatch problem of a meshed network (any connected network, :mod:`popdispatch.feeder.dcnet`).
+"""The dispatch problem of a meshed network (any connected one, :mod:`popdispatch.feeder.dcnet`).
 
 The same :class:`~popdispatch.game.problem.DispatchProblem` as a radial feeder's, with the
 limited lines' coefficients given as distribution factors: flows on the limited lines are

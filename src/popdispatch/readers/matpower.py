@@ -86,8 +86,8 @@ from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components, depth_first_order
 
 from popdispatch.errors import FeederError, OptionError
-from popdispatch.feeder.generators import as_fleet, make_fleet
 from popdispatch.feeder.dcnet import DcNetwork
+from popdispatch.feeder.generators import as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.radial import join_feeders, merge_parallel
 

@@ -73,8 +73,8 @@ from scipy.sparse.csgraph import connected_components
 
 from popdispatch.constants import KW_PER_MW
 from popdispatch.errors import FeederError, FleetError, OptionError
-from popdispatch.feeder.generators import FLEET_COLUMNS, as_fleet, make_fleet
 from popdispatch.feeder.dcnet import DcNetwork
+from popdispatch.feeder.generators import FLEET_COLUMNS, as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.radial import join_feeders, merge_parallel
 
