@@ -14,7 +14,8 @@ grid and mv_oberrhein with their rings closed (tests/test_meshed.py ``ring_net``
   DC-OPF's and no limited line more than 1 % over its limit (the criterion of the
   distributed-OPF literature, e.g. PowerModelsADA.jl's).
 - times: the engine's own seconds for the run (``wall_seconds``, warm numba cache: a warm-up
-  run first) against Clarabel's solve of the same DC-OPF (building and solving the QP).
+  run first, the kernels every meshed problem shares) against Clarabel's solve of the same
+  DC-OPF (building and solving the QP).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import os
 import sys
 import time
 import warnings
+from dataclasses import replace
 
 import numpy as np
 
@@ -32,6 +34,10 @@ from popdispatch.online import RunSettings, run_snapshot
 from popdispatch.opf import generation_cost, solve_opf
 from popdispatch.readers.matpower import read_matpower_network
 from popdispatch.readers.pandapower import read_pandapower_network
+
+#: The quadratic term given to every generator of the big case in its second row (its own
+#: costs are linear: the DC-OPF is then a linear program, whose optimum need not be unique).
+CURVATURE = 0.01
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
 from test_meshed import CASES, congested, ring_net  # noqa: E402
@@ -47,9 +53,13 @@ def problems(big: str | None):
     for name in ("cigre", "oberrhein"):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            yield f"{name} (rings closed)", build_mesh_problem(read_pandapower_network(ring_net(name)))
+            net = read_pandapower_network(ring_net(name))
+        yield f"{name} (rings closed)", build_mesh_problem(net)
     if big:
-        yield big, build_mesh_problem(read_matpower_network(os.path.join(data, f"{big}.m")))
+        problem = build_mesh_problem(read_matpower_network(os.path.join(data, f"{big}.m")))
+        yield f"{big} (its own linear costs)", problem
+        curved = replace(problem, c=np.full(problem.n_generators, CURVATURE))
+        yield f"{big}, c_i = {CURVATURE} EUR/MW^2h added", curved
 
 
 def to_gap(problem, run, cost: float, gap: float = 0.01) -> int:
@@ -58,8 +68,8 @@ def to_gap(problem, run, cost: float, gap: float = 0.01) -> int:
     p = run.trajectory_kw / 1e3
     costs = generation_cost(problem, p)
     flows = problem.line_load_flow[0][None, :] - p @ problem.down.T
-    over = (np.abs(flows) - problem.limit).max(axis=1, initial=0.0)
-    ok = (np.abs(costs - cost) <= gap * abs(cost)) & (over <= gap * problem.limit.min(initial=1.0))
+    over = ((np.abs(flows) - problem.limit) / problem.limit).max(axis=1, initial=0.0)
+    ok = (np.abs(costs - cost) <= gap * abs(cost)) & (over <= gap)
     bad = np.flatnonzero(~ok)
     return 0 if not len(bad) else int(bad[-1] + 1)
 
@@ -74,11 +84,12 @@ def main() -> None:
           "| iterations to accuracy | to 1 % | engine s | engine ms/iteration | Clarabel s "
           "| distance to Clarabel kW | certified bound kW |")
     print("|---" * 13 + "|")
-    for name, problem in problems(None if args.no_big else args.big):
+    for number, (name, problem) in enumerate(problems(None if args.no_big else args.big)):
         began = time.perf_counter()
         opf = solve_opf(problem, 1)
         qp_seconds = time.perf_counter() - began
-        run_snapshot(problem, 1, settings)  # warm-up: compile or load the kernels
+        if number == 0:  # warm-up: compile or load the kernels (every mesh shares them)
+            run_snapshot(problem, 1, settings)
         run = run_snapshot(problem, 1, settings)
         net = problem.feeder
         binding = int((np.abs(opf.line_price) > 1e-6).sum())
