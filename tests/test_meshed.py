@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
 
 from popdispatch.errors import FeederError
 from popdispatch.feeder.dcnet import DcNetwork
@@ -248,3 +250,58 @@ def test_paper_mode_runs_on_a_mesh():
     run = run_snapshot(problem, 1, RunSettings(mode="paper"))
     assert np.isfinite(run.setpoints_kw).all()
     assert run.setpoints_kw.sum() == pytest.approx(problem.demand[0] * 1e3, rel=1e-9)
+
+
+def random_mesh(seed: int, n_buses: int, n_chords: int, n_gens: int, n_limits: int):
+    """A random connected meshed network: a random tree plus ``n_chords`` chords (parallel
+    branches allowed), reactances, taps, phase shifts, loads, shunt conductances and a fleet
+    (several generators per bus allowed) drawn at random; ``n_limits`` lines limited between
+    30 % and 120 % of their unconstrained DC-OPF flows."""
+    import pandas as pd
+
+    from popdispatch.feeder.generators import make_fleet
+
+    rng = np.random.default_rng(seed)
+    ends = [(int(rng.integers(k)), k) for k in range(1, n_buses)]
+    ends += [tuple(int(v) for v in rng.choice(n_buses, 2, replace=False)) for _ in range(n_chords)]
+    m = len(ends)
+    buses = pd.DataFrame({"pd_mw": rng.uniform(0, 20, n_buses),
+                          "gs_mw": rng.uniform(0, 1, n_buses) * (rng.random(n_buses) < 0.3)},
+                         index=pd.Index(np.arange(1, n_buses + 1), name="bus"))  # fmt: skip
+    lines = pd.DataFrame(
+        {"from_bus": [a + 1 for a, _ in ends], "to_bus": [b + 1 for _, b in ends],
+         "x_pu": rng.uniform(0.02, 0.5, m),
+         "tap": np.where(rng.random(m) < 0.2, rng.uniform(0.9, 1.1, m), 0.0),
+         "shift_deg": np.where(rng.random(m) < 0.2, rng.uniform(-10, 10, m), 0.0),
+         "limit_kw": np.inf},
+        index=[f"l{k}" for k in range(m)],
+    )  # fmt: skip
+    total = float(buses.pd_mw.sum() + buses.gs_mw.sum())
+    rows = [(int(rng.integers(1, n_buses + 1)), 0.0, rng.uniform(5, 50), rng.uniform(0.01, 2),
+             0.0, rng.uniform(0.6, 1.0) * total * 1e3) for _ in range(n_gens)]  # fmt: skip
+    fleet = make_fleet(rows, [f"G{i}" for i in range(n_gens)])
+    net = DcNetwork("random", 100.0, buses, lines, fleet, 1)
+    chosen = list(rng.choice(lines.index, n_limits, replace=False))
+    limited = congested(net, chosen, 1.0)
+    scale = rng.uniform(0.3, 1.2, n_limits)
+    limits = limited.lines.limit_kw.copy()
+    limits[chosen] = np.maximum(limits[chosen].to_numpy() * scale, 1.0)
+    return replace(net, lines=net.lines.assign(limit_kw=limits))
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.integers(1, 3), st.integers(2, 4),
+       st.integers(0, 2))  # fmt: skip
+def test_exact_mode_on_random_meshes_lands_on_the_exact_dc_opf(seed, n_buses, chords, gens, limits):
+    """Random meshes against the DC-OPF found by enumerating active sets (tests/qp_exact.py,
+    no solver tolerance): converged, within the run's accuracy, in at most 200 iterations,
+    and the certificate a true bound."""
+    from qp_exact import exact_dc_opf
+
+    problem = build_mesh_problem(random_mesh(seed, n_buses, chords, gens, limits), check=False)
+    optimum = exact_dc_opf(problem)
+    assume(optimum is not None)
+    run = run_exact(problem)
+    distance_kw = np.abs(run.setpoints_kw - optimum * 1e3).max()
+    assert distance_kw <= run.accuracy_kw
+    assert run.distance_bound_kw >= distance_kw - 1e-9
