@@ -23,7 +23,7 @@ p`` as on the radial feeder, where ``D_ki`` is 1 below the line and 0 above it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
@@ -61,7 +61,6 @@ class DcNetwork:
     lines: pd.DataFrame
     generators: pd.DataFrame
     slack_bus: int
-    notes: tuple[str, ...] = field(default=(), compare=False)
 
     def __post_init__(self) -> None:
         validate_network(self)
