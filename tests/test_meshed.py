@@ -324,3 +324,15 @@ def test_a_day_on_a_mesh_lands_on_each_minutes_dc_opf():
     assert day.iterations.max() <= HORIZON
     tol = np.maximum(1e-3, 1e-6 * day.demand_kw)
     assert (np.abs(day.setpoints_kw - opf).max(axis=1) <= tol).all()
+
+
+def test_a_pandapower_piecewise_linear_cost_is_refused_in_one_line():
+    from popdispatch.errors import FleetError
+    from popdispatch.readers.pandapower import read_pandapower_network
+
+    net = pn.create_cigre_network_mv()
+    net.switch["closed"] = True
+    pp.create_pwl_cost(net, 0, "ext_grid", [[0, 10, 5], [10, 50, 8]])
+    with pytest.raises(FleetError) as info:
+        read_pandapower_network(net)
+    assert "\n" not in str(info.value) and "ext_grid 0" in str(info.value)

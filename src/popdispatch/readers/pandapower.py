@@ -821,6 +821,9 @@ def _network_fleet(lookups, ids, gen, cost) -> pd.DataFrame:
             if row >= 0:
                 element[int(row)] = f"G{prefix}{index}"
     rows, names = [], []
+    if cost is None or len(cost) < len(gen):
+        raise FleetError("the net's generators have no costs: give each ext_grid, gen and "
+                         "controllable sgen a poly_cost")  # fmt: skip
     for k in np.flatnonzero(gen[:, 7] > 0):
         ncost = int(cost[k, 3])
         c = np.concatenate([cost[k, 4 : 4 + ncost][::-1], np.zeros(3)])[:3]
