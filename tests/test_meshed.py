@@ -336,3 +336,30 @@ def test_a_pandapower_piecewise_linear_cost_is_refused_in_one_line():
     with pytest.raises(FleetError) as info:
         read_pandapower_network(net)
     assert "\n" not in str(info.value) and "ext_grid 0" in str(info.value)
+
+
+def test_the_kkt_check_reads_ptdf_weighted_prices():
+    """The KKT check on a mesh: Clarabel's optimum of congested case9 with its line duals as
+    the controllers' prices passes; the same prices read on the radial 0/1 rule (the factors
+    rounded) fail stationarity, and so does the unconstrained economic dispatch."""
+    from popdispatch.online.kkt import KktTolerances, kkt_violations
+    from popdispatch.readers.matpower import read_matpower_network
+
+    net = congested(read_matpower_network(os.path.join(DATA, "case9.m")), ["L4-5", "L6-7"], 0.8)
+    problem = build_mesh_problem(net)
+    opf = solve_opf(problem, 1)
+    price = np.where(np.abs(opf.line_price) > 1e-6, opf.line_price, 0.0)  # interior-point dust
+    z = np.r_[np.maximum(price, 0.0), np.maximum(-price, 0.0)]
+    p = opf.p_kw / 1e3
+    tol = KktTolerances(power_mw=1e-5, flow_gap=1e-4, price=1e-4)
+    assert kkt_violations(problem, np.array([1]), p, z, tol) == [None]
+    # weights other than the factors, with the same flows at p: stationarity fails
+    k = int(np.argmax(np.abs(price)))
+    tilt = np.zeros_like(p)
+    tilt[0], tilt[1] = p[1], -p[0]  # tilt @ p = 0
+    other = problem.factor + np.outer(np.eye(len(price))[k], tilt / np.abs(p).max())
+    reason = kkt_violations(replace(problem, factor=other), np.array([1]), p, z, tol)[0]
+    assert reason is not None and "not a KKT point" in reason
+    free = solve_opf(build_mesh_problem(replace(net, lines=net.lines.assign(limit_kw=np.inf))), 1)
+    reason = kkt_violations(problem, np.array([1]), free.p_kw / 1e3, 0 * z, tol)[0]
+    assert reason is not None and "over its limit" in reason
