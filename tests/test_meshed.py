@@ -363,3 +363,20 @@ def test_the_kkt_check_reads_ptdf_weighted_prices():
     free = solve_opf(build_mesh_problem(replace(net, lines=net.lines.assign(limit_kw=np.inf))), 1)
     reason = kkt_violations(problem, np.array([1]), free.p_kw / 1e3, 0 * z, tol)[0]
     assert reason is not None and "over its limit" in reason
+
+
+@pytest.mark.parametrize(
+    ("mode", "law", "option"),
+    [("voltage", "plain", "--mode"), ("exact", "tree", "--price-law"),
+     ("exact", "scaled", "--price-law")],
+)  # fmt: skip
+def test_what_reads_the_tree_is_refused_on_a_mesh_in_one_line(mode, law, option):
+    from popdispatch.errors import OptionError
+    from popdispatch.modes import get_mode, mode_tag
+    from popdispatch.modes.exact import ExactConstants
+
+    net = random_mesh(3, 4, 1, 2, 1)
+    problem = build_mesh_problem(net, check=False)
+    with pytest.raises(OptionError) as info:
+        mode_tag(get_mode(mode).code, ExactConstants(price_law=law).price_law, problem.meshed)
+    assert "\n" not in str(info.value) and info.value.option == option
