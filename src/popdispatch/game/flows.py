@@ -75,3 +75,33 @@ def broadcast(to_parent_side, to_child_side, generator_line, line_up, line_preor
     for i in range(signal.shape[0]):
         k = generator_line[i]
         signal[i] = common + (path[k] if k >= 0 else 0.0)
+
+
+@nb.njit(cache=True, inline="always")
+def mesh_line_flows(load_flow, p, factor, flow):
+    """Flows (MW) on the limited lines of a meshed network into ``flow``: ``load_flow - D p``
+    with the distribution factors ``factor`` = ``D`` (limited lines x generators,
+    :mod:`popdispatch.game.mesh`); ``p``: set points (MW). One pass over ``D``."""
+    for k in range(flow.shape[0]):
+        total = 0.0
+        for i in range(p.shape[0]):
+            total += factor[k, i] * p[i]
+        flow[k] = load_flow[k] - total
+
+
+@nb.njit(cache=True, inline="always")
+def mesh_broadcast(to_parent_side, to_child_side, factor, signal):
+    """:func:`broadcast` on a meshed network: generator ``i`` weighs line ``k``'s two values by
+    its own distribution factor ``D_ki`` (``factor``), ``signal_i = sum_k to_parent_side[k] +
+    D_ki (to_child_side[k] - to_parent_side[k])``; on a radial feeder (``D`` 0/1) the values
+    of the side the generator is on, as :func:`broadcast` sends them."""
+    common = 0.0
+    for k in range(to_parent_side.shape[0]):
+        common += to_parent_side[k]
+    for i in range(signal.shape[0]):
+        signal[i] = common
+    for k in range(to_parent_side.shape[0]):
+        step = to_child_side[k] - to_parent_side[k]
+        if step != 0.0:
+            for i in range(signal.shape[0]):
+                signal[i] += factor[k, i] * step

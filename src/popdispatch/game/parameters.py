@@ -16,6 +16,7 @@ from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.problem import DispatchProblem
 
 NO_VOLTAGE_ROWS = np.zeros((0, 0))  # empty: nothing in it to change
+NO_FACTORS = np.zeros((0, 0))  # a radial feeder's: its kernels work on the tree
 NO_RATES = np.zeros(0)  # empty: the dynamics that take no per-generator revision rate
 
 
@@ -73,6 +74,9 @@ class GameParameters(NamedTuple):
     # per generator, the revision rate of the dynamics that scale each generator's revision by
     # its own cost curve (dynamics/newton.py), dimensionless; empty for the others
     revision_rate: np.ndarray = NO_RATES
+    # on a meshed network, per limited line and generator the distribution factor D_ki
+    # (game/mesh.py; the mesh kernels read it instead of the tree); (0, 0) on a radial feeder
+    factor: np.ndarray = NO_FACTORS
 
     @classmethod
     def of(
@@ -86,6 +90,8 @@ class GameParameters(NamedTuple):
             problem.generator_line, problem.line_up, problem.line_preorder,
             np.ascontiguousarray(problem.voltage_sens, dtype=float),
             np.ascontiguousarray(revision_rate, dtype=float),
+            NO_FACTORS if problem.factor is None
+            else np.ascontiguousarray(problem.factor, dtype=float),
         )  # fmt: skip
 
 

@@ -17,6 +17,7 @@ import pandas as pd
 
 from popdispatch.constants import KW_PER_MW
 from popdispatch.errors import FleetError, InfeasibleError, ProfileError
+from popdispatch.feeder.dcnet import DcNetwork
 from popdispatch.feeder.profiles import LoadProfiles, check_minute
 from popdispatch.feeder.reduction import ReducedFeeder
 from popdispatch.feeder.tree import downstream, line_flows, selected_line_flows
@@ -59,9 +60,14 @@ class DispatchProblem:
     fixed_injection : per minute, the fixed injections' total output, MW (the negative parts
         of the per-load series: generators without cost data following their profiles;
         ``demand`` is net of it). Zeros where there are none.
+    factor : on a meshed network (:mod:`popdispatch.game.mesh`; ``feeder`` is then its
+        :class:`~popdispatch.feeder.dcnet.DcNetwork`), ``(limited lines, generators)``: the
+        coefficient ``D_ki`` of generator ``i`` on limited line ``k``, minus its PTDF (MW per
+        MW, withdrawn at the slack); ``None`` on a radial feeder, whose coefficients are the
+        tree's 0/1 (:attr:`down`) and whose engine works on the tree of limited lines.
     """
 
-    feeder: ReducedFeeder
+    feeder: ReducedFeeder | DcNetwork
     generators: pd.Index
     a: np.ndarray
     b: np.ndarray
@@ -84,6 +90,13 @@ class DispatchProblem:
     vmin_pu: float = float("nan")
     vmax_pu: float = float("nan")
     fixed_injection: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    factor: np.ndarray | None = None
+
+    @property
+    def meshed(self) -> bool:
+        """Whether the limited lines' coefficients are a network's distribution factors
+        (:attr:`factor`, :mod:`popdispatch.game.mesh`) rather than the radial tree's."""
+        return self.factor is not None
 
     @property
     def n_generators(self) -> int:
@@ -110,7 +123,10 @@ class DispatchProblem:
     @cached_property
     def down(self) -> np.ndarray:
         """``(limited lines, generators)``: 1.0 where the generator is below the line (dense;
-        for the DC-OPF and reports, never for the engine)."""
+        for the DC-OPF and reports, never for the engine). On a meshed network, the
+        distribution factors :attr:`factor` (which the engine does use)."""
+        if self.factor is not None:
+            return self.factor
         nodes = self.feeder.generators["node"].to_numpy()
         return downstream(self.feeder.tree, nodes)[self.lines].astype(float)
 

@@ -38,12 +38,30 @@ TAGS: dict[ModeCode, dict[PriceLaw, type]] = {
 }  # fmt: skip
 
 
-def mode_tag(code: ModeCode, price_law: PriceLaw = PriceLaw.PLAIN) -> ModeTag:
+#: Each mode's tag class on a meshed network (the plain law only: the tree and scaled laws
+#: read the tree of limited lines).
+MESH_TAGS: dict[ModeCode, type] = {ModeCode.PAPER: paper.PaperMeshTag,
+                                   ModeCode.EXACT: exact.ExactMeshTag}  # fmt: skip
+
+
+def mode_tag(code: ModeCode, price_law: PriceLaw = PriceLaw.PLAIN, meshed: bool = False) -> ModeTag:
     """The compile-time record of the mode ``code`` with exact mode's line-price law (a
     choice of kernel, so a run compiles only its own law; paper mode has no line prices).
     The scaled law exists for exact mode only: voltage mode with it raises
-    :class:`~popdispatch.errors.OptionError`."""
+    :class:`~popdispatch.errors.OptionError`. ``meshed``: the kernel of a meshed network
+    (distribution factors, :mod:`popdispatch.game.mesh`), paper or exact mode with the plain
+    law; another law or voltage mode raises :class:`~popdispatch.errors.OptionError`."""
     law, code = PriceLaw(price_law), ModeCode(code)
+    if meshed:
+        from popdispatch.errors import OptionError
+
+        if code not in MESH_TAGS:
+            raise OptionError(f"{code.name.lower()} mode runs on radial feeders only (a meshed "
+                              "network: paper or exact mode)", "--mode")  # fmt: skip
+        if law != PriceLaw.PLAIN and code == ModeCode.EXACT:
+            raise OptionError(f"the {law.name.lower()} price law reads the tree of a radial "
+                              "feeder (a meshed network: plain)", "--price-law")  # fmt: skip
+        return MESH_TAGS[code](int(code))
     if law == PriceLaw.SCALED and code == ModeCode.VOLTAGE:
         from popdispatch.errors import OptionError
 
@@ -60,4 +78,4 @@ def get_mode(name: str) -> Mode:
         raise ValueError(f"unknown mode {name!r} (known: {', '.join(MODES)})") from None
 
 
-__all__ = ["MODES", "TAGS", "Mode", "ModeCode", "ModeTag", "get_mode", "mode_tag"]
+__all__ = ["MESH_TAGS", "MODES", "TAGS", "Mode", "ModeCode", "ModeTag", "get_mode", "mode_tag"]

@@ -19,7 +19,12 @@ import numba as nb
 import numpy as np
 
 from popdispatch.game.fitness import FitnessParameters, fitness_into
-from popdispatch.game.flows import broadcast, limited_line_flows
+from popdispatch.game.flows import (
+    broadcast,
+    limited_line_flows,
+    mesh_broadcast,
+    mesh_line_flows,
+)
 from popdispatch.game.parameters import PriceLaw
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.modes.mechanism import Mode, ModeCode, ModeTag
@@ -176,6 +181,18 @@ def broadcast_prices(z, params, work, signal):
     above (incentive to the receiving side, penalty to the sending side), into ``signal``
     (EUR/MW). Returns the largest ``|nu|`` (EUR/MW) and the largest distance from
     complementary slackness (MW)."""
+    congestion, residual = price_sides(z, params, work)
+    broadcast(work.parent_side, work.child_side, params.generator_line, params.line_up,
+              params.line_preorder, work.path, signal)  # fmt: skip
+    return congestion, residual
+
+
+@nb.njit(cache=True, inline="always")
+def price_sides(z, params, work):
+    """Each line's :func:`line_price` ``nu`` at the flows in ``work.flow``, as the values its
+    controllers send: ``+nu / 2`` to the child side (``work.child_side``) and ``-nu / 2`` to
+    the parent side (``work.parent_side``). Returns the largest ``|nu|`` (EUR/MW) and the
+    largest distance from complementary slackness (MW)."""
     flow, parent_side, child_side = work.flow, work.parent_side, work.child_side
     limit, C = params.limit, params.C
     n_lines = limit.shape[0]
@@ -190,8 +207,27 @@ def broadcast_prices(z, params, work, signal):
         congestion = max(congestion, abs(nu))
         child_side[k] = 0.5 * nu
         parent_side[k] = -0.5 * nu
-    broadcast(parent_side, child_side, params.generator_line, params.line_up,
-              params.line_preorder, work.path, signal)  # fmt: skip
+    return congestion, residual
+
+
+@nb.njit(cache=True, inline="always")
+def mesh_line_signals(p, z, params, minute, work, signal, z_rate):
+    """:func:`line_signals` on a meshed network: flows ``load_flow - D p`` and each line's
+    price weighed by every generator's own distribution factor, ``signal_i = sum_k nu_k (D_ki
+    - 1/2)`` (:func:`~popdispatch.game.flows.mesh_broadcast`; ``params.factor`` = ``D``),
+    prices moving by the plain law."""
+    mesh_line_flows(minute.load_flow, p, params.factor, work.flow)
+    plain_rates(work.flow, params.limit, params.price_rate, z_rate)
+    congestion, residual = price_sides(z, params, work)
+    mesh_broadcast(work.parent_side, work.child_side, params.factor, signal)
+    return congestion, residual
+
+
+@nb.njit(cache=True)
+def mesh_payoff(p, z, params, minute, work, fitness, z_rate):
+    """:func:`payoff` on a meshed network (:func:`mesh_line_signals`)."""
+    congestion, residual = mesh_line_signals(p, z, params, minute, work, fitness, z_rate)
+    marginal_costs_into(p, params, fitness)
     return congestion, residual
 
 
@@ -411,3 +447,10 @@ class ExactScaledTag(ModeTag):
 
     __slots__ = ()
     kernel = staticmethod(scaled_payoff)
+
+
+class ExactMeshTag(ModeTag):
+    """Exact mode's payoff on a meshed network, plain price law (:func:`mesh_payoff`)."""
+
+    __slots__ = ()
+    kernel = staticmethod(mesh_payoff)

@@ -49,8 +49,8 @@ class Engine:
         if field is None:
             raise ValueError(f"{self.mode.name} mode cannot run {self.dynamics.name} dynamics: "
                              f"{self.dynamics.refusal}")  # fmt: skip
-        self.term = Term.of(field, mode_tag(self.mode.code, settings.exact.price_law),
-                            *self._graph())  # fmt: skip
+        tag = mode_tag(self.mode.code, settings.exact.price_law, problem.meshed)
+        self.term = Term.of(field, tag, *self._graph())
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
         self.params = GameParameters.of(problem, self.constants, settings.revision_rates(problem))
@@ -181,6 +181,8 @@ class Engine:
 
 def limited_flows_mw(problem: DispatchProblem, p_mw: np.ndarray, minute: int) -> np.ndarray:
     """Flows (MW) on the limited lines for set points ``p_mw`` (MW) at a 1-based minute."""
+    if problem.meshed:
+        return problem.flows(np.asarray(p_mw, dtype=float), minute)
     flow = np.empty(len(problem.limit))
     limited_line_flows(
         problem.load_flow[minute - 1], np.ascontiguousarray(p_mw, dtype=float),

@@ -86,6 +86,7 @@ from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components, depth_first_order
 
 from popdispatch.errors import FeederError, OptionError
+from popdispatch.feeder.dcnet import DcNetwork
 from popdispatch.feeder.generators import as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.radial import join_feeders, merge_parallel
@@ -870,3 +871,76 @@ def _polynomial(cost: np.ndarray | None, k: int) -> tuple[tuple[float, float, fl
         return None, f"has a cost polynomial of degree {len(coefficients) - 1} (at most 2)"
     c0, c1, c2 = np.concatenate([coefficients[::-1], np.zeros(3)])[:3]
     return (float(c0), float(c1), float(c2)), ""
+
+
+# -- any network, meshed or radial: the DC model's tables ------------------------------------
+
+
+def read_matpower_network(
+    path: str | Path, *, fleet: pd.DataFrame | None = None, ratings: bool = True
+) -> DcNetwork:
+    """Read a MATPOWER case of any shape (meshed or radial) into a
+    :class:`~popdispatch.feeder.dcnet.DcNetwork` for MATPOWER's DC model.
+
+    Per-unit impedances as the case has them (no ``baseKV`` needed); in-service branches only
+    (parallel ones as separate rows, named ``L<from>-<to>`` and ``#<row>`` on a repeated
+    pair), each with ``BR_X``, ``TAP``, ``SHIFT`` and ``RATE_A`` (MVA -> kW at 1000 kW per MVA,
+    0 = unlimited; ``ratings=False``: all unlimited); isolated buses (``BUS_TYPE`` 4) dropped;
+    ``PD`` and ``GS`` (MW at 1 p.u.) per bus as demand; the slack is the first reference bus
+    (``BUS_TYPE`` 3). The fleet is the case's in-service generators with their polynomial
+    costs (:func:`read_matpower`'s rules, several per bus named ``G<bus>_2``, ...), or
+    ``fleet``. A piecewise-linear cost (gencost model 1) is refused, naming its row.
+    """
+    path = Path(path)
+    base_mva, mpc = parse_matpower(path)
+    bus, branch = mpc["bus"], mpc["branch"]
+    ids = _bus_ids(_col(bus, "BUS_I"), "bus", path)
+    live = _col(bus, "BUS_TYPE") != 4
+    buses = pd.DataFrame(
+        {"pd_mw": _col(bus, "PD")[live], "gs_mw": _col(bus, "GS")[live]},
+        index=pd.Index(ids[live], name="bus"),
+    )
+    on = np.flatnonzero(_col(branch, "BR_STATUS") != 0)
+    ends = [_bus_ids(_col(branch, e)[on], "branch end", path) for e in ("F_BUS", "T_BUS")]
+    for end in ends:
+        bad = ~np.isin(end, buses.index)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise FeederError(f"{path}: in-service branch {on[k] + 1} ({ends[0][k]}-{ends[1][k]}) "
+                              f"ends at an isolated or unknown bus {end[k]}")  # fmt: skip
+    rate = _col(branch, "RATE_A")[on] * KW_PER_MVA
+    names = [f"L{a}-{b}" for a, b in zip(*ends, strict=True)]
+    seen: set[str] = set()
+    for k, name in enumerate(names):
+        names[k] = f"{name}#{on[k] + 1}" if name in seen else name
+        seen.add(name)
+    lines = pd.DataFrame(
+        {"from_bus": ends[0], "to_bus": ends[1], "x_pu": _col(branch, "BR_X")[on],
+         "tap": _col(branch, "TAP")[on], "shift_deg": _col(branch, "SHIFT")[on],
+         "limit_kw": np.where((rate > 0) & ratings, rate, np.inf)},
+        index=pd.Index(names, name="line"),
+    )  # fmt: skip
+    refs = ids[(_col(bus, "BUS_TYPE") == 3) & live]
+    if not len(refs):
+        raise FeederError(f"{path}: no reference bus (BUS_TYPE 3)")
+    if fleet is None:
+        _refuse_piecewise_linear(path, mpc)
+        generators = _fleet(path, mpc, set(buses.index.tolist()))
+    else:
+        generators = as_fleet(fleet)
+    return DcNetwork(path.stem, float(base_mva), buses, lines, generators, int(refs[0]))
+
+
+def _refuse_piecewise_linear(path: Path, mpc: dict[str, np.ndarray]) -> None:
+    """One-line :class:`FeederError` naming the first in-service generator whose cost is
+    piecewise linear (gencost model 1)."""
+    gen, cost = mpc.get("gen"), mpc.get("gencost")
+    if gen is None or cost is None:
+        return
+    rows = min(len(gen), len(cost))
+    pwl = np.flatnonzero((cost[:rows, 0] == 1) & (_col(gen[:rows], "GEN_STATUS") > 0))
+    if len(pwl):
+        k = int(pwl[0])
+        raise FeederError(f"{path}: generator {k + 1} (bus {int(gen[k, 0])}) has a piecewise-"
+                          "linear cost (gencost model 1): popdispatch takes polynomial costs "
+                          "(model 2) of degree at most 2")  # fmt: skip

@@ -71,7 +71,9 @@ import pandas as pd
 from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components
 
+from popdispatch.constants import KW_PER_MW
 from popdispatch.errors import FeederError, FleetError, OptionError
+from popdispatch.feeder.dcnet import DcNetwork
 from popdispatch.feeder.generators import FLEET_COLUMNS, as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.radial import join_feeders, merge_parallel
@@ -742,3 +744,90 @@ def _known(pmax: float, et: str, index) -> float:
             f"{et} {index} has no usable max_p_mw (nor sn_mva): give a fleet (--fleet FILE)"
         )
     return float(pmax)
+
+
+# -- any network, meshed or radial: the DC model's tables ------------------------------------
+
+
+def read_pandapower_network(net_or_path, name: str = "") -> DcNetwork:
+    """A pandapower net of any shape (closed rings, meshes) as a
+    :class:`~popdispatch.feeder.dcnet.DcNetwork`, from pandapower's own conversion to its
+    internal MATPOWER-format case for a DC OPF (``rundcopp``'s: closed bus-bus switches fuse
+    buses, transformers with their taps and shifts, ratings from ``max_loading_percent``; the
+    net given is not changed). Buses keep the pandapower index of their fused group's smallest
+    member; branches are named ``line<index>``/``trafo<index>``; the fleet is the ext_grids,
+    gens and controllable sgens with their ``poly_cost`` (``G<table><index>``, e.g.
+    ``Gsgen3``), within their ``min_p_mw``/``max_p_mw``; what is not controllable is fixed
+    demand, as in ``rundcopp``. A ``pwl_cost`` is refused."""
+    import copy
+
+    from pandapower.auxiliary import _add_auxiliary_elements, _init_rundcopp_options
+    from pandapower.pd2ppc import _pd2ppc
+
+    net, default = _load(net_or_path)
+    net = copy.deepcopy(net)
+    pwl = _table(net, "pwl_cost")
+    if pwl is not None and len(pwl):
+        row = pwl.iloc[0]
+        raise FleetError(f"{row.et} {row.element} has a piecewise-linear cost (pwl_cost): "
+                         "popdispatch takes polynomial costs (poly_cost) only")  # fmt: skip
+    _init_rundcopp_options(net, check_connectivity=True, switch_rx_ratio=2, delta=1e-10,
+                           trafo3w_losses="hv")  # fmt: skip
+    _add_auxiliary_elements(net)
+    ppc, ppci = _pd2ppc(net)
+    lookups = net._pd2ppc_lookups
+    bus, branch, gen, cost = ppci["bus"], ppci["branch"], ppci["gen"], ppci.get("gencost")
+    ids = _internal_bus_ids(lookups["bus"], len(bus))
+    live = bus[:, 1] != 4
+    buses = pd.DataFrame({"pd_mw": bus[live, 2], "gs_mw": bus[live, 4]},
+                         index=pd.Index(ids[live], name="bus"))  # fmt: skip
+    names = np.array([f"branch{k}" for k in range(len(branch))], dtype=object)
+    for table, (start, stop) in lookups.get("branch", {}).items():
+        if stop - start and len(branch) == len(ppc["branch"]):
+            names[start:stop] = [f"{table}{i}" for i in net[table].index[: stop - start]]
+    on = branch[:, 10] != 0
+    rate = branch[on, 5] * 1e3
+    lines = pd.DataFrame(
+        {"from_bus": ids[branch[on, 0].astype(int)], "to_bus": ids[branch[on, 1].astype(int)],
+         "x_pu": branch[on, 3], "tap": branch[on, 8], "shift_deg": branch[on, 9],
+         "limit_kw": np.where(rate > 0, rate, np.inf)},
+        index=pd.Index(names[on], name="line"),
+    )  # fmt: skip
+    fleet = _network_fleet(lookups, ids, gen, cost)
+    slack = int(ids[np.flatnonzero(bus[:, 1] == 3)[0]])
+    return DcNetwork(name or default, float(ppci["baseMVA"]), buses, lines, fleet, slack)
+
+
+def _internal_bus_ids(lookup: np.ndarray, n: int) -> np.ndarray:
+    """Per bus of pandapower's internal case, the smallest pandapower bus index mapped to it."""
+    ids = np.full(n, -1, dtype=np.int64)
+    for pp_bus in range(len(lookup) - 1, -1, -1):
+        internal = lookup[pp_bus]
+        if 0 <= internal < n:
+            ids[internal] = pp_bus
+    return ids
+
+
+def _network_fleet(lookups, ids, gen, cost) -> pd.DataFrame:
+    """The fleet of pandapower's internal case: each in-service generator row with its
+    polynomial cost (``gencost`` model 2, ``c2 P^2 + c1 P + c0``), named after its element."""
+    element = {}
+    for table, prefix in (("ext_grid", "ext_grid"), ("gen", "gen"),
+                          ("sgen_controllable", "sgen")):  # fmt: skip
+        rows = lookups.get(table)
+        if rows is None:
+            continue
+        for index, row in enumerate(np.asarray(rows)):
+            if row >= 0:
+                element[int(row)] = f"G{prefix}{index}"
+    rows, names = [], []
+    if cost is None or len(cost) < len(gen):
+        raise FleetError("the net's generators have no costs: give each ext_grid, gen and "
+                         "controllable sgen a poly_cost")  # fmt: skip
+    for k in np.flatnonzero(gen[:, 7] > 0):
+        ncost = int(cost[k, 3])
+        c = np.concatenate([cost[k, 4 : 4 + ncost][::-1], np.zeros(3)])[:3]
+        rows.append((int(ids[int(gen[k, 0])]), c[0], c[1], c[2], gen[k, 9] * KW_PER_MW,
+                     gen[k, 8] * KW_PER_MW))  # fmt: skip
+        names.append(element.get(int(k), f"G{k}"))
+    return make_fleet(rows, names)

@@ -1,0 +1,178 @@
+"""A connected network of any shape (meshed or radial) in MATPOWER's lossless DC model.
+
+The radial feeder (:mod:`popdispatch.feeder.model`, its tree and O(n) passes) is the radial
+path; this module is the meshed one. Its tables are plain, in MATPOWER's own units (p.u. on
+``base_mva``, degrees, MW), and its DC model is MATPOWER's ``makeBdc``:
+
+- branch ``k`` from bus ``f`` to bus ``t`` has the series susceptance ``b_k = 1 / (x_k
+  tau_k)`` (``x_k`` p.u., ``tau_k`` the off-nominal tap ratio, 1 where the case says 0) and
+  the phase shift ``phi_k`` (rad); its flow from ``f`` to ``t`` is ``P_k = S (b_k (theta_f -
+  theta_t) - b_k phi_k)`` (MW, ``S`` = ``base_mva``);
+- bus balance: ``S B theta = P_inj - P_shift`` with ``B = C^T diag(b) C`` (``C`` the
+  branch-bus incidence) and ``P_shift = -S C^T (b phi)``; a bus's shunt conductance ``G_s``
+  (MW at 1 p.u.) is a load, as MATPOWER's DC model has it;
+- the slack bus's angle is 0 and it balances the rest: with a sparse LU (SuperLU,
+  :func:`scipy.sparse.linalg.splu`) of the reduced ``B`` the flow of any injection is two
+  sparse solves away, and the power transfer distribution factors (PTDF) are formed only for
+  the limited lines and the generators' buses, never as the full (lines x buses) matrix.
+
+The engine's coefficient of generator ``i`` on limited line ``k`` is ``D_ki = -PTDF_k,bus(i)``
+(injection at the generator's bus withdrawn at the slack), so that flows are ``load_flow - D
+p`` as on the radial feeder, where ``D_ki`` is 1 below the line and 0 above it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import pandas as pd
+from scipy import sparse
+
+from popdispatch.errors import FeederError
+
+BUS_COLUMNS = ["pd_mw", "gs_mw"]
+LINE_COLUMNS = ["from_bus", "to_bus", "x_pu", "tap", "shift_deg", "limit_kw"]
+
+
+@dataclass(frozen=True)
+class DcNetwork:
+    """A connected network in the DC model (any shape), in service elements only.
+
+    Attributes
+    ----------
+    name : case name.
+    base_mva : the per-unit base, MVA.
+    buses : index bus id (the source format's number); columns ``pd_mw`` (fixed demand, MW)
+        and ``gs_mw`` (shunt conductance, MW demanded at 1 p.u.).
+    lines : index branch name; columns ``from_bus``, ``to_bus``, ``x_pu`` (series reactance,
+        p.u. on ``base_mva``), ``tap`` (off-nominal ratio, 0 or 1 for a line), ``shift_deg``
+        (phase shift, degrees) and ``limit_kw`` (flow limit in kW, ``inf`` for none).
+        Parallel branches are separate rows, each with its own limit.
+    generators : the fleet (columns ``bus``, ``a``, ``b``, ``c``, ``pmin_kw``, ``pmax_kw``,
+        :mod:`popdispatch.feeder.generators`), several per bus allowed.
+    slack_bus : the angle reference, which balances the network in the PTDF.
+    """
+
+    name: str
+    base_mva: float
+    buses: pd.DataFrame
+    lines: pd.DataFrame
+    generators: pd.DataFrame
+    slack_bus: int
+
+    def __post_init__(self) -> None:
+        validate_network(self)
+
+    @property
+    def demand_mw(self) -> float:
+        """The network's total demand, MW: loads plus shunt conductances at 1 p.u."""
+        return float(self.buses.pd_mw.sum() + self.buses.gs_mw.sum())
+
+    @cached_property
+    def model(self) -> DcModel:
+        """The DC model (susceptances, LU of the reduced ``B``)."""
+        return DcModel.of(self)
+
+
+def validate_network(net: DcNetwork) -> None:
+    """One-line :class:`FeederError` on a table that the DC model cannot take: unknown buses,
+    zero reactance, a network in several parts."""
+    for table, columns in (("buses", BUS_COLUMNS), ("lines", LINE_COLUMNS)):
+        missing = [c for c in columns if c not in getattr(net, table).columns]
+        if missing:
+            raise FeederError(f"network {net.name!r}: the {table} table lacks {missing[0]}")
+    index = net.buses.index
+    for what, values in (
+        ("line end", net.lines.from_bus), ("line end", net.lines.to_bus),
+        ("generator bus", net.generators.bus),
+    ):  # fmt: skip
+        unknown = ~pd.Index(values).isin(index)
+        if unknown.any():
+            raise FeederError(f"network {net.name!r}: {what} {values.iloc[unknown.argmax()]} "
+                              "is not a bus of the network")  # fmt: skip
+    if net.slack_bus not in index:
+        raise FeederError(f"network {net.name!r}: slack bus {net.slack_bus} is not a bus")
+    zero = net.lines.x_pu.to_numpy(float) == 0
+    if zero.any():
+        raise FeederError(f"network {net.name!r}: line {net.lines.index[zero.argmax()]!r} has "
+                          "zero reactance (the DC model needs x != 0)")  # fmt: skip
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(index)
+    a, b = index.get_indexer(net.lines.from_bus), index.get_indexer(net.lines.to_bus)
+    graph = sparse.csr_array((np.ones(len(a)), (a, b)), shape=(n, n))
+    _, part = connected_components(graph, directed=False)
+    apart = part != part[index.get_loc(net.slack_bus)]
+    if apart.any():
+        raise FeederError(
+            f"network {net.name!r}: bus {index[apart.argmax()]} is not connected to slack bus "
+            f"{net.slack_bus} (the network is in several parts)"
+        )
+
+
+@dataclass(frozen=True)
+class DcModel:
+    """MATPOWER's ``makeBdc`` of a :class:`DcNetwork` and a sparse LU of its reduced ``B``.
+
+    ``branch_b``: per line, ``b_k = 1 / (x_k tau_k)`` (p.u.); ``Bf``: (lines x buses) sparse,
+    ``b_k`` at the from bus and ``-b_k`` at the to bus; ``p_shift``: per line, the flow of its
+    phase shift alone, ``-S b_k phi_k`` (MW); ``bus_shift``: per bus, ``C^T p_shift`` (MW);
+    ``keep``: the buses other than the slack (positions); ``lu``: SuperLU of ``B`` on them.
+    """
+
+    base_mva: float
+    branch_b: np.ndarray
+    Bf: sparse.csr_array
+    p_shift: np.ndarray
+    bus_shift: np.ndarray
+    keep: np.ndarray
+    lu: object
+
+    @classmethod
+    def of(cls, net: DcNetwork) -> DcModel:
+        from scipy.sparse.linalg import splu
+
+        index = net.buses.index
+        n, m = len(index), len(net.lines)
+        f, t = index.get_indexer(net.lines.from_bus), index.get_indexer(net.lines.to_bus)
+        tap = net.lines.tap.to_numpy(float)
+        tap = np.where(tap == 0, 1.0, tap)
+        b = 1.0 / (net.lines.x_pu.to_numpy(float) * tap)
+        rows = np.r_[np.arange(m), np.arange(m)]
+        incidence = sparse.csr_array((np.r_[np.ones(m), -np.ones(m)], (rows, np.r_[f, t])),
+                                     shape=(m, n))  # fmt: skip
+        Bf = sparse.csr_array(sparse.diags(b) @ incidence)
+        Bbus = (incidence.T @ Bf).tocsc()
+        p_shift = -net.base_mva * b * np.deg2rad(net.lines.shift_deg.to_numpy(float))
+        keep = np.flatnonzero(np.arange(n) != index.get_loc(net.slack_bus))
+        lu = splu(sparse.csc_matrix(Bbus[keep][:, keep]))
+        return cls(float(net.base_mva), b, Bf, p_shift, incidence.T @ p_shift, keep, lu)
+
+    def angles(self, injection_mw: np.ndarray) -> np.ndarray:
+        """Bus angles (rad, buses x columns) for injections ``injection_mw`` (MW, buses x
+        columns; the slack's own entry is replaced by the balance)."""
+        injection = np.atleast_2d(np.asarray(injection_mw, float).T).T
+        theta = np.zeros(injection.shape)
+        rhs = (injection[self.keep] - self.bus_shift[self.keep, None]) / self.base_mva
+        theta[self.keep] = self.lu.solve(np.ascontiguousarray(rhs))
+        return theta
+
+    def flows_mw(self, injection_mw: np.ndarray, lines: np.ndarray) -> np.ndarray:
+        """Flows (MW, from bus to to bus) on ``lines`` (positions) for the bus injections
+        ``injection_mw`` (MW, buses x columns), the slack balancing: (lines x columns)."""
+        theta = self.angles(injection_mw)
+        return self.base_mva * (self.Bf[lines] @ theta) + self.p_shift[lines, None]
+
+    def ptdf(self, lines: np.ndarray, buses: np.ndarray) -> np.ndarray:
+        """PTDF (MW per MW) of ``lines`` for injections at ``buses`` (positions) withdrawn at
+        the slack: ``(lines, buses)``, by one sparse solve per distinct bus (the slack's
+        column is 0); the full matrix is never formed."""
+        unique, back = np.unique(np.asarray(buses, np.int64), return_inverse=True)
+        n = self.Bf.shape[1]
+        rhs = np.zeros((n, len(unique)))
+        rhs[unique, np.arange(len(unique))] = 1.0
+        theta = np.zeros((n, len(unique)))
+        theta[self.keep] = self.lu.solve(np.ascontiguousarray(rhs[self.keep]))
+        return np.asarray(self.Bf[lines] @ theta)[:, back]

