@@ -10,7 +10,6 @@ import json
 import subprocess
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import networkx as nx
 import numpy as np
@@ -119,7 +118,8 @@ def test_setpoints_against_the_dc_opf(run, problem):
             continue
         # binding: the generation below moves by the offset of the measured AC flow
         assert points[row][below].sum() - plain.p_kw[below].sum() == pytest.approx(
-            steps.at[minute, "505-578_offset_kw"], abs=TOL_KW)
+            steps.at[minute, "505-578_offset_kw"], abs=TOL_KW
+        )
         load_flow = dc.load_flow.copy()
         load_flow[minute - 1, : len(dc.limit)] += offsets[row]
         corrected = solve_opf(replace(dc, load_flow=load_flow), int(minute))

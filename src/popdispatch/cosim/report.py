@@ -64,8 +64,9 @@ def cosim_summary(result: CosimResult, day_setpoints_kw: np.ndarray, accuracy_kw
             "max_abs_diff_kw_free_minutes": float(diff[free].max()) if free.any() else None,
             "accuracy_kw": accuracy_kw,
             "free_minutes_equal": bool(not free.any() or diff[free].max() <= 2 * accuracy_kw),
-            "binding_minutes": {str(m): float(diff[i].max()) for i, m in enumerate(s.index)
-                                if binding[i]},
+            "binding_minutes": {
+                str(m): float(diff[i].max()) for i, m in enumerate(s.index) if binding[i]
+            },
         },  # fmt: skip
         "result_csv": result.csv.name,
     }
@@ -107,6 +108,8 @@ def cosim_text(summary: dict) -> str:
         f"  vs the DC day: set points differ by at most {vs['max_abs_diff_kw']:.4f} kW "
         f"(minutes without a binding line: {'-' if free is None else f'{free:.2g}'} kW)"
     )
-    lines.append(f"  losses {summary['losses_kwh']:.4f} kWh, voltages {summary['v_min_pu']:.4f}-"
-                 f"{summary['v_max_pu']:.4f} p.u.; mosaik's record: {summary['result_csv']}")
+    lines.append(
+        f"  losses {summary['losses_kwh']:.4f} kWh, voltages {summary['v_min_pu']:.4f}-"
+        f"{summary['v_max_pu']:.4f} p.u.; mosaik's record: {summary['result_csv']}"
+    )
     return "\n".join(lines) + "\n"
