@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from popdispatch.cli.clock import stamp
+from popdispatch.cli.clock import Failure, stamp
 from popdispatch.cli.options import (
     check_out,
     json_option,
@@ -43,6 +43,10 @@ def cosim(case, profiles, limits, minutes, out, as_json, quiet) -> int:
     from popdispatch.report.output import staged_folder
     from popdispatch.runs import FeederSource, load_run, run_day_vs_opf
 
+    try:
+        import mosaik  # noqa: F401
+    except ImportError as exc:
+        raise Failure(f'cosim needs mosaik: pip install "popdispatch[cosim]" ({exc})') from None
     progress = Progress(quiet)
     check_out(out)
     settings = RunSettings(mode="exact")
