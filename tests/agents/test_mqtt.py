@@ -1,0 +1,88 @@
+"""``agents launch --transport mqtt``: the agents as processes on a mosquitto broker the launch
+starts; the congestion minute reaches the DC-OPF (Clarabel) within 0.01 kW with supply equal to
+demand, while an outsider publishes forged messages on the agents' topics (a DG off the roster
+offering power, a controller price from a stale run, a controller at a wrong address): every
+one is rejected and the dispatch is unchanged. No broker or agent process is left."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip(
+    "mango", reason='the agents need mango-agents: pip install "popdispatch[agents]"'
+)
+if shutil.which("mosquitto") is None and not Path("/usr/sbin/mosquitto").exists():
+    pytest.skip("no mosquitto broker (apt-get install mosquitto)", allow_module_level=True)
+
+from popdispatch.agents.launch import _codec, launch  # noqa: E402
+from popdispatch.agents.messages import Offer, Signals  # noqa: E402
+from popdispatch.agents.transport import topic  # noqa: E402
+from popdispatch.opf import solve_opf  # noqa: E402
+
+FORGED_EACH = 10  # copies of each forged message
+
+
+def _running(pattern: str) -> int:
+    found = subprocess.run(["pgrep", "-f", pattern], capture_output=True, text=True)
+    return len(found.stdout.split())
+
+
+class Forger:
+    """Publishes forged messages on the run's topics once the agents are up."""
+
+    def __init__(self):
+        self.published = 0
+        self.thread: threading.Thread | None = None
+
+    def __call__(self, config) -> None:  # the launch's on_start hook
+        self.thread = threading.Thread(target=self._forge, args=(config,), daemon=True)
+        self.thread.start()
+
+    def _forge(self, config) -> None:
+        import paho.mqtt.client as paho
+        from mango.messages.message import MangoMessage
+
+        t0 = float((Path(config.folder) / "go").read_text())
+        time.sleep(max(0.0, t0 + 1.0 - time.time()))  # every agent has subscribed
+        codec, run = _codec(), config.run_id
+        forged = [  # (to, content, sender, sender address, run id)
+            ("G114", Offer(5, "G999/5/G114", 0.005), "G999", topic(run, "G999"), run),
+            ("G578", Signals(5, {0: 1e6}), "C505", topic(run, "C505"), "stale-run"),
+            ("G739", Signals(5, {0: -1e6}), "C505", "elsewhere/C505", run),
+        ]
+        client = paho.Client(paho.CallbackAPIVersion.VERSION2, client_id="forger")
+        client.connect(*config.broker)
+        client.loop_start()
+        for _ in range(FORGED_EACH):
+            for to, content, sender, address, run_id in forged:
+                meta = {"sender_id": sender, "sender_addr": address, "receiver_id": to,
+                        "run_id": run_id}  # fmt: skip
+                payload = codec.encode(MangoMessage(content, meta))
+                client.publish(topic(run, to), payload, qos=1).wait_for_publish(5)
+                self.published += 1
+            time.sleep(0.1)
+        client.loop_stop()
+        client.disconnect()
+
+
+def test_mqtt_launch_rejects_forged_messages(congestion_problem):
+    forger = Forger()
+    result = launch(566, [[505, 666, 28.0]], rounds=200, startup_s=300, transport="mqtt",
+                    on_start=forger)  # fmt: skip
+    forger.thread.join(timeout=30)
+    assert result.transport == "mqtt" and result.broker.startswith("127.0.0.1:")
+    assert forger.published == 3 * FORGED_EACH
+    assert result.rejected == forger.published  # each forged message, and nothing else
+    final = result.trajectory_kw[-1]
+    opf = solve_opf(congestion_problem, 566)
+    assert np.abs(final - opf.p_kw).max() < 0.01, f"{result.missed_ticks} ticks missed"  # kW
+    assert final.sum() == pytest.approx(congestion_problem.demand[565] * 1e3, abs=1e-6)
+    assert _running("popdispatch.agents.launch --id") == 0
+    assert _running("popdispatch-broker-") == 0  # the broker the launch started is gone
