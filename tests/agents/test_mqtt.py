@@ -6,8 +6,12 @@ one is rejected and the dispatch is unchanged. No broker or agent process is lef
 
 from __future__ import annotations
 
+import os
 import shutil
+import signal
+import socket
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -30,8 +34,18 @@ FORGED_EACH = 10  # copies of each forged message
 
 
 def _running(pattern: str) -> int:
+    """Processes whose command line holds ``pattern`` (this run's own folder: other runs on
+    the machine do not count)."""
     found = subprocess.run(["pgrep", "-f", pattern], capture_output=True, text=True)
     return len(found.stdout.split())
+
+
+def _listening(host: str, port: int) -> bool:
+    try:
+        with socket.create_connection((host, port), 0.5):
+            return True
+    except OSError:
+        return False
 
 
 class Forger:
@@ -40,8 +54,10 @@ class Forger:
     def __init__(self):
         self.published = 0
         self.thread: threading.Thread | None = None
+        self.config = None
 
     def __call__(self, config) -> None:  # the launch's on_start hook
+        self.config = config
         self.thread = threading.Thread(target=self._forge, args=(config,), daemon=True)
         self.thread.start()
 
@@ -84,5 +100,67 @@ def test_mqtt_launch_rejects_forged_messages(congestion_problem):
     opf = solve_opf(congestion_problem, 566)
     assert np.abs(final - opf.p_kw).max() < 0.01, f"{result.missed_ticks} ticks missed"  # kW
     assert final.sum() == pytest.approx(congestion_problem.demand[565] * 1e3, abs=1e-6)
-    assert _running("popdispatch.agents.launch --id") == 0
-    assert _running("popdispatch-broker-") == 0  # the broker the launch started is gone
+    assert _running(forger.config.folder) == 0  # no agent process of this run is left
+    assert not _listening(*forger.config.broker)  # the broker the launch started is gone
+
+
+def test_ctrl_c_stops_agents_and_broker():
+    """Ctrl-C (SIGINT) to a launch over MQTT during start-up: the launcher exits non-zero and
+    its twelve agent processes and the mosquitto it started are gone."""
+    code = (
+        "from popdispatch.agents.launch import launch\n"
+        "launch(566, [[505, 666, 28.0]], rounds=40, startup_s=120, transport='mqtt')\n"
+    )
+    launcher = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE)
+
+    def children() -> list[str]:
+        found = subprocess.run(["pgrep", "-P", str(launcher.pid)], capture_output=True,
+                               text=True)  # fmt: skip
+        return found.stdout.split()
+
+    deadline = time.time() + 150
+    while len(children()) < 13 and time.time() < deadline:  # 12 agents and the broker
+        time.sleep(0.5)
+    started = children()
+    assert len(started) == 13
+    os.kill(launcher.pid, signal.SIGINT)
+    launcher.wait(timeout=60)
+    assert launcher.returncode != 0
+    alive = [p for p in started if Path(f"/proc/{p}").exists()
+             and Path(f"/proc/{p}/stat").read_text().split()[2] != "Z"]  # fmt: skip
+    assert alive == []
+
+
+def test_gate_passes_the_roster_and_drops_the_rest():
+    """The gate alone: a message of this run from a roster sender at its roster address is
+    handed on; another run id, a sender off the roster or at another address is counted as
+    rejected; what the agent sends carries the run id."""
+    import asyncio
+
+    from popdispatch.agents.transport import guard
+
+    class Agent:
+        def __init__(self):
+            self.got, self.sent = [], []
+
+        async def send_message(self, content, receiver_addr, **kwargs):
+            self.sent.append(kwargs)
+
+        def handle_message(self, content, meta):
+            self.got.append(content)
+
+    agent = Agent()
+    roster = {"C505": topic("run1", "C505"), "G1": ["127.0.0.1", 4000]}
+    guard(agent, "run1", roster)
+    ok = {"sender_id": "C505", "sender_addr": topic("run1", "C505"), "run_id": "run1"}
+    agent.handle_message("a", ok)
+    agent.handle_message("b", {**ok, "run_id": "run0"})
+    agent.handle_message("c", {**ok, "sender_id": "G999"})
+    agent.handle_message("d", {**ok, "sender_addr": "elsewhere/C505"})
+    agent.handle_message("e", {"sender_id": "G1", "sender_addr": ["127.0.0.1", 4000],
+                               "run_id": "run1"})  # fmt: skip
+    agent.handle_message("f", {"sender_id": "G1", "sender_addr": ["127.0.0.1", 4001],
+                               "run_id": "run1"})  # fmt: skip
+    assert agent.got == ["a", "e"] and agent.rejected == 4
+    asyncio.run(agent.send_message("x", receiver_addr=None))
+    assert agent.sent == [{"run_id": "run1"}]
