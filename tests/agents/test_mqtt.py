@@ -90,7 +90,7 @@ class Forger:
 
 def test_mqtt_launch_rejects_forged_messages(congestion_problem):
     forger = Forger()
-    result = launch(566, [[505, 666, 28.0]], rounds=200, startup_s=300, transport="mqtt",
+    result = launch(566, [[505, 666, 28.0]], rounds=160, startup_s=300, transport="mqtt",
                     on_start=forger)  # fmt: skip
     forger.thread.join(timeout=30)
     assert result.transport == "mqtt" and result.broker.startswith("127.0.0.1:")

@@ -1,11 +1,11 @@
 """A mosaik simulator that writes what it receives to a CSV file (``RecorderSim``,
-event-based): one row per mosaik time and same-time round, one column ``<source entity
-full id>.<attribute>`` per input (units in the attribute names; empty where the input did not
-change), written when the simulation ends.
+event-based): one row each time it steps, one column ``<source entity full id>.<attribute>``
+per input (units in the attribute names; empty where the input did not change), written when
+the simulation ends. Outside a same-time loop's group it steps once per mosaik time, with the
+values the loop settled on.
 
 Model ``Recorder`` (one per simulator), any inputs; ``init`` param ``path`` (the CSV file).
-The first column is ``time_s`` (mosaik time, seconds); ``round`` counts the same-time rounds
-of a time (0 for the first).
+The first column is ``time_s`` (mosaik time, seconds).
 """
 
 from __future__ import annotations
@@ -42,8 +42,7 @@ class RecorderSim(mosaik_api_v3.Simulator):
         return [{"eid": "Recorder", "type": model}]
 
     def step(self, time, inputs, max_advance):
-        same_time = sum(1 for r in self.rows if r["time_s"] == time)
-        row = {"time_s": time, "round": same_time}
+        row = {"time_s": time}
         for attrs in inputs.values():
             for attr, sources in attrs.items():
                 for source, value in sources.items():
@@ -54,9 +53,7 @@ class RecorderSim(mosaik_api_v3.Simulator):
     def finalize(self):
         if self.path is None or not self.rows:
             return
-        columns = ["time_s", "round"] + sorted(
-            {k for r in self.rows for k in r} - {"time_s", "round"}
-        )
+        columns = ["time_s"] + sorted({k for r in self.rows for k in r} - {"time_s"})
         with self.path.open("w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=columns)
             writer.writeheader()

@@ -12,7 +12,8 @@ The dispatcher and the grid form a mosaik group: at each minute the dispatcher r
 new demand, the grid solves the AC power flow at its set points, the measured flows of the
 limited lines return at the same time and the dispatcher reruns until they no longer move
 (:mod:`popdispatch.cosim.dispatcher`). Every simulator's outputs go to ``cosim.csv`` (one
-row per time and same-time round) through :class:`~popdispatch.cosim.recorder.RecorderSim`.
+row per minute, the values the loop settled on) through
+:class:`~popdispatch.cosim.recorder.RecorderSim`.
 """
 
 from __future__ import annotations
@@ -118,7 +119,7 @@ def run_cosim(
 
 def _result(problem, minutes, log, names, csv: Path) -> CosimResult:
     """The final run of every minute (from the dispatcher's log) and the plant's measurements
-    at its set points (from the recorder's file: the last round of each time)."""
+    at its set points (from the recorder's file)."""
     runs = pd.DataFrame(log)
     runs["minute"] = minutes[0] + runs.time_s // STEP_SECONDS
     final = runs.groupby("minute").last()
