@@ -164,3 +164,20 @@ def test_gate_passes_the_roster_and_drops_the_rest():
     assert agent.got == ["a", "e"] and agent.rejected == 4
     asyncio.run(agent.send_message("x", receiver_addr=None))
     assert agent.sent == [{"run_id": "run1"}]
+
+
+@pytest.mark.parametrize(
+    ("args", "code", "says"),
+    [
+        (["--transport", "mqtt", "--broker", "nohost"], 2, "'nohost' is not HOST:PORT"),
+        (["--broker", "127.0.0.1:1883"], 2, "--broker needs --transport mqtt"),
+        (["--transport", "mqtt", "--broker", "127.0.0.1:1"], 1, "MQTT broker 127.0.0.1:1 not"),
+    ],
+)
+def test_bad_broker_is_one_line(args, code, says):
+    done = subprocess.run(
+        [sys.executable, "-m", "popdispatch.cli", "agents", "launch", "--minute", "566", "-q",
+         *args], capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == code
+    assert len(done.stderr.strip().splitlines()) == 1 and says in done.stderr

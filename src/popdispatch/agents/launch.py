@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from popdispatch.agents.schedule import TICKS_PER_ROUND
-from popdispatch.agents.transport import TRANSPORTS, Broker
+from popdispatch.agents.transport import TRANSPORTS, Broker, check_reachable
 from popdispatch.errors import PopdispatchError
 
 HOST = "127.0.0.1"
@@ -274,6 +274,8 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
         stack.enter_context(_sigterm_unwinds())  # the broker and the children are stopped
         if transport == "mqtt" and broker is None:
             broker = stack.enter_context(Broker()).address
+        elif transport == "mqtt":
+            check_reachable(broker)
         folder = stack.enter_context(tempfile.TemporaryDirectory(prefix="popdispatch-launch-"))
         config = LaunchConfig(minute, [list(x) for x in limits], mode, dynamics, graph,
                               dict(zip(ids, ports, strict=True)), folder, float(startup_s),

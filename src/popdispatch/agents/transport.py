@@ -85,6 +85,16 @@ def _same_address(given: Any, expected: Any) -> bool:
     return given == expected
 
 
+def check_reachable(broker: tuple[str, int], timeout_s: float = 3.0) -> None:
+    """BrokerError naming ``broker`` unless a TCP connection to it opens within ``timeout_s``."""
+    try:
+        with socket.create_connection(broker, timeout_s):
+            return
+    except OSError as exc:
+        raise BrokerError(f"MQTT broker {broker[0]}:{broker[1]} not reachable ({exc}): start "
+                          "one, or leave out --broker to let the launch start its own") from None
+
+
 def free_port(host: str = "127.0.0.1") -> int:
     with socket.socket() as s:
         s.bind((host, 0))
