@@ -181,3 +181,19 @@ def test_bad_broker_is_one_line(args, code, says):
     )  # fmt: skip
     assert done.returncode == code
     assert len(done.stderr.strip().splitlines()) == 1 and says in done.stderr
+
+
+def test_documented_type_ids_are_the_codecs():
+    """docs/cosim.md's table of MQTT payload type ids is what the codec writes."""
+    import re
+
+    from mango.messages.message import MangoMessage
+
+    from popdispatch.agents.messages import ALL_MESSAGES
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "cosim.md").read_text()
+    documented = {m: int(i) for m, i in re.findall(r"^\| `(\w+)` \| (-?\d+) \|", text, re.M)}
+    codec = _codec()
+    written = {kind.__name__: codec._serializers[kind][0] for kind in ALL_MESSAGES}
+    assert documented == written
+    assert f"`MangoMessage` (`{codec._serializers[MangoMessage][0]}`)" in text

@@ -4,12 +4,12 @@ gate every launched agent keeps (``agents launch --transport``; docs/cosim.md, "
 **MQTT.** Every agent is a mango MQTT container (paho-mqtt) whose inbox is the topic
 :func:`topic` ``popdispatch/<run id>/<agent id>`` (agent ids: ``plant``, the node controllers
 ``C<bus>``, the generators by name, e.g. ``G114``); it publishes to the addressee's topic,
-QoS 0. Payloads are mango's JSON codec: ``{"__json_type": "MangoMessage", "__json_data":
-{"content": <message>, "meta": {...}}}``, the message one of
-:mod:`popdispatch.agents.messages` as ``{"__json_type": "<kind>", "__json_data": {fields}}``
-(powers in MW), the meta carrying ``sender_id``, ``sender_addr`` (the sender's topic) and
-``run_id``. Without ``--broker`` the launcher starts its own broker (:class:`Broker`,
-Debian's ``mosquitto``) on 127.0.0.1 at a free port and stops it at the end.
+QoS 0. Payloads are mango's JSON codec: ``{"__type__": [TYPE_ID, DATA]}``, a ``MangoMessage``
+whose data holds ``content`` (one of :mod:`popdispatch.agents.messages`, itself
+``{"__type__": [TYPE_ID, {fields}]}``, powers in MW) and ``meta`` (``sender_id``,
+``sender_addr``: the sender's topic, ``run_id``); the type ids are in docs/cosim.md.
+Without ``--broker`` the launcher starts its own broker (:class:`Broker`, Debian's
+``mosquitto``) on 127.0.0.1 at a free port and stops it at the end.
 
 **The gate** (:func:`guard`): a launched run has a random run id and a roster (every agent id
 and its address). An agent stamps ``run_id`` on everything it sends and drops, counting them
