@@ -1,15 +1,15 @@
-"""``agents launch --transport mqtt``: the agents as processes on a mosquitto broker the launch
-starts; the congestion minute reaches the DC-OPF (Clarabel) within 0.01 kW with supply equal to
-demand, while an outsider publishes forged messages on the agents' topics (a DG off the roster
-offering power, a controller price from a stale run, a controller at a wrong address): every
-one is rejected and the dispatch is unchanged. No broker or agent process is left."""
+"""``agents launch --transport mqtt``: the agents as processes on a mosquitto broker; the
+congestion minute reaches the DC-OPF (Clarabel) within 0.01 kW with supply equal to demand,
+while an outsider publishes forged messages on the agents' topics (a DG off the roster offering
+power, a controller price from a stale run, a controller at a wrong address) and the broker
+restarts: every forged message is rejected, the agents reconnect, the dispatch is unchanged.
+Ctrl-C leaves no agent process or broker; bad --broker values are one line."""
 
 from __future__ import annotations
 
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -40,26 +40,35 @@ def _running(pattern: str) -> int:
     return len(found.stdout.split())
 
 
-def _listening(host: str, port: int) -> bool:
-    try:
-        with socket.create_connection((host, port), 0.5):
-            return True
-    except OSError:
-        return False
-
-
 class Forger:
     """Publishes forged messages on the run's topics once the agents are up."""
 
-    def __init__(self):
+    def __init__(self, brokers: list):
         self.published = 0
         self.thread: threading.Thread | None = None
         self.config = None
+        self.brokers = brokers  # the run's broker; its restart appended
+        self.restarted_at = None
 
     def __call__(self, config) -> None:  # the launch's on_start hook
         self.config = config
-        self.thread = threading.Thread(target=self._forge, args=(config,), daemon=True)
+        self.thread = threading.Thread(target=self._run, args=(config,), daemon=True)
         self.thread.start()
+
+    def _run(self, config) -> None:
+        self._forge(config)
+        self._restart_broker(config)
+
+    def _restart_broker(self, config) -> None:
+        """Stop the broker 6 s into the run; start it again on its port 1 s later."""
+        from popdispatch.agents.transport import Broker
+
+        t0 = float((Path(config.folder) / "go").read_text())
+        time.sleep(max(0.0, t0 + 6.0 - time.time()))
+        self.brokers[0].__exit__(None, None, None)
+        time.sleep(1.0)
+        self.brokers.append(Broker(port=self.brokers[0].port).__enter__())
+        self.restarted_at = time.time() - t0
 
     def _forge(self, config) -> None:
         import paho.mqtt.client as paho
@@ -88,20 +97,27 @@ class Forger:
         client.disconnect()
 
 
-def test_mqtt_launch_rejects_forged_messages(congestion_problem):
-    forger = Forger()
-    result = launch(566, [[505, 666, 28.0]], rounds=160, startup_s=300, transport="mqtt",
-                    on_start=forger)  # fmt: skip
-    forger.thread.join(timeout=30)
-    assert result.transport == "mqtt" and result.broker.startswith("127.0.0.1:")
+def test_mqtt_launch_rejects_forged_messages_and_survives_a_broker_restart(congestion_problem):
+    from popdispatch.agents.transport import Broker
+
+    brokers = [Broker().__enter__()]
+    forger = Forger(brokers)
+    try:
+        result = launch(566, [[505, 666, 28.0]], rounds=160, startup_s=300, transport="mqtt",
+                        broker=brokers[0].address, on_start=forger)  # fmt: skip
+        forger.thread.join(timeout=30)
+    finally:
+        for broker in brokers:
+            broker.__exit__(None, None, None)
+    assert result.transport == "mqtt" and result.broker == f"{brokers[0].host}:{brokers[0].port}"
     assert forger.published == 3 * FORGED_EACH
     assert result.rejected == forger.published  # each forged message, and nothing else
+    assert forger.restarted_at is not None and len(brokers) == 2  # an agent that failed raises
     final = result.trajectory_kw[-1]
     opf = solve_opf(congestion_problem, 566)
     assert np.abs(final - opf.p_kw).max() < 0.01, f"{result.missed_ticks} ticks missed"  # kW
     assert final.sum() == pytest.approx(congestion_problem.demand[565] * 1e3, abs=1e-6)
     assert _running(forger.config.folder) == 0  # no agent process of this run is left
-    assert not _listening(*forger.config.broker)  # the broker the launch started is gone
 
 
 def test_ctrl_c_stops_agents_and_broker():
@@ -123,6 +139,8 @@ def test_ctrl_c_stops_agents_and_broker():
         time.sleep(0.5)
     started = children()
     assert len(started) == 13
+    broker = [p for p in started if "mosquitto" in Path(f"/proc/{p}/cmdline").read_text()]
+    assert len(broker) == 1  # the launch started its own
     os.kill(launcher.pid, signal.SIGINT)
     launcher.wait(timeout=60)
     assert launcher.returncode != 0
