@@ -2,7 +2,9 @@
 
 Run from a checkout with the ELV data beside it (``pip install "popdispatch[cosim]"``)::
 
-    python examples/cosim_scenario.py ../shared/ieee-elv /tmp/cosim-example
+    python examples/cosim_scenario.py ../shared/ieee-elv /tmp/cosim-example [MINUTES]
+
+(MINUTES: how many minutes from minute 560, default 10).
 
 What it builds, simulator by simulator (swap any of them for your own):
 
@@ -30,7 +32,7 @@ from popdispatch.runs import FeederSource, load_run
 
 profiles_folder, out = Path(sys.argv[1]), Path(sys.argv[2])
 out.mkdir(parents=True, exist_ok=True)
-first_minute, minutes = 560, 10
+first_minute, minutes = 560, int(sys.argv[3]) if len(sys.argv) > 3 else 10
 
 # the feeder, the paper's fleet and a 28 kW limit on the path 505-666 (the dispatcher's problem)
 problem, profiles = load_run(FeederSource(), profiles_folder, limits=[(505, 666, 28.0)])

@@ -10,6 +10,7 @@ import json
 import subprocess
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 import networkx as nx
 import numpy as np
@@ -126,3 +127,17 @@ def test_setpoints_against_the_dc_opf(run, problem):
         np.testing.assert_allclose(points[row], corrected.p_kw, atol=TOL_KW)
     assert points.sum(axis=1) == pytest.approx(dc.demand[MINUTES - 1] * 1e3, abs=TOL_KW)
     assert summary["vs_dc_day"]["free_minutes_equal"]
+
+
+def test_example_scenario_runs(tmp_path):
+    """examples/cosim_scenario.py as docs/cosim.md gives it (two minutes): mosaik's record
+    holds a row per minute with the limited line's measured flow and the dispatcher's status."""
+    folder = official_folder()
+    example = Path(__file__).resolve().parents[2] / "examples" / "cosim_scenario.py"
+    done = subprocess.run([sys.executable, str(example), str(folder), str(tmp_path), "2"],
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    record = pd.read_csv(tmp_path / "cosim.csv")
+    assert list(record.time_s) == [0, 60]
+    assert (record["Dispatcher-0.Dispatcher.status"] == "converged").all()
+    assert (record["Grid-0.Branch-505-578.p_kw"].abs() <= LIMIT_KW).all()
