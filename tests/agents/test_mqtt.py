@@ -190,6 +190,7 @@ def test_gate_passes_the_roster_and_drops_the_rest():
         (["--transport", "mqtt", "--broker", "nohost"], 2, "'nohost' is not HOST:PORT"),
         (["--broker", "127.0.0.1:1883"], 2, "--broker needs --transport mqtt"),
         (["--transport", "mqtt", "--broker", "127.0.0.1:1"], 1, "MQTT broker 127.0.0.1:1 not"),
+        (["--transport", "mqtt", "--tls-ca", __file__], 2, "--tls-ca needs --broker"),
     ],
 )
 def test_bad_broker_is_one_line(args, code, says):
@@ -215,3 +216,51 @@ def test_documented_type_ids_are_the_codecs():
     written = {kind.__name__: codec._serializers[kind][0] for kind in ALL_MESSAGES}
     assert documented == written
     assert f"`MangoMessage` (`{codec._serializers[MangoMessage][0]}`)" in text
+
+
+def _tls_files(folder: Path) -> dict:
+    """A CA and a server certificate for 127.0.0.1 signed by it (openssl), PEM files."""
+    run = lambda *args: subprocess.run(["openssl", *args], cwd=folder, check=True,  # noqa: E731
+                                       capture_output=True)  # fmt: skip
+    run("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1", "-subj", "/CN=test-ca",
+        "-keyout", "ca.key", "-out", "ca.pem")  # fmt: skip
+    run("req", "-newkey", "rsa:2048", "-nodes", "-subj", "/CN=127.0.0.1", "-keyout",
+        "server.key", "-out", "server.csr")  # fmt: skip
+    (folder / "san.ext").write_text("subjectAltName=IP:127.0.0.1\n")
+    run("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+        "-CAcreateserial", "-days", "1", "-extfile", "san.ext", "-out", "server.pem")  # fmt: skip
+    return {name: folder / f"{name}.pem" for name in ("ca", "server")} | {
+        "key": folder / "server.key"
+    }
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="no openssl to make certificates")
+def test_tls_broker_takes_an_agent_with_the_ca(tmp_path):
+    """``--tls-ca``: an agent's container (as the launch builds it) connects to a TLS broker
+    whose certificate the CA signed, and is refused without the CA."""
+    import asyncio
+    import dataclasses
+
+    from mango import activate
+
+    from popdispatch.agents.launch import LaunchConfig, _container
+    from popdispatch.agents.transport import Broker
+
+    files = _tls_files(tmp_path)
+    options = f"cafile {files['ca']}\ncertfile {files['server']}\nkeyfile {files['key']}"
+    if os.geteuid() == 0:  # mosquitto started as root reads the files as its own user
+        options += "\nuser root"
+    with Broker(options=options) as broker:
+        config = LaunchConfig(566, [], "exact", "smith", "complete", {"G1": 0}, str(tmp_path),
+                              1.0, 0.05, 1, 0.001, transport="mqtt",
+                              broker=list(broker.address), run_id="tls",
+                              tls_ca=str(files["ca"]))  # fmt: skip
+
+        async def connect(cfg) -> bool:
+            container = _container("G1", cfg)
+            async with activate(container):
+                return container.mqtt_client.is_connected()
+
+        assert asyncio.run(connect(config))
+        with pytest.raises(OSError):  # TLS refused (ssl.SSLError) or no connection
+            asyncio.run(connect(dataclasses.replace(config, tls_ca=None)))

@@ -76,7 +76,9 @@ class LaunchConfig:
     ``step_s``: the round's Euler step (s); ``loss``: probability that a message is dropped
     by its sender (fault injection over TCP, each process with its own seeded draws);
     ``seed``: of those draws; ``transport``: ``tcp`` or ``mqtt``; ``broker``: ``[host,
-    port]`` of the MQTT broker; ``run_id``: stamped on every message (the gate's)."""
+    port]`` of the MQTT broker; ``run_id``: stamped on every message (the gate's);
+    ``tls_ca``: the CA certificate file the broker's TLS certificate is checked against
+    (None: no TLS)."""
 
     minute: int
     limits: list
@@ -94,6 +96,7 @@ class LaunchConfig:
     transport: str = "tcp"
     broker: list | None = None
     run_id: str = ""
+    tls_ca: str | None = None
 
 
 def _codec():
@@ -170,9 +173,10 @@ def _container(aid: str, config: LaunchConfig):
     from popdispatch.agents.transport import topic
 
     if config.transport == "mqtt":
+        tls = {"tls_kwargs": {"ca_certs": config.tls_ca}} if config.tls_ca else {}
         return create_mqtt_container(tuple(config.broker), client_id=f"{config.run_id}-{aid}",
-                                     inbox_topic=topic(config.run_id, aid),
-                                     codec=_codec())  # fmt: skip
+                                     inbox_topic=topic(config.run_id, aid), codec=_codec(),
+                                     **tls)  # fmt: skip
     return create_tcp_container((HOST, config.ports[aid]), codec=_codec())
 
 
@@ -239,7 +243,7 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
            step_s: float | None = None, base_port: int = 0, startup_s: float = 180.0,
            loss: float = 0.0, seed: int = 0, transport: str = "tcp",
            broker: tuple[str, int] | None = None, run_id: str | None = None,
-           on_start=None) -> LaunchResult:  # fmt: skip
+           tls_ca: str | None = None, on_start=None) -> LaunchResult:  # fmt: skip
     """Run the agents of one minute as separate processes over TCP (module docstring).
 
     ``base_port``: first TCP port (0: free ports the OS hands out); ``startup_s``: longest
@@ -249,7 +253,8 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
     that each message is dropped by its sender (``seed``: of the draws; decisions then go out
     in 3 copies, as in the simulation); ``transport``: ``tcp`` (localhost) or ``mqtt``
     (``broker``: ``(host, port)``; None: a mosquitto started for the run on 127.0.0.1);
-    ``run_id``: the run's id (default random); ``on_start``: called with the
+    ``run_id``: the run's id (default random); ``tls_ca``: with ``broker``, the CA
+    certificate (a file) of the broker's TLS certificate; ``on_start``: called with the
     :class:`LaunchConfig` once the start time is fixed (a test's hook).
     """
     from popdispatch.runs import FeederSource, load_run
@@ -267,6 +272,8 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
     ids = list(agent_ids(build_agents(problem, minute, settings, step_s, Faults())))
     if transport not in TRANSPORTS:
         raise ValueError(f"unknown transport {transport!r} (known: {', '.join(TRANSPORTS)})")
+    if tls_ca is not None and (transport != "mqtt" or broker is None):
+        raise ValueError("TLS (tls_ca) needs the MQTT transport and a broker given")
     ports = _ports(len(ids), base_port) if transport == "tcp" else [0] * len(ids)
     run_id = run_id or uuid.uuid4().hex[:12]
     start = time.perf_counter()
@@ -280,7 +287,8 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
         config = LaunchConfig(minute, [list(x) for x in limits], mode, dynamics, graph,
                               dict(zip(ids, ports, strict=True)), folder, float(startup_s),
                               tick_s, rounds, step_s, float(loss), int(seed), transport,
-                              None if broker is None else list(broker), run_id)  # fmt: skip
+                              None if broker is None else list(broker), run_id,
+                              None if tls_ca is None else str(tls_ca))  # fmt: skip
         warm_up(config)
         outputs = {aid: json.loads(out.strip().splitlines()[-1])
                    for aid, out in _run_children(ids, config, on_start).items()}  # fmt: skip

@@ -104,10 +104,12 @@ def free_port(host: str = "127.0.0.1") -> int:
 class Broker:
     """A mosquitto broker on ``host`` (default 127.0.0.1: this machine only) at a free port,
     as a context manager: started and reachable on entry, stopped (and waited for) on exit.
-    ``address``: ``(host, port)``."""
+    ``address``: ``(host, port)``; ``options``: more lines of its listener's configuration
+    (e.g. ``cafile``, ``certfile``, ``keyfile`` for TLS)."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 0):
+    def __init__(self, host: str = "127.0.0.1", port: int = 0, options: str = ""):
         self.host, self.port = host, port or free_port(host)
+        self.options = options
         self.process: subprocess.Popen | None = None
         self._folder: tempfile.TemporaryDirectory | None = None
 
@@ -126,7 +128,7 @@ class Broker:
         self._folder = tempfile.TemporaryDirectory(prefix="popdispatch-broker-")
         config = Path(self._folder.name) / "mosquitto.conf"
         config.write_text(f"listener {self.port} {self.host}\nallow_anonymous true\n"
-                          "persistence false\n")  # fmt: skip
+                          f"persistence false\n{self.options}\n")  # fmt: skip
         log = open(Path(self._folder.name) / "mosquitto.log", "w")  # noqa: SIM115
         with log:
             self.process = subprocess.Popen([exe, "-c", str(config)], stdout=log, stderr=log,

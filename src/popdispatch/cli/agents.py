@@ -341,12 +341,15 @@ def _event_text(e: dict) -> str:
 @option("--broker", metavar="HOST:PORT", callback=lambda ctx, param, value: _broker(value),
         help="MQTT broker to use (default: a mosquitto started for the run on 127.0.0.1, "
         "stopped at the end).")  # fmt: skip
+@option("--tls-ca", type=click.Path(exists=True, dir_okay=False),
+        help="With --broker: connect over TLS, checking the broker's certificate against "
+        "this CA certificate (PEM).")  # fmt: skip
 @option("--run-id", metavar="ID", help="The run's id, stamped on every message (default "
         "random); agents drop messages with another.")  # fmt: skip
 @json_option
 @quiet_option
 def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, transport, broker,
-           run_id, as_json, quiet) -> int:  # fmt: skip
+           tls_ca, run_id, as_json, quiet) -> int:  # fmt: skip
     """One OS process per agent (plant, node controllers, generators) on localhost, talking
     over TCP or MQTT (mango), on the built-in ieee-elv case; compared with the DC-OPF. Every
     agent drops messages from senders off the run's roster or with another run id (counted in
@@ -360,6 +363,9 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, transpo
     progress = Progress(quiet)
     if broker is not None and transport != "mqtt":
         raise click.BadParameter("--broker needs --transport mqtt", param_hint="'--broker'")
+    if tls_ca is not None and broker is None:
+        raise click.BadParameter("--tls-ca needs --broker (the broker the launch starts "
+                                 "listens on 127.0.0.1 without TLS)", param_hint="'--tls-ca'")
     _faults(0.0, 0, 0.0, 0.0, 0)  # the agents extra is installed
     problem, _ = load_run(FeederSource(), None, minute, limits, progress)
     over = transport.upper()
@@ -367,7 +373,7 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, transpo
         result = run_launch(minute, [list(x) for x in limits], mode=mode, rounds=rounds,
                             tick_s=tick_ms / 1000.0, startup_s=startup_s, loss=loss,
                             seed=seed, transport=transport, broker=broker,
-                            run_id=run_id)  # fmt: skip
+                            run_id=run_id, tls_ca=tls_ca)  # fmt: skip
     opf = solve_opf(problem, minute)
     final = result.trajectory_kw[-1]
     error = float(np.abs(final - opf.p_kw).max()) if opf.status == "optimal" else None
