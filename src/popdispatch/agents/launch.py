@@ -1,4 +1,4 @@
-"""The agents as separate OS processes over TCP on localhost (``agents launch``).
+"""The agents as separate OS processes over TCP on localhost or over MQTT (``agents launch``).
 
 :func:`launch` starts one process per agent (``python -m popdispatch.agents.launch --id AID
 CONFIG``), each building the same problem and agents (:func:`popdispatch.agents.system.
@@ -18,6 +18,12 @@ every kernel they use), then starts the processes; each builds its agent, runs t
 (loading those kernels into memory), and says it is ready (a file in the run's folder). When
 all are ready the launcher writes the start time ``t0`` (``START_MARGIN_S`` ahead, for the
 containers to open their sockets) and every process starts its container and waits for it.
+
+Over MQTT (``transport="mqtt"``) each process is a mango MQTT container on a broker, its inbox
+the topic ``popdispatch/<run id>/<agent id>``; the launcher starts a local broker when none
+is given (:mod:`popdispatch.agents.transport`). On either transport every agent keeps the
+gate of :func:`popdispatch.agents.transport.guard`: messages with another run id or from a
+sender off the run's roster are dropped and counted (``rejected``).
 """
 
 from __future__ import annotations
@@ -33,12 +39,14 @@ import sys
 import tempfile
 import threading
 import time
+import uuid
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from popdispatch.agents.schedule import TICKS_PER_ROUND
+from popdispatch.agents.transport import TRANSPORTS, Broker, check_reachable
 from popdispatch.errors import PopdispatchError
 
 HOST = "127.0.0.1"
@@ -67,7 +75,10 @@ class LaunchConfig:
     ``rounds``: rounds to run;
     ``step_s``: the round's Euler step (s); ``loss``: probability that a message is dropped
     by its sender (fault injection over TCP, each process with its own seeded draws);
-    ``seed``: of those draws."""
+    ``seed``: of those draws; ``transport``: ``tcp`` or ``mqtt``; ``broker``: ``[host,
+    port]`` of the MQTT broker; ``run_id``: stamped on every message (the gate's);
+    ``tls_ca``: the CA certificate file the broker's TLS certificate is checked against
+    (None: no TLS)."""
 
     minute: int
     limits: list
@@ -82,6 +93,10 @@ class LaunchConfig:
     step_s: float
     loss: float = 0.0
     seed: int = 0
+    transport: str = "tcp"
+    broker: list | None = None
+    run_id: str = ""
+    tls_ca: str | None = None
 
 
 def _codec():
@@ -142,8 +157,33 @@ def _wait_for_go(config: LaunchConfig, aid: str) -> float:
     return float(go.read_text())
 
 
+def _roster(config: LaunchConfig) -> dict:
+    """Agent id -> its address on the run's transport (an MQTT topic, or ``[host, port]``)."""
+    from popdispatch.agents.transport import topic
+
+    if config.transport == "mqtt":
+        return {a: topic(config.run_id, a) for a in config.ports}
+    return {a: [HOST, port] for a, port in config.ports.items()}
+
+
+def _container(aid: str, config: LaunchConfig):
+    """The agent's mango container on the run's transport."""
+    from mango import create_mqtt_container, create_tcp_container
+
+    from popdispatch.agents.transport import topic
+
+    if config.transport == "mqtt":
+        tls = {"tls_kwargs": {"ca_certs": config.tls_ca}} if config.tls_ca else {}
+        return create_mqtt_container(tuple(config.broker), client_id=f"{config.run_id}-{aid}",
+                                     inbox_topic=topic(config.run_id, aid), codec=_codec(),
+                                     **tls)  # fmt: skip
+    return create_tcp_container((HOST, config.ports[aid]), codec=_codec())
+
+
 async def _serve(aid: str, config: LaunchConfig) -> None:
-    from mango import AgentAddress, activate, create_tcp_container
+    from mango import AgentAddress, activate
+
+    from popdispatch.agents.transport import guard
 
     problem, system = _system(config)
     agent = agent_ids(system)[aid]
@@ -156,9 +196,12 @@ async def _serve(aid: str, config: LaunchConfig) -> None:
         agent.loss, agent.drop = config.loss, random.Random(f"{config.seed}/{aid}")
     if aid in system.graph.nodes:
         agent.plant_id = "plant"
-    container = create_tcp_container((HOST, config.ports[aid]), codec=_codec())
+    container = _container(aid, config)
     container.register(agent, suggested_aid=aid)
-    agent.addresses = {a: AgentAddress((HOST, port), a) for a, port in config.ports.items()}
+    roster = _roster(config)
+    address = tuple if config.transport == "tcp" else str
+    agent.addresses = {a: AgentAddress(address(where), a) for a, where in roster.items()}
+    guard(agent, config.run_id, roster)
     end = t0 + (config.rounds + 1) * agent.round_ticks * config.tick_s
     async with activate(container):
         await asyncio.sleep(max(0.0, end - time.time()))
@@ -167,7 +210,8 @@ async def _serve(aid: str, config: LaunchConfig) -> None:
     if agent.missed_ticks:
         print(f"agent {aid} missed {agent.missed_ticks} ticks (started late or fell behind; "
               "a longer --startup-s or --tick-ms helps)", file=sys.stderr)  # fmt: skip
-    counts = {"sent": agent.sent, "dropped": agent.dropped, "missed_ticks": agent.missed_ticks}
+    counts = {"sent": agent.sent, "dropped": agent.dropped, "missed_ticks": agent.missed_ticks,
+              "rejected": agent.rejected}  # fmt: skip
     if aid == "plant":
         counts["setpoints_mw"] = [list(map(float, p)) for p in agent.history]
     print(json.dumps(counts))
@@ -178,7 +222,8 @@ class LaunchResult:
     """Set points (kW) the plant saw at the start of every round, the run's wall time (s,
     start-up included), the number of agent processes, messages sent and dropped, and the
     ticks the agents missed (deadlines already past when they got to them: a loaded machine;
-    0 in a sound run)."""
+    0 in a sound run), the messages the agents' gates rejected, the transport, the broker
+    (``host:port``, MQTT) and the run id."""
 
     generators: list
     trajectory_kw: np.ndarray
@@ -187,12 +232,18 @@ class LaunchResult:
     messages: int = 0
     lost: int = 0
     missed_ticks: int = 0
+    rejected: int = 0
+    transport: str = "tcp"
+    broker: str | None = None
+    run_id: str = ""
 
 
 def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
            graph: str = "complete", rounds: int = 200, tick_s: float = 0.05,
            step_s: float | None = None, base_port: int = 0, startup_s: float = 180.0,
-           loss: float = 0.0, seed: int = 0) -> LaunchResult:  # fmt: skip
+           loss: float = 0.0, seed: int = 0, transport: str = "tcp",
+           broker: tuple[str, int] | None = None, run_id: str | None = None,
+           tls_ca: str | None = None, on_start=None) -> LaunchResult:  # fmt: skip
     """Run the agents of one minute as separate processes over TCP (module docstring).
 
     ``base_port``: first TCP port (0: free ports the OS hands out); ``startup_s``: longest
@@ -200,7 +251,11 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
     the round's Euler step
     (None: :func:`popdispatch.agents.system.default_step`); ``loss``: probability
     that each message is dropped by its sender (``seed``: of the draws; decisions then go out
-    in 3 copies, as in the simulation).
+    in 3 copies, as in the simulation); ``transport``: ``tcp`` (localhost) or ``mqtt``
+    (``broker``: ``(host, port)``; None: a mosquitto started for the run on 127.0.0.1);
+    ``run_id``: the run's id (default random); ``tls_ca``: with ``broker``, the CA
+    certificate (a file) of the broker's TLS certificate; ``on_start``: called with the
+    :class:`LaunchConfig` once the start time is fixed (a test's hook).
     """
     from popdispatch.runs import FeederSource, load_run
 
@@ -215,21 +270,37 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
 
         step_s = default_step(problem, settings, minute)
     ids = list(agent_ids(build_agents(problem, minute, settings, step_s, Faults())))
-    ports = _ports(len(ids), base_port)
+    if transport not in TRANSPORTS:
+        raise ValueError(f"unknown transport {transport!r} (known: {', '.join(TRANSPORTS)})")
+    if tls_ca is not None and (transport != "mqtt" or broker is None):
+        raise ValueError("TLS (tls_ca) needs the MQTT transport and a broker given")
+    ports = _ports(len(ids), base_port) if transport == "tcp" else [0] * len(ids)
+    run_id = run_id or uuid.uuid4().hex[:12]
     start = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="popdispatch-launch-") as folder:
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(_sigterm_unwinds())  # the broker and the children are stopped
+        if transport == "mqtt" and broker is None:
+            broker = stack.enter_context(Broker()).address
+        elif transport == "mqtt":
+            check_reachable(broker)
+        folder = stack.enter_context(tempfile.TemporaryDirectory(prefix="popdispatch-launch-"))
         config = LaunchConfig(minute, [list(x) for x in limits], mode, dynamics, graph,
                               dict(zip(ids, ports, strict=True)), folder, float(startup_s),
-                              tick_s, rounds, step_s, float(loss), int(seed))  # fmt: skip
+                              tick_s, rounds, step_s, float(loss), int(seed), transport,
+                              None if broker is None else list(broker), run_id,
+                              None if tls_ca is None else str(tls_ca))  # fmt: skip
         warm_up(config)
         outputs = {aid: json.loads(out.strip().splitlines()[-1])
-                   for aid, out in _run_children(ids, config).items()}  # fmt: skip
+                   for aid, out in _run_children(ids, config, on_start).items()}  # fmt: skip
     history = outputs["plant"]["setpoints_mw"]
     wall = time.perf_counter() - start
     counts = {key: sum(o[key] for o in outputs.values())
-              for key in ("sent", "dropped", "missed_ticks")}  # fmt: skip
+              for key in ("sent", "dropped", "missed_ticks", "rejected")}  # fmt: skip
     return LaunchResult(list(problem.generators), np.array(history) * 1000.0, wall, len(ids),
-                        counts["sent"], counts["dropped"], counts["missed_ticks"])  # fmt: skip
+                        counts["sent"], counts["dropped"], counts["missed_ticks"],
+                        counts["rejected"], transport,
+                        None if broker is None else f"{broker[0]}:{broker[1]}",
+                        run_id)  # fmt: skip
 
 
 def _ports(n: int, base: int) -> list[int]:
@@ -248,7 +319,7 @@ def _ports(n: int, base: int) -> list[int]:
             s.close()
 
 
-def _run_children(ids: list[str], config: LaunchConfig) -> dict[str, str]:
+def _run_children(ids: list[str], config: LaunchConfig, on_start=None) -> dict[str, str]:
     """Start one process per agent in a new process group; when all are ready, write the
     start time; wait for all (each until the run's agreed end plus :data:`END_GRACE_S`); on
     Ctrl-C, SIGTERM or an error terminate the group and wait, so no child outlives the
@@ -274,6 +345,8 @@ def _run_children(ids: list[str], config: LaunchConfig) -> dict[str, str]:
         staged = folder / "go.tmp"
         staged.write_text(repr(t0))
         os.replace(staged, folder / "go")
+        if on_start is not None:
+            on_start(config)
         finish = t0 + (config.rounds + 1) * TICKS_PER_ROUND * config.tick_s + END_GRACE_S
         for aid, child in children.items():
             try:
@@ -287,6 +360,20 @@ def _run_children(ids: list[str], config: LaunchConfig) -> dict[str, str]:
         _stop(children, group)
         if main_thread:
             signal.signal(signal.SIGTERM, previous)
+
+
+@contextlib.contextmanager
+def _sigterm_unwinds():
+    """SIGTERM raises SystemExit inside the block (in the main thread): every ``finally`` and
+    context manager of the launch runs, so no child process or broker outlives it."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _terminated(signum, frame) -> None:

@@ -295,6 +295,18 @@ def _price_lines(prices: list[dict] | None) -> list[str]:
     return lines
 
 
+def _broker(value: str | None) -> tuple[str, int] | None:
+    """``--broker HOST:PORT`` as ``(host, port)``; a usage error naming the option otherwise."""
+    if value is None:
+        return None
+    from popdispatch.agents.transport import parse_broker
+
+    try:
+        return parse_broker(value)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="'--broker'") from None
+
+
 def _event_text(e: dict) -> str:
     """One fault event as a line."""
     extra = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
@@ -323,13 +335,25 @@ def _event_text(e: dict) -> str:
     help="Probability that a message is dropped by its sender (0-1).",
 )
 @option("--seed", type=int, default=0, show_default=True, help="Seed of the drops.")
+@option("--transport", type=click.Choice(["tcp", "mqtt"]), default="tcp", show_default=True,
+        help="tcp: every agent a TCP server on 127.0.0.1; mqtt: every agent an MQTT client "
+        "of a broker, inbox topic popdispatch/RUN_ID/AGENT (docs/cosim.md).")  # fmt: skip
+@option("--broker", metavar="HOST:PORT", callback=lambda ctx, param, value: _broker(value),
+        help="MQTT broker to use (default: a mosquitto started for the run on 127.0.0.1, "
+        "stopped at the end).")  # fmt: skip
+@option("--tls-ca", type=click.Path(exists=True, dir_okay=False),
+        help="With --broker: connect over TLS, checking the broker's certificate against "
+        "this CA certificate (PEM).")  # fmt: skip
+@option("--run-id", metavar="ID", help="The run's id, stamped on every message (default "
+        "random); agents drop messages with another.")  # fmt: skip
 @json_option
 @quiet_option
-def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, as_json,
-           quiet) -> int:  # fmt: skip
+def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, transport, broker,
+           tls_ca, run_id, as_json, quiet) -> int:  # fmt: skip
     """One OS process per agent (plant, node controllers, generators) on localhost, talking
-    over TCP (mango), on the built-in ieee-elv case; compared with the DC-OPF. Ctrl-C stops
-    every process (exit 130)."""
+    over TCP or MQTT (mango), on the built-in ieee-elv case; compared with the DC-OPF. Every
+    agent drops messages from senders off the run's roster or with another run id (counted in
+    rejected). Ctrl-C stops every process and a broker the command started (exit 130)."""
     import numpy as np
 
     from popdispatch.agents.launch import launch as run_launch
@@ -337,12 +361,19 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, as_json
     from popdispatch.runs import FeederSource, load_run
 
     progress = Progress(quiet)
+    if broker is not None and transport != "mqtt":
+        raise click.BadParameter("--broker needs --transport mqtt", param_hint="'--broker'")
+    if tls_ca is not None and broker is None:
+        raise click.BadParameter("--tls-ca needs --broker (the broker the launch starts "
+                                 "listens on 127.0.0.1 without TLS)", param_hint="'--tls-ca'")
     _faults(0.0, 0, 0.0, 0.0, 0)  # the agents extra is installed
     problem, _ = load_run(FeederSource(), None, minute, limits, progress)
-    with progress.step(f"minute {minute}: {rounds} rounds by agent processes over TCP"):
+    over = transport.upper()
+    with progress.step(f"minute {minute}: {rounds} rounds by agent processes over {over}"):
         result = run_launch(minute, [list(x) for x in limits], mode=mode, rounds=rounds,
                             tick_s=tick_ms / 1000.0, startup_s=startup_s, loss=loss,
-                            seed=seed)  # fmt: skip
+                            seed=seed, transport=transport, broker=broker,
+                            run_id=run_id, tls_ca=tls_ca)  # fmt: skip
     opf = solve_opf(problem, minute)
     final = result.trajectory_kw[-1]
     error = float(np.abs(final - opf.p_kw).max()) if opf.status == "optimal" else None
@@ -362,15 +393,23 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, as_json
         "messages": result.messages,
         "lost": result.lost,
         "missed_ticks": result.missed_ticks,
+        "rejected": result.rejected,
+        "transport": result.transport,
+        "broker": result.broker,
+        "run_id": result.run_id,
+        "supply_kw": float(final.sum()),
+        "demand_kw": float(problem.demand[minute - 1] * 1000.0),
     }
     text = "\n".join(
-        [f"minute {minute}, {mode} mode: {summary['rounds']} rounds by agent processes over TCP"]
+        [f"minute {minute}, {mode} mode: {summary['rounds']} rounds by agent processes over "
+         f"{over}" + (f" (broker {result.broker}, run {result.run_id})" if result.broker else "")]
         + [
             f"{g['name']:>10} {g['setpoint_kw']:>10.3f} {g['opf_kw']:>10.3f}"
             for g in summary["generators"]
         ]
         + ["max |error| vs DC-OPF: " + ("null" if error is None else f"{error:.4f} kW")]
-        + [f"messages {result.messages} ({result.lost} dropped, loss {loss:g})"]
+        + [f"messages {result.messages} ({result.lost} dropped, loss {loss:g}; "
+           f"{result.rejected} rejected: another run or a sender off the roster)"]
         + [
             f"missed ticks {result.missed_ticks} (agents that fell behind the clock: a loaded "
             "machine; a longer --tick-ms helps)"

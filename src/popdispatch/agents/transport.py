@@ -1,0 +1,169 @@
+"""How launched agents reach each other: TCP on localhost or MQTT through a broker, and the
+gate every launched agent keeps (``agents launch --transport``; docs/cosim.md, "MQTT").
+
+**MQTT.** Every agent is a mango MQTT container (paho-mqtt) whose inbox is the topic
+:func:`topic` ``popdispatch/<run id>/<agent id>`` (agent ids: ``plant``, the node controllers
+``C<bus>``, the generators by name, e.g. ``G114``); it publishes to the addressee's topic,
+QoS 0. Payloads are mango's JSON codec: ``{"__type__": [TYPE_ID, DATA]}``, a ``MangoMessage``
+whose data holds ``content`` (one of :mod:`popdispatch.agents.messages`, itself
+``{"__type__": [TYPE_ID, {fields}]}``, powers in MW) and ``meta`` (``sender_id``,
+``sender_addr``: the sender's topic, ``run_id``); the type ids are in docs/cosim.md.
+Without ``--broker`` the launcher starts its own broker (:class:`Broker`, Debian's
+``mosquitto``) on 127.0.0.1 at a free port and stops it at the end.
+
+**The gate** (:func:`guard`): a launched run has a random run id and a roster (every agent id
+and its address). An agent stamps ``run_id`` on everything it sends and drops, counting them
+as ``rejected``, messages whose run id is not the run's (a stale run) or whose sender is not
+on the roster or not at its roster address. This keeps stray and stale messages out; it is
+not authentication: anyone who can read the broker's traffic learns the run id, so keep the
+broker on localhost (the default) or use a broker with TLS and credentials.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import shutil
+import socket
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from popdispatch.errors import PopdispatchError
+
+TRANSPORTS = ("tcp", "mqtt")
+#: Topic prefix of a launched run's agents.
+TOPIC_PREFIX = "popdispatch"
+#: Seconds to wait for a started broker to accept connections.
+BROKER_START_S = 10.0
+
+
+class BrokerError(PopdispatchError):
+    """The MQTT broker could not be started or reached."""
+
+
+def topic(run_id: str, aid: str) -> str:
+    """The inbox topic of agent ``aid`` in run ``run_id``."""
+    return f"{TOPIC_PREFIX}/{run_id}/{aid}"
+
+
+def parse_broker(text: str) -> tuple[str, int]:
+    """``HOST:PORT`` as ``(host, port)``; ValueError naming the form otherwise."""
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ValueError(f"{text!r} is not HOST:PORT (e.g. 127.0.0.1:1883)")
+    return host, int(port)
+
+
+def guard(agent: Any, run_id: str, roster: dict[str, Any]) -> None:
+    """Make ``agent`` stamp ``run_id`` on what it sends and drop (counting
+    ``agent.rejected``) what arrives with another run id or from a sender not on ``roster``
+    (agent id -> address: a topic, or ``[host, port]``) or not at its roster address."""
+    send, handle = agent.send_message, agent.handle_message
+    agent.rejected = 0
+
+    async def send_message(content, receiver_addr, **kwargs):
+        return await send(content, receiver_addr=receiver_addr, run_id=run_id, **kwargs)
+
+    def handle_message(content, meta: dict) -> None:
+        sender = meta.get("sender_id")
+        if (meta.get("run_id") != run_id or sender not in roster
+                or not _same_address(meta.get("sender_addr"), roster[sender])):  # fmt: skip
+            agent.rejected += 1
+            return
+        handle(content, meta)
+
+    agent.send_message = send_message
+    agent.handle_message = handle_message
+
+
+def _same_address(given: Any, expected: Any) -> bool:
+    """A topic, or ``(host, port)`` as a tuple or (after JSON) a list."""
+    if isinstance(expected, tuple | list):
+        return isinstance(given, tuple | list) and list(given) == list(expected)
+    return given == expected
+
+
+def check_reachable(broker: tuple[str, int], timeout_s: float = 3.0) -> None:
+    """BrokerError naming ``broker`` unless a TCP connection to it opens within ``timeout_s``."""
+    try:
+        with socket.create_connection(broker, timeout_s):
+            return
+    except OSError as exc:
+        raise BrokerError(f"MQTT broker {broker[0]}:{broker[1]} not reachable ({exc}): start "
+                          "one, or leave out --broker to let the launch start its own") from None
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+class Broker:
+    """A mosquitto broker on ``host`` (default 127.0.0.1: this machine only) at a free port,
+    as a context manager: started and reachable on entry, stopped (and waited for) on exit.
+    ``address``: ``(host, port)``; ``options``: more lines of its listener's configuration
+    (e.g. ``cafile``, ``certfile``, ``keyfile`` for TLS)."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 0, options: str = ""):
+        self.host, self.port = host, port or free_port(host)
+        self.options = options
+        self.process: subprocess.Popen | None = None
+        self._folder: tempfile.TemporaryDirectory | None = None
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return self.host, self.port
+
+    def __enter__(self) -> Broker:
+        exe = shutil.which("mosquitto") or next(
+            (p for p in ("/usr/sbin/mosquitto", "/usr/local/sbin/mosquitto") if Path(p).exists()),
+            None,
+        )
+        if exe is None:
+            raise BrokerError("no MQTT broker: install mosquitto (apt-get install mosquitto) "
+                              "or give one with --broker HOST:PORT")  # fmt: skip
+        self._folder = tempfile.TemporaryDirectory(prefix="popdispatch-broker-")
+        config = Path(self._folder.name) / "mosquitto.conf"
+        config.write_text(f"listener {self.port} {self.host}\nallow_anonymous true\n"
+                          f"persistence false\n{self.options}\n")  # fmt: skip
+        log = open(Path(self._folder.name) / "mosquitto.log", "w")  # noqa: SIM115
+        with log:
+            self.process = subprocess.Popen([exe, "-c", str(config)], stdout=log, stderr=log,
+                                            stdin=subprocess.DEVNULL, start_new_session=True)
+        try:
+            self._wait_reachable()
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        return self
+
+    def _wait_reachable(self) -> None:
+        deadline = time.monotonic() + BROKER_START_S
+        while time.monotonic() < deadline:
+            if self.process.poll() is not None:
+                raise BrokerError(f"mosquitto exited {self.process.returncode} on "
+                                  f"{self.host}:{self.port}: {self._log_tail()}")  # fmt: skip
+            with contextlib.suppress(OSError), socket.create_connection(self.address, 0.2):
+                return
+            time.sleep(0.05)
+        raise BrokerError(f"mosquitto not reachable on {self.host}:{self.port} after "
+                          f"{BROKER_START_S:g} s")  # fmt: skip
+
+    def _log_tail(self) -> str:
+        log = Path(self._folder.name) / "mosquitto.log"
+        lines = log.read_text().strip().splitlines() if log.exists() else []
+        return lines[-1] if lines else "no message"
+
+    def __exit__(self, *exc) -> None:
+        if self.process is not None and self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        if self._folder is not None:
+            self._folder.cleanup()
