@@ -64,6 +64,7 @@ class Message:
     values: tuple[float, ...]
     sent: int
     key: tuple = ()  # a transaction's identity (not counted as payload: it is in the header)
+    via: tuple[str, ...] = ()  # the agents that relayed it, in order
 
 
 @dataclass
@@ -95,31 +96,35 @@ class Network:
         return crash is not None and crash[0] == agent and self.round >= crash[1]
 
     def send(self, sender: str, receiver: str, kind: str, values, reveals: str = "",
-             key: tuple = ()) -> None:  # fmt: skip
-        """Send ``values`` (scalars) from ``sender`` to ``receiver``; ``reveals`` names what
-        the sender discloses by it (a cost curve, a set point, a price ...)."""
+             key: tuple = (), via: tuple[str, ...] = ()) -> None:  # fmt: skip
+        """Send ``values`` (scalars) from ``sender`` to ``receiver`` (relayed by the agents
+        ``via``, one message and one round per hop, each hop lost on its own); ``reveals``
+        names what the sender discloses by it (a cost curve, a set point, a price ...)."""
         if self.crashed(sender):
             return
         values = tuple(float(v) for v in np.atleast_1d(values))
+        hops = (sender, *via, receiver)
         c = self.counters
-        c.messages += 1
-        c.scalars += len(values)
-        c.bytes += HEADER_BYTES + SCALAR_BYTES * len(values)
-        c.sent_by[sender] += 1
-        c.partners[sender].add(receiver)
-        c.partners[receiver].add(sender)
         if reveals:
             c.reveals[sender].add(reveals)
-        message = Message(sender, receiver, kind, values, self.round, key)
         f = self.faults
-        if f.loss and self._rng.random() < f.loss:
-            c.lost += 1
-            return
-        delay = int(self._rng.integers(0, f.delay_max + 1)) if f.delay_max else 0
-        self._queue[self.round + 1 + delay].append(message)
+        delay = 0
+        for a, b in zip(hops[:-1], hops[1:], strict=True):
+            c.messages += 1
+            c.scalars += len(values)
+            c.bytes += HEADER_BYTES + SCALAR_BYTES * len(values)
+            c.sent_by[a] += 1
+            c.partners[a].add(b)
+            c.partners[b].add(a)
+            if (f.loss and self._rng.random() < f.loss) or (b != receiver and self.crashed(b)):
+                c.lost += 1
+                return
+            delay += 1 + (int(self._rng.integers(0, f.delay_max + 1)) if f.delay_max else 0)
+        message = Message(sender, receiver, kind, values, self.round, key, tuple(via))
+        self._queue[self.round + delay].append(message)
         if f.duplicate and self._rng.random() < f.duplicate:
             c.duplicated += 1
-            self._queue[self.round + 2 + delay].append(message)
+            self._queue[self.round + delay + 1].append(message)
 
     def deliver(self, round_: int) -> dict[str, list[Message]]:
         """Start round ``round_``: the messages due, by receiver (none to a crashed agent)."""

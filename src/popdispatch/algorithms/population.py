@@ -28,8 +28,14 @@ until it arrives (the imbalance the runner reports). Loss handling: stale partne
 prices are used as they are; a transfer not acknowledged within ``2 (1 + delay) + 1`` rounds
 is sent again under the same identity (receivers accept an identity once and acknowledge it
 again); a partner silent for ``silent_rounds`` is dropped from the view and its open transfers
-are taken back (a crashed DG). The relay of the engine's distributed Smith (mass passed
-around a DG at its limit) is not part of this module.
+are taken back (a crashed DG).
+
+The relay (distributed Smith's, :func:`popdispatch.reference.relay_matrix`): a DG that is
+blocked (at a limit, or without receiver weight) announces to its neighbours the best
+receiver of its group it knows (an unblocked neighbour with room, or what its own blocked
+neighbours announce, with the route); a DG sends mass to an announced receiver beyond its
+neighbours at the same rate ``w_b v_a [f_b - f_a]_+``, the transfer and its acknowledgement
+relayed hop by hop along the route (one message and one round per hop).
 """
 
 from __future__ import annotations
@@ -41,9 +47,10 @@ import numpy as np
 from popdispatch.algorithms.base import Algorithm, Minute, balanced_start, controller_name
 from popdispatch.algorithms.network import Message, Network
 from popdispatch.dynamics import communication_graph
+from popdispatch.dynamics.pairwise import RELAY_MASS
 from popdispatch.game.fitness import generator_fitness
 from popdispatch.online import RunSettings
-from popdispatch.reference import weights
+from popdispatch.reference import pair_flows, weights
 
 
 @dataclass(frozen=True)
@@ -82,12 +89,13 @@ class PopulationDynamics(Algorithm):
         self.h = params.step * stable_step(minute, self.fp)
         self.graph = communication_graph(params.graph, minute.names)
         self.neighbours = [np.flatnonzero(self.graph[i]) for i in range(n)]
+        self.complete = bool((self.graph + np.eye(n) > 0).all())
         self.p = balanced_start(minute)
         self.below = problem.down > 0.5  # (lines, generators)
         self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
         self.z = np.zeros((len(problem.limit), 2))
         # each DG's view: the last report of each partner (f, w, p) and its round
-        self.report = np.zeros((n, n, 3))
+        self.report = np.zeros((n, n, 4))
         self.heard = np.zeros((n, n), dtype=int)
         self.gone = np.zeros((n, n), dtype=bool)
         self.nu = np.zeros((n, len(problem.limit)))  # each DG's last price from each line
@@ -96,11 +104,12 @@ class PopulationDynamics(Algorithm):
         self.outstanding: list[dict] = [{} for _ in range(n)]  # key -> [to, amount, sent, tries]
         self.accepted: list[dict] = [{} for _ in range(n)]  # key -> amount accepted
         self.debits: list[list] = [[] for _ in range(n)]  # (round, amount) due
-        self.own = np.zeros((n, 3))
+        self.own = np.zeros((n, 4))
+        self.announced: list[dict] = [{} for _ in range(n)]  # blocked neighbour -> its best
         self.send_cost_curves(lambda i: [minute.names[j] for j in self.neighbours[i]])
         for i in range(n):
             for j in self.neighbours[i]:
-                self.report[i, j] = (0.0, 0.0, self.p[j])
+                self.report[i, j] = (0.0, 0.0, self.p[j], 0.0)
 
     def agents(self) -> list[str]:
         return self.m.names + self.controllers
@@ -129,6 +138,8 @@ class PopulationDynamics(Algorithm):
             self._transfers(i, round_)
             for j in self._partners(i):
                 self.net.send(name, self.m.names[j], "report", self.own[i], reveals="fitness")
+            if self.own[i, 3] and not self.complete:
+                self._announce(i, round_)
 
     # -- node controllers ----------------------------------------------------------------
     def _controllers(self, inbox, round_: int) -> None:
@@ -161,12 +172,17 @@ class PopulationDynamics(Algorithm):
                 self.gone[i, j] = False
         elif message.kind == "transfer":
             if message.key not in self.accepted[i]:
-                room = max(self.m.hi[i] - self.p[i], 0.0)
+                refunds = sum(e[1] for e in self.outstanding[i].values())
+                room = max(self.m.hi[i] - self.p[i] - refunds, 0.0)
                 take = min(message.values[0], room)
                 self.accepted[i][message.key] = take
                 self.p[i] += take
             self.net.send(names[i], message.sender, "ack", [self.accepted[i][message.key]],
-                          key=message.key)  # fmt: skip
+                          key=message.key, via=message.via[::-1])  # fmt: skip
+        elif message.kind == "relay":
+            k = names.index(message.sender)
+            self.announced[i][k] = (message.key[0], *message.values, message.key[1],
+                                    message.sent)  # fmt: skip
         elif message.kind == "ack":
             open_ = self.outstanding[i].pop(message.key, None)
             if open_ is not None:
@@ -175,11 +191,11 @@ class PopulationDynamics(Algorithm):
     def _resend(self, i: int, round_: int) -> None:
         wait = 2 * (1 + self.net.faults.delay_max) + 1
         for key, entry in self.outstanding[i].items():
-            to, amount, sent, _ = entry
-            if round_ - sent >= wait:
+            to, amount, sent, _, via = entry
+            if round_ - sent >= wait * (1 + len(via)):
                 entry[2], entry[3] = round_, entry[3] + 1
                 self.net.send(self.m.names[i], self.m.names[to], "transfer", [amount, sent],
-                              key=key)  # fmt: skip
+                              key=key, via=via)  # fmt: skip
 
     def _forget_silent(self, i: int, round_: int) -> None:
         for j in self.neighbours[i]:
@@ -197,23 +213,50 @@ class PopulationDynamics(Algorithm):
         f_i = self._fitness(i, signal)
         x = p_view / m.demand
         lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
-        w, v, _room, mass = weights(self.field, x, lo, hi, hi > lo, self.rate[view])
-        self.own[i] = (f_i, w[0], self.p[i])
-        if len(view) == 1:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w, v, room, mass = weights(self.field, x, lo, hi, hi > lo, self.rate[view])
+        blocked = not (w[0] > 0 and mass[0] > RELAY_MASS and room[0] > RELAY_MASS)
+        self.own[i] = (f_i, w[0], self.p[i], float(blocked))
+        targets, routes = self._relay_targets(i, view, round_)
+        if len(view) == 1 and not targets:
             return
-        f_view = np.array([f_i] + [self.report[i, j, 0] for j in view[1:]])
-        w_view = np.array([w[0]] + [self.report[i, j, 1] for j in view[1:]])
-        out = h * w_view[1:] * v[0] * np.maximum(f_view[1:] - f_i, 0.0) * m.demand  # MW
-        room_mw = np.maximum(m.hi[view[1:]] - p_view[1:], 0.0)
-        out = np.minimum(out, room_mw)
+        f_view = np.array([f_i] + [self.report[i, j, 0] for j in view[1:]]
+                          + [t[1] for t in targets])  # fmt: skip
+        w_view = np.array([w[0]] + [self.report[i, j, 1] for j in view[1:]]
+                          + [t[2] for t in targets])  # fmt: skip
+        p_all = np.concatenate([p_view, [t[3] for t in targets]])
+        view = view + [t[0] for t in targets]
+        routes = [()] * (len(view) - 1 - len(targets)) + routes
+        out = self._limited_outflows(view, f_view, w_view, p_all)
         pending = sum(a for _, a in self.debits[i])
         movable = max(self.p[i] - m.lo[i] - pending, 0.0)
         total = out.sum()
         if total > movable:
             out = out * (movable / total)
-        for j, amount in zip(view[1:], out):
+        for j, amount, via in zip(view[1:], out, routes, strict=True):
             if amount > 1e-12 * m.demand:
-                self._send_transfer(i, j, amount, round_)
+                self._send_transfer(i, j, amount, round_, via)
+
+    def _limited_outflows(self, view, f, w, p) -> np.ndarray:
+        """The MW ``view[0]`` sends each other member of its view this round: ``h D w_j v_i
+        [f_j - f_i]_+``, each receiver's share cut by the reference's receiver limiter
+        (``room_j / (h inflow_j)``, the inflow from every member of the view as this DG
+        knows them: :func:`popdispatch.reference.pair_flows`), and at most the receiver's
+        reported room over ``2 (1 + delay) (N - 1)``: the senders of the two rounds of
+        transfers its report does not yet show cannot overfill it on a perfect network (no
+        transfer is turned back, so supply = demand every round)."""
+        m, h = self.m, self.h
+        x = p / m.demand
+        lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
+        with np.errstate(divide="ignore", invalid="ignore"):
+            _, v, room, mass = weights(self.field, x, lo, hi, hi > lo, self.rate[view])
+        everyone = np.ones((len(view), len(view))) - np.eye(len(view))
+        inflow, _ = pair_flows(f, w, v, everyone, mass, room)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
+        out = h * beta[1:] * w[1:] * v[0] * np.maximum(f[1:] - f[0], 0.0) * m.demand
+        waves = 2 * (1 + self.net.faults.delay_max) * max(1, len(self.m.names) - 1)
+        return np.minimum(out, np.maximum(m.hi[view[1:]] - p[1:], 0.0) / waves)
 
     def _fitness(self, i: int, signal: float) -> float:
         """DG ``i``'s exact-mode fitness (the engine's kernel, as the reference calls it)."""
@@ -223,13 +266,51 @@ class PopulationDynamics(Algorithm):
                                        self.m.hi[one], float(fp.B), float(fp.m),
                                        np.array([signal]), float(fp.gain), False)[0])  # fmt: skip
 
-    def _send_transfer(self, i: int, j: int, amount: float, round_: int) -> None:
+    def _send_transfer(self, i: int, j: int, amount: float, round_: int, via=()) -> None:
         key = (self.m.names[i], int(self.seq[i]))
         self.seq[i] += 1
-        self.outstanding[i][key] = [j, amount, round_, 0]
-        self.debits[i].append((round_ + 1, amount))
+        self.outstanding[i][key] = [j, amount, round_, 0, via]
+        self.debits[i].append((round_ + 1 + len(via), amount))
         self.net.send(self.m.names[i], self.m.names[j], "transfer", [amount, round_ + 1],
-                      reveals="set point change", key=key)  # fmt: skip
+                      reveals="set point change", key=key, via=via)  # fmt: skip
+
+    def _fresh(self, round_: int) -> int:
+        return 2 * (1 + self.net.faults.delay_max) + 2
+
+    def _relay_targets(self, i: int, view: list[int], round_: int) -> tuple[list, list]:
+        """The best receivers blocked neighbours announce beyond the view (the relay):
+        ``([(b, f_b, w_b, p_b), ...], [route, ...])``, the shortest route to each."""
+        best: dict[int, tuple] = {}
+        for k, (b, f, w, p, via, sent) in self.announced[i].items():
+            if self.gone[i, k] or round_ - sent > self._fresh(round_) or b == i or b in view:
+                continue
+            if i in via:
+                continue
+            route = (self.m.names[k],) + tuple(via)
+            if b not in best or len(route) < len(best[b][1]):
+                best[b] = ((b, f, w, p), route)
+        return [t for t, _ in best.values()], [r for _, r in best.values()]
+
+    def _announce(self, i: int, round_: int) -> None:
+        """A blocked DG tells its neighbours the best receiver of its group it knows: an
+        unblocked neighbour with room, or what its blocked neighbours announce (route)."""
+        names, m = self.m.names, self.m
+        candidates = []
+        for j in self._partners(i):
+            f, w, p, blocked = self.report[i, j]
+            if not blocked and w > 0 and m.hi[j] - p > RELAY_MASS * m.demand:
+                candidates.append((f, -j, j, w, p, ()))
+        for k, (b, f, w, p, via, sent) in self.announced[i].items():
+            if self.gone[i, k] or round_ - sent > self._fresh(round_) or i in via or b == i:
+                continue
+            candidates.append((f, -b, b, w, p, (names[k],) + tuple(via)))
+        if not candidates:
+            return
+        f, _, b, w, p, via = max(candidates, key=lambda c: (c[0], c[1]))
+        for j in self._partners(i):
+            if j != b and names[j] not in via:
+                self.net.send(names[i], names[j], "relay", [f, w, p], key=(b, via),
+                              reveals="fitness")  # fmt: skip
 
 
 def stable_step(minute: Minute, fp) -> float:
