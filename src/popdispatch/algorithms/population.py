@@ -216,7 +216,9 @@ class PopulationDynamics(Algorithm):
         with np.errstate(divide="ignore", invalid="ignore"):
             w, v, room, mass = weights(self.field, x, lo, hi, hi > lo, self.rate[view])
         blocked = not (w[0] > 0 and mass[0] > RELAY_MASS and room[0] > RELAY_MASS)
-        self.own[i] = (f_i, w[0], self.p[i], float(blocked))
+        refunds = sum(e[1] for e in self.outstanding[i].values())
+        self.own[i] = (f_i, w[0], self.p[i] + refunds, float(blocked))  # p: at most, once
+        # the open transfers' refunds are back (the room partners may fill)
         targets, routes = self._relay_targets(i, view, round_)
         if len(view) == 1 and not targets:
             return
@@ -242,9 +244,10 @@ class PopulationDynamics(Algorithm):
         [f_j - f_i]_+``, each receiver's share cut by the reference's receiver limiter
         (``room_j / (h inflow_j)``, the inflow from every member of the view as this DG
         knows them: :func:`popdispatch.reference.pair_flows`), and at most the receiver's
-        reported room over ``2 (1 + delay) (N - 1)``: the senders of the two rounds of
-        transfers its report does not yet show cannot overfill it on a perfect network (no
-        transfer is turned back, so supply = demand every round)."""
+        reported room over ``4 (1 + delay) (N - 1)``: the senders of the rounds of transfers
+        its report does not yet show (two on a perfect network, each wave at most a quarter
+        of a room that shrinks by at most that much a round) cannot overfill it, so no
+        transfer is turned back and supply = demand every round."""
         m, h = self.m, self.h
         x = p / m.demand
         lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
@@ -255,7 +258,7 @@ class PopulationDynamics(Algorithm):
         with np.errstate(divide="ignore", invalid="ignore"):
             beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
         out = h * beta[1:] * w[1:] * v[0] * np.maximum(f[1:] - f[0], 0.0) * m.demand
-        waves = 2 * (1 + self.net.faults.delay_max) * max(1, len(self.m.names) - 1)
+        waves = 4 * (1 + self.net.faults.delay_max) * max(1, len(self.m.names) - 1)
         return np.minimum(out, np.maximum(m.hi[view[1:]] - p[1:], 0.0) / waves)
 
     def _fitness(self, i: int, signal: float) -> float:

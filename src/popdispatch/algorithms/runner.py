@@ -64,6 +64,7 @@ class AlgorithmRun:
     rounds_per_iteration: int
     setpoints_kw: np.ndarray
     opf_kw: np.ndarray
+    trajectory_kw: np.ndarray  # (rounds + 1, generators): the applied set points
 
     @property
     def rounds(self) -> int:
@@ -124,6 +125,7 @@ def run_algorithm(name: str, problem: DispatchProblem, minute: int, faults: Faul
     algorithm.exchange(0)
     tol = max(options.accuracy_kw, options.accuracy_rel * m.demand * KW_PER_MW)
     rows = [_measure(m, yardstick, algorithm.applied_mw(), network)]
+    trajectory = [algorithm.applied_mw()]
     crash = network.faults.crash
     calm, converged = 0, None
     for r in range(1, options.max_rounds + 1):
@@ -133,7 +135,8 @@ def run_algorithm(name: str, problem: DispatchProblem, minute: int, faults: Faul
                 m.names.index(crash[0])]))  # fmt: skip
         algorithm.local_update(inbox, r)
         algorithm.exchange(r)
-        rows.append(_measure(m, yardstick, algorithm.applied_mw(), network))
+        trajectory.append(algorithm.applied_mw())
+        rows.append(_measure(m, yardstick, trajectory[-1], network))
         distance, _, overflow, imbalance = rows[-1][:4]
         calm = calm + 1 if max(distance, overflow, abs(imbalance)) <= tol else 0
         if calm >= options.hold:
@@ -151,7 +154,7 @@ def run_algorithm(name: str, problem: DispatchProblem, minute: int, faults: Faul
         c.messages / (len(agents) * max(1, len(rows) - 1)), float(np.mean(partners)),
         int(max(partners)), _by_role(reveals, m.names), algorithm.loss_handling,
         algorithm.rounds_per_iteration, algorithm.applied_mw() * KW_PER_MW,
-        yardstick.opf.p_kw.copy(),
+        yardstick.opf.p_kw.copy(), np.array(trajectory) * KW_PER_MW,
     )  # fmt: skip
 
 
