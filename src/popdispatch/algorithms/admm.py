@@ -56,7 +56,7 @@ class AdmmParams:
     adaptation of the penalty on or off; adapt_iterations: the iterations it may change in
     (then fixed, so that fixed-penalty ADMM's convergence applies; Boyd et al. sec. 3.4.1)."""
 
-    rho_scale: float = 1.0
+    rho_scale: float = 100.0
     adapt: bool = True
     adapt_iterations: int = 100
 

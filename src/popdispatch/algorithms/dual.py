@@ -44,8 +44,8 @@ class DualParams:
     """balance_step, line_step: the dimensionless steps of the balance and line prices (see
     the module docstring)."""
 
-    balance_step: float = 0.5
-    line_step: float = 0.5
+    balance_step: float = 1.0
+    line_step: float = 1.0
 
 
 class DualDecomposition(Algorithm):

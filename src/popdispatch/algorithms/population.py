@@ -62,8 +62,8 @@ class SmithParams:
     :data:`popdispatch.dynamics.GRAPHS`); silent_rounds: rounds without a report after which
     a partner counts as gone."""
 
-    step: float = 1.0
-    price_rate: float | None = None
+    step: float = 0.1
+    price_rate: float | None = 100.0
     graph: str = "complete"
     silent_rounds: int = 40
 
@@ -229,7 +229,8 @@ class PopulationDynamics(Algorithm):
         p_all = np.concatenate([p_view, [t[3] for t in targets]])
         view = view + [t[0] for t in targets]
         routes = [()] * (len(view) - 1 - len(targets)) + routes
-        out = self._limited_outflows(view, f_view, w_view, p_all)
+        hops = np.array([1 + len(r) for r in routes])
+        out = self._limited_outflows(view, f_view, w_view, p_all, hops)
         pending = sum(a for _, a in self.debits[i])
         movable = max(self.p[i] - m.lo[i] - pending, 0.0)
         total = out.sum()
@@ -239,12 +240,12 @@ class PopulationDynamics(Algorithm):
             if amount > 1e-12 * m.demand:
                 self._send_transfer(i, j, amount, round_, via)
 
-    def _limited_outflows(self, view, f, w, p) -> np.ndarray:
+    def _limited_outflows(self, view, f, w, p, hops) -> np.ndarray:
         """The MW ``view[0]`` sends each other member of its view this round: ``h D w_j v_i
         [f_j - f_i]_+``, each receiver's share cut by the reference's receiver limiter
         (``room_j / (h inflow_j)``, the inflow from every member of the view as this DG
         knows them: :func:`popdispatch.reference.pair_flows`), and at most the receiver's
-        reported room over ``4 (1 + delay) (N - 1)``: the senders of the rounds of transfers
+        reported room over ``4 (1 + delay) hops (N - 1)``: the senders of the rounds of transfers
         its report does not yet show (two on a perfect network, each wave at most a quarter
         of a room that shrinks by at most that much a round) cannot overfill it, so no
         transfer is turned back and supply = demand every round."""
@@ -258,7 +259,7 @@ class PopulationDynamics(Algorithm):
         with np.errstate(divide="ignore", invalid="ignore"):
             beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
         out = h * beta[1:] * w[1:] * v[0] * np.maximum(f[1:] - f[0], 0.0) * m.demand
-        waves = 4 * (1 + self.net.faults.delay_max) * max(1, len(self.m.names) - 1)
+        waves = 4 * (1 + self.net.faults.delay_max) * hops * max(1, len(self.m.names) - 1)
         return np.minimum(out, np.maximum(m.hi[view[1:]] - p[1:], 0.0) / waves)
 
     def _fitness(self, i: int, signal: float) -> float:
