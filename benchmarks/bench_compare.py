@@ -64,19 +64,26 @@ def tune(options: RunOptions) -> dict:
             key = (s["status"] != "converged", s["converged_round"] or 0, s["messages"],
                    s["final_distance_kw"])  # fmt: skip
             scored.append((key, params))
-            print(f"  tune {name} {params}: {s['status']} round {s['converged_round']} "
-                  f"distance {s['final_distance_kw']:.3g} kW", file=sys.stderr, flush=True)
+            print(
+                f"  tune {name} {params}: {s['status']} round {s['converged_round']} "
+                f"distance {s['final_distance_kw']:.3g} kW",
+                file=sys.stderr,
+                flush=True,
+            )
         best[name] = min(scored, key=lambda t: t[0])[1]
     return best
 
 
 def markdown(frame) -> str:
     """A pipe table of ``frame`` (numbers to four significant digits)."""
+
     def cell(v) -> str:
         return f"{v:.4g}" if isinstance(v, float) else str(v)
 
     lines = ["| " + " | ".join(frame.columns) + " |", "|" + " --- |" * len(frame.columns)]
-    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(index=False)]
+    lines += [
+        "| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(index=False)
+    ]
     return "\n".join(lines)
 
 

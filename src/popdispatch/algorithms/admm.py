@@ -12,9 +12,10 @@ on its own, ``|s| <= U``; held by its controller). A net's constraint is that it
 powers sum to zero. One iteration, in two rounds:
 
 1. (even rounds) every device takes the proximal step of its cost at ``p_t - pbar_n - u_n``
-   (DG: ``p = clip((rho v - b) / (2 c + rho), Pmin, Pmax)``; line: ``s = clip((rho_own
-   v_own - rho_above v_above) / (rho_own + rho_above), -U, U)``) and sends its terminal power to its net's holder (a DG to its zone's
-   controller, a line's controller its upper terminal to the zone above);
+   (DG: ``p = clip((rho v - b) / (2 c + rho), Pmin, Pmax)``; line: ``s = clip((rho_own v_own
+   - rho_above v_above) / (rho_own + rho_above), -U, U)``) and sends its terminal power to
+   its net's holder (a DG to its zone's controller, a line's controller its upper terminal
+   to the zone above);
 2. (odd rounds) every net's holder averages its terminals' latest powers, ``pbar_n``, moves
    its scaled price ``u_n += pbar_n`` (the price is ``rho u_n`` EUR/MW), reports its squared
    primal and dual residuals (``T_n pbar_n^2``, ``rho^2 sum_t ((p_t - pbar_n) - (p_t' -
@@ -22,14 +23,13 @@ powers sum to zero. One iteration, in two rounds:
 
 The coordinator sums the residuals ``r``, ``s`` and sets ``rho <- tau rho`` if ``r > mu s``,
 ``rho <- rho / tau`` if ``s > mu r`` (``mu = 10``, ``tau = 2``; sec. 3.4.1) in the first
-``adapt_iterations`` iterations (then the penalty stays: adapting for good flaps) and sends it to
-the zone holders, which rescale their ``u`` by ``rho_old / rho_new``. The penalty starts at
-``rho = rho_scale S / P`` EUR/MW per MW (exact mode's scales, :func:`popdispatch.modes.exact.
-scales`) and every net's price ``-rho u`` at the DGs' mean marginal cost at the uniform
-start (dual decomposition's start). The applied set points are the DGs' current proposals. Loss handling: a holder
-averages the last terminal powers it received (stale), a device steps from the last
-``(pbar, u, rho)`` it received.
-"""
+``adapt_iterations`` iterations (then the penalty stays: adapting for good flaps) and sends
+it to the zone holders, which rescale their ``u`` by ``rho_old / rho_new``. The penalty
+starts at ``rho = rho_scale S / P`` EUR/MW per MW (exact mode's scales,
+:func:`popdispatch.modes.exact. scales`) and every net's price ``-rho u`` at the DGs' mean
+marginal cost at the uniform start (dual decomposition's start). The applied set points are
+the DGs' current proposals. Loss handling: a holder averages the last terminal powers it
+received (stale), a device steps from the last ``(pbar, u, rho)`` it received."""
 
 from __future__ import annotations
 

@@ -32,7 +32,7 @@ def compare_algorithms(problem: DispatchProblem, minute: int, names: Sequence[st
 def runs_table(runs: dict[str, list[AlgorithmRun]], seed0: int = 0) -> pd.DataFrame:
     """One row per algorithm and seed: the run's totals (units in the column names)."""
     rows = []
-    for name, group in runs.items():
+    for group in runs.values():
         for s, run in enumerate(group):
             row = {k: v for k, v in run.summary().items() if k not in ("reveals", "loss_handling")}
             row["seed"] = seed0 + s

@@ -14,14 +14,14 @@ substation that holds the balance price ``lambda``. Each round
 * the coordinator sends ``lambda`` to every DG, controller ``k`` sends ``nu_k`` to the DGs
   below its line.
 
-The steps are scaled by the fleet's price response: ``alpha = balance_step / sum_i 1 /
-(2 c_i)`` and ``beta_k = line_step / sum_{i below k} 1 / (2 c_i)`` (EUR/MW per MW, over the
-DGs with a range), from the cost curves each DG sends the coordinator and the controllers
-above it once (configuration, round 0); the balance price starts at the DGs' mean marginal
-cost at the uniform start (the start of the population dynamics), the line prices at 0. The applied set points are the current best
-responses: they balance supply and demand only at the optimum. Loss handling: a DG keeps the
-last prices it received (stale); prices are measured, not messaged, into the price holders.
-"""
+The steps are scaled by the fleet's price response: ``alpha = balance_step / sum_i 1 / (2
+c_i)`` and ``beta_k = line_step / sum_{i below k} 1 / (2 c_i)`` (EUR/MW per MW, over the DGs
+with a range), from the cost curves each DG sends the coordinator and the controllers above
+it once (configuration, round 0); the balance price starts at the DGs' mean marginal cost at
+the uniform start (the start of the population dynamics), the line prices at 0. The applied
+set points are the current best responses: they balance supply and demand only at the
+optimum. Loss handling: a DG keeps the last prices it received (stale); prices are measured,
+not messaged, into the price holders."""
 
 from __future__ import annotations
 
@@ -69,8 +69,11 @@ class DualDecomposition(Algorithm):
         self.nu_seen = np.zeros((n, len(problem.limit)))
         self.nu_round = np.full((n, len(problem.limit)), -1)
         self.p = self._best_response(np.arange(n))
-        self.send_cost_curves(lambda i: [COORDINATOR] + [
-            self.controllers[k] for k in np.flatnonzero(self.below[:, i])])
+        self.send_cost_curves(
+            lambda i: (
+                [COORDINATOR] + [self.controllers[k] for k in np.flatnonzero(self.below[:, i])]
+            )
+        )
 
     def agents(self) -> list[str]:
         return self.m.names + self.controllers + [COORDINATOR]

@@ -1,12 +1,13 @@
-"""Population dynamics by messages: Smith on the complete graph, distributed Smith on a
-sparse graph, in exact mode (the curvature-scaled capacity field and integrated line prices,
-docs/exact-mode.md), one explicit Euler step of ``h = step x`` :func:`stable_step` seconds per round.
+"""Population dynamics by messages: Smith on the complete graph, distributed Smith on a sparse
+graph, in exact mode (the curvature-scaled capacity field and integrated line prices,
+docs/exact-mode.md), one explicit Euler step of ``h = step x`` :func:`stable_step` seconds
+per round.
 
-The numbers come from the plain-numpy reference (:mod:`popdispatch.reference`): the
-fitness is the engine's kernel (``generator_fitness``, as ``reference.fitness`` calls it), the receiver and sender weights
-``reference.weights`` on each DG's view of its neighbourhood, the pairwise flow ``w_j v_i
-[f_j - f_i]_+`` of ``reference.pair_flows``; the game's constants and revision rates are the
-run settings' (``RunSettings(mode="exact")``).
+The numbers come from the plain-numpy reference (:mod:`popdispatch.reference`): the fitness
+is the engine's kernel (``generator_fitness``, as ``reference.fitness`` calls it), the
+receiver and sender weights ``reference.weights`` on each DG's view of its neighbourhood,
+the pairwise flow ``w_j v_i [f_j - f_i]_+`` of ``reference.pair_flows``; the game's
+constants and revision rates are the run settings' (``RunSettings(mode="exact")``).
 
 Agents: one per DG and one node controller per limited line. Each round
 
@@ -28,7 +29,8 @@ until it arrives (the imbalance the runner reports). Loss handling: stale partne
 prices are used as they are; a transfer not acknowledged within ``2 (1 + delay) + 1`` rounds
 is sent again under the same identity (receivers accept an identity once and acknowledge it
 again); a partner silent for ``silent_rounds`` is dropped from the view and its open transfers
-are taken back (a crashed DG).
+are taken back (a crashed DG: its inverter still makes the set-point changes its agent
+committed before the crash, then holds).
 
 The relay (distributed Smith's, :func:`popdispatch.reference.relay_matrix`): a DG that is
 blocked (at a limit, or without receiver weight) announces to its neighbours the best
@@ -121,13 +123,13 @@ class PopulationDynamics(Algorithm):
     def local_update(self, inbox: dict[str, list[Message]], round_: int) -> None:
         self._controllers(inbox, round_)
         for i, name in enumerate(self.m.names):
+            due = [a for r, a in self.debits[i] if r <= round_]
+            self.debits[i] = [(r, a) for r, a in self.debits[i] if r > round_]
+            self.p[i] -= sum(due)  # the inverter's schedule, kept by a crashed DG's too
             if self.net.crashed(name):
                 continue
             for message in inbox.get(name, []):
                 self._receive(i, message, round_)
-            due = [a for r, a in self.debits[i] if r <= round_]
-            self.debits[i] = [(r, a) for r, a in self.debits[i] if r > round_]
-            self.p[i] -= sum(due)
             self._resend(i, round_)
             self._forget_silent(i, round_)
 
@@ -152,7 +154,7 @@ class PopulationDynamics(Algorithm):
             excess = np.array([flows[k] - limit[k], -flows[k] - limit[k]])
             mu = np.maximum(0.0, self.z[k] + fp.C * excess)
             self.z[k] = np.maximum(self.z[k] + h * fp.price_rate * excess, 0.0)
-            for i, dg in enumerate(self.m.names):
+            for dg in self.m.names:
                 self.net.send(name, dg, "price", [mu[0] - mu[1]], reveals="line price")
 
     # -- generators ----------------------------------------------------------------------
@@ -206,7 +208,7 @@ class PopulationDynamics(Algorithm):
 
     def _transfers(self, i: int, round_: int) -> None:
         """Compute the own report and send this round's transfers to better partners."""
-        m, h = self.m, self.h
+        m = self.m
         view = [i] + self._partners(i)
         p_view = np.array([self.p[i]] + [self.report[i, j, 2] for j in view[1:]])
         signal = np.where(self.below[:, i], 0.5, -0.5) @ self.nu[i]

@@ -4,13 +4,12 @@ one message counter and one clock, measured against the DC-OPF every round.
 Each round ``r = 1, 2, ...``: the network delivers the messages due, the algorithm's agents
 act on them (``local_update``) and send (``exchange``); the runner then reads the set points
 the inverters apply (``applied_mw``) and measures them against the yardstick, the project's
-Clarabel DC-OPF of the minute (after a DG's crash: the DC-OPF with that DG held at the set
-point its inverter keeps). A run is ``converged`` only when its applied set points are within
-``tol`` (``max(accuracy_kw, accuracy_rel x demand)`` kW) of the DC-OPF, balance supply and
-demand within ``tol`` and overflow no line by more than ``tol``, for ``hold`` rounds in a row
-(the distance to the known optimum is the certificate); else ``not_converged`` at the horizon,
-with the distance it ended at.
-"""
+Clarabel DC-OPF of the minute (from a DG's crash on: the DC-OPF with that DG held at the set
+point its inverter keeps, its value at the end of the crash round). A run is ``converged``
+only when its applied set points are within ``tol`` (``max(accuracy_kw, accuracy_rel x
+demand)`` kW) of the DC-OPF, balance supply and demand within ``tol`` and overflow no line
+by more than ``tol``, for ``hold`` rounds in a row (the distance to the known optimum is the
+certificate); else ``not_converged`` at the horizon, with the distance it ended at."""
 
 from __future__ import annotations
 
@@ -20,6 +19,7 @@ import numpy as np
 
 from popdispatch.algorithms.base import Minute
 from popdispatch.algorithms.network import Faults, Network
+from popdispatch.algorithms.registry import ALGORITHMS
 from popdispatch.constants import KW_PER_MW
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.opf import OpfResult, generation_cost, solve_opf
@@ -113,8 +113,6 @@ class Yardstick:
 def run_algorithm(name: str, problem: DispatchProblem, minute: int, faults: Faults | None = None,
                   params=None, options: RunOptions | None = None) -> AlgorithmRun:  # fmt: skip
     """Run algorithm ``name`` (:data:`popdispatch.algorithms.ALGORITHMS`) on ``minute``."""
-    from popdispatch.algorithms import ALGORITHMS
-
     options = options or RunOptions()
     entry = ALGORITHMS[name]
     params = params if params is not None else entry.params()
@@ -130,11 +128,11 @@ def run_algorithm(name: str, problem: DispatchProblem, minute: int, faults: Faul
     calm, converged = 0, None
     for r in range(1, options.max_rounds + 1):
         inbox = network.deliver(r)
-        if crash is not None and r == crash[1] and crash[0] in m.names:
-            yardstick.hold(m.names.index(crash[0]), float(algorithm.applied_mw()[
-                m.names.index(crash[0])]))  # fmt: skip
         algorithm.local_update(inbox, r)
         algorithm.exchange(r)
+        if crash is not None and r == crash[1] and crash[0] in m.names:
+            i = m.names.index(crash[0])
+            yardstick.hold(i, float(algorithm.applied_mw()[i]))
         trajectory.append(algorithm.applied_mw())
         rows.append(_measure(m, yardstick, trajectory[-1], network))
         distance, _, overflow, imbalance = rows[-1][:4]

@@ -77,8 +77,12 @@ class CrashType(click.ParamType):
         help="Largest extra message delay, rounds.")  # fmt: skip
 @option("--duplicate", type=click.FloatRange(0.0, 1.0, max_open=True), default=0.0,
         show_default=True, help="Probability that a message is delivered twice.")  # fmt: skip
-@option("--crash", type=CrashType(), default=None,
-        help="DG GEN's agent stops at ROUND for good; its inverter holds its set point.")
+@option(
+    "--crash",
+    type=CrashType(),
+    default=None,
+    help="DG GEN's agent stops at ROUND for good; its inverter holds its set point.",
+)
 @option("--seeds", type=click.IntRange(1), default=1, show_default=True,
         help="Runs per algorithm, seeds --seed, --seed + 1, ...")  # fmt: skip
 @option("--seed", type=int, default=0, show_default=True, help="First seed.")
