@@ -11,6 +11,7 @@ iterative method.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -37,7 +38,7 @@ class Minute:
                    np.where(online, problem.pmax, 0.0), float(problem.demand[minute - 1]),
                    problem.line_load_flow[minute - 1].copy())  # fmt: skip
 
-    @property
+    @cached_property
     def names(self) -> list[str]:
         return [str(g) for g in self.problem.generators]
 

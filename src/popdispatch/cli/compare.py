@@ -115,8 +115,11 @@ def compare(algorithms, minute, limits, loss, delay_max, duplicate, crash, seeds
         raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given limits")
     faults = Faults(loss, delay_max, duplicate, seed, crash)
     with progress.step(f"minute {minute}: {len(algorithms)} algorithms x {seeds} seeds"):
-        runs = compare_algorithms(problem, minute, algorithms, faults, seeds,
-                                  RunOptions(max_rounds=max_rounds))  # fmt: skip
+        try:
+            runs = compare_algorithms(problem, minute, algorithms, faults, seeds,
+                                      RunOptions(max_rounds=max_rounds))  # fmt: skip
+        except ValueError as exc:  # the DC-OPF with a crashed DG held is infeasible
+            raise Failure(str(exc)) from None
     table = runs_table(runs, seed)
     summary = summary_table(table)
     payload = {"minute": minute, "faults": faults.label(), "seeds": seeds,
