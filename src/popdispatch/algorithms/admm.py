@@ -118,6 +118,8 @@ class Admm(Algorithm):
         self.line_above_round = np.full(len(self.s), -1)
         self.residuals = np.zeros((n_zones, 2))
         self.residual_round = np.full(n_zones, -1)
+        self._pending_residuals: dict[int, tuple[float, float]] = {}  # a holder's, to report
+        self.iteration = 0
         self.send_cost_curves(lambda i: [self.zones.holder(self.zones.of_generator[i],
                                                            self.controllers)])  # fmt: skip
 
@@ -209,11 +211,10 @@ class Admm(Algorithm):
             dual = 0.0 if last is None else self.zone_rho[z] ** 2 * np.sum((dev - last) ** 2)
             self.residuals[z] = (len(t) * self.pbar[z] ** 2, dual) if z == 0 else \
                 self.residuals[z]  # fmt: skip
-            self._pending_residuals = getattr(self, "_pending_residuals", {})
             self._pending_residuals[z] = (len(t) * self.pbar[z] ** 2, dual)
             devs.append(dev)
         self.last_dev = devs
-        self.iteration = getattr(self, "iteration", 0) + 1
+        self.iteration += 1
         adapting = self.params.adapt and self.iteration <= self.params.adapt_iterations
         if adapting and not self.net.crashed(COORDINATOR):
             self._adapt()
@@ -237,7 +238,7 @@ class Admm(Algorithm):
                 holder = zones.holder(zones.above_line[k], self.controllers)
                 self.net.send(name, holder, "terminal", [-self.s[k]], reveals="line flow")
             return
-        pending = getattr(self, "_pending_residuals", {})
+        pending = self._pending_residuals
         for z, holder in enumerate([COORDINATOR] + self.controllers):
             state = [self.pbar[z], self.u[z], self.zone_rho[z]]
             for i in np.flatnonzero(zones.of_generator == z):
