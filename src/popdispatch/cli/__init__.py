@@ -17,13 +17,14 @@ from popdispatch.cli.clock import (
     stamp,
 )
 from popdispatch.cli.commands import cli
+from popdispatch.cli.compare import compare
 from popdispatch.cli.cosim import cosim
 from popdispatch.cli.process import main
 from popdispatch.cli.sweep import sweep, sweep_report
 from popdispatch.constants import MINUTES_PER_DAY
 from popdispatch.report.text import infeasible_day_message, infeasible_minute_message
 
-for _command in (sweep, sweep_report, agents, cosim):
+for _command in (sweep, sweep_report, agents, compare, cosim):
     cli.add_command(_command)
 
 __all__ = [

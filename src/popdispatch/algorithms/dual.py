@@ -1,0 +1,120 @@
+"""Dual decomposition: a balance price and line prices by projected gradient ascent on the
+DC-OPF's dual, each DG best-responding to its locational price (Everett 1963; Boyd et al.,
+"Notes on decomposition methods", 2007, dual decomposition).
+
+Agents: one per DG, one node controller per limited line, and a coordinator at the
+substation that holds the balance price ``lambda``. Each round
+
+* every DG sets ``p_i = clip((pi_i - b_i) / (2 c_i), Pmin_i, Pmax_i)`` from its locational
+  price ``pi_i = lambda + sum_k nu_k`` over the limited lines above it (the last ones received);
+* the coordinator measures the substation's imbalance ``P_d - sum p`` at the applied set
+  points and moves ``lambda += alpha (P_d - sum p)``; each line's controller measures its
+  flow and moves its two directions' prices ``mu_up = max(0, mu_up + beta_k (flow - U))``,
+  ``mu_down = max(0, mu_down + beta_k (-flow - U))``, ``nu_k = mu_up - mu_down``;
+* the coordinator sends ``lambda`` to every DG, controller ``k`` sends ``nu_k`` to the DGs
+  below its line.
+
+The steps are scaled by the fleet's price response: ``alpha = balance_step / sum_i 1 / (2
+c_i)`` and ``beta_k = line_step / sum_{i below k} 1 / (2 c_i)`` (EUR/MW per MW, over the DGs
+with a range), from the cost curves each DG sends the coordinator and the controllers above
+it once (configuration, round 0); the balance price starts at the DGs' mean marginal cost at
+the uniform start (the start of the population dynamics), the line prices at 0. The applied
+set points are the current best responses: they balance supply and demand only at the
+optimum. Loss handling: a DG keeps the last prices it received (stale); prices are measured,
+not messaged, into the price holders."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from popdispatch.algorithms.base import (
+    COORDINATOR,
+    Algorithm,
+    Minute,
+    balanced_start,
+    controller_name,
+)
+from popdispatch.algorithms.network import Message, Network
+
+
+@dataclass(frozen=True)
+class DualParams:
+    """balance_step, line_step: the dimensionless steps of the balance and line prices (see
+    the module docstring)."""
+
+    balance_step: float = 1.0
+    line_step: float = 1.0
+
+
+class DualDecomposition(Algorithm):
+    loss_handling = "stale prices at the DGs; imbalance and flows measured by the price holders"
+
+    def __init__(self, minute: Minute, network: Network, params: DualParams):
+        super().__init__(minute, network, params)
+        problem, n = minute.problem, len(minute.names)
+        self.below = problem.down > 0.5
+        tradable = minute.hi > minute.lo
+        response = np.where(tradable, 1.0 / (2.0 * problem.c), 0.0)  # MW per EUR/MW
+        self.alpha = params.balance_step / response.sum()
+        below_response = self.below.astype(float) @ response
+        self.beta = params.line_step / np.where(below_response > 0, below_response, np.inf)
+        self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
+        start = balanced_start(minute)  # the balance price starts at the DGs' mean
+        self.lam = float(np.mean((problem.b + 2.0 * problem.c * start)[tradable]))  # marginal cost
+        self.mu = np.zeros((len(problem.limit), 2))
+        self.lam_seen = np.full(n, self.lam)  # each DG's last balance price and its round
+        self.lam_round = np.full(n, -1)
+        self.nu_seen = np.zeros((n, len(problem.limit)))
+        self.nu_round = np.full((n, len(problem.limit)), -1)
+        self.p = self._best_response(np.arange(n))
+        self.send_cost_curves(
+            lambda i: (
+                [COORDINATOR] + [self.controllers[k] for k in np.flatnonzero(self.below[:, i])]
+            )
+        )
+
+    def agents(self) -> list[str]:
+        return self.m.names + self.controllers + [COORDINATOR]
+
+    def applied_mw(self) -> np.ndarray:
+        return self.p.copy()
+
+    def _best_response(self, who) -> np.ndarray:
+        problem = self.m.problem
+        price = self.lam_seen[who] + (self.nu_seen[who] * self.below[:, who].T).sum(axis=1)
+        p = (price - problem.b[who]) / (2.0 * problem.c[who])
+        return np.clip(p, self.m.lo[who], self.m.hi[who])
+
+    def local_update(self, inbox: dict[str, list[Message]], round_: int) -> None:
+        live = []
+        for i, name in enumerate(self.m.names):
+            if self.net.crashed(name):
+                continue  # its inverter holds its set point
+            live.append(i)
+            for message in inbox.get(name, []):
+                if message.kind == "balance price" and message.sent > self.lam_round[i]:
+                    self.lam_seen[i], self.lam_round[i] = message.values[0], message.sent
+                elif message.kind == "line price":
+                    k = self.controllers.index(message.sender)
+                    if message.sent > self.nu_round[i, k]:
+                        self.nu_seen[i, k], self.nu_round[i, k] = message.values[0], message.sent
+        self.p[live] = self._best_response(np.array(live, dtype=int))
+        if not self.net.crashed(COORDINATOR):
+            self.lam += self.alpha * (self.m.demand - self.p.sum())
+        flows = self.m.flows(self.p)
+        limit = self.m.problem.limit
+        for k, name in enumerate(self.controllers):
+            if not self.net.crashed(name):
+                excess = np.array([flows[k] - limit[k], -flows[k] - limit[k]])
+                self.mu[k] = np.maximum(0.0, self.mu[k] + self.beta[k] * excess)
+
+    def exchange(self, round_: int) -> None:
+        for name in self.m.names:
+            self.net.send(COORDINATOR, name, "balance price", [self.lam],
+                          reveals="balance price")  # fmt: skip
+        for k, name in enumerate(self.controllers):
+            nu = self.mu[k, 0] - self.mu[k, 1]
+            for i in np.flatnonzero(self.below[k]):
+                self.net.send(name, self.m.names[i], "line price", [nu], reveals="line price")

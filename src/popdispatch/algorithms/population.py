@@ -1,0 +1,332 @@
+"""Population dynamics by messages: Smith on the complete graph, distributed Smith on a sparse
+graph, in exact mode (the curvature-scaled capacity field and integrated line prices,
+docs/exact-mode.md), one explicit Euler step of ``h = step x`` :func:`stable_step` seconds
+per round.
+
+The numbers come from the plain-numpy reference (:mod:`popdispatch.reference`): the fitness
+is the engine's kernel (``generator_fitness``, as ``reference.fitness`` calls it), the
+receiver and sender weights ``reference.weights`` on each DG's view of its neighbourhood,
+the pairwise flow ``w_j v_i [f_j - f_i]_+`` of ``reference.pair_flows``; the game's
+constants and revision rates are the run settings' (``RunSettings(mode="exact")``).
+
+Agents: one per DG and one node controller per limited line. Each round
+
+* a controller measures its line's flow at the applied set points, integrates its two
+  directions' prices (``z <- max(0, z + h price_rate e)``) and sends the net price ``nu =
+  mu_up - mu_down`` (``mu = max(0, z + C e)``) to every DG (those below take ``+nu/2``,
+  the others ``-nu/2``: exact mode's split);
+* a DG reads its partners' last reported ``(fitness, receiver weight, set point)``, sends
+  mass ``h P_d w_j v_i [f_j - f_i]_+`` (MW) to each better partner in a *transfer* (at most
+  its movable mass in all, at most the partner's reported room each), and reports its own
+  ``(fitness, receiver weight, set point)`` to its partners.
+
+Supply = demand through the transactions: a transfer names the round it takes effect; the
+sender lowers its set point by the amount in that round, the receiver raises its own by what
+it accepts (at most its room) when the transfer arrives and acknowledges it; the sender takes
+back what was not accepted when the acknowledgement arrives. On a perfect network both sides
+move in the same round; a lost or late transfer leaves the difference to the source bus
+until it arrives (the imbalance the runner reports). Loss handling: stale partner reports and
+prices are used as they are; a transfer not acknowledged within ``2 (1 + delay) + 1`` rounds
+is sent again under the same identity (receivers accept an identity once and acknowledge it
+again); a partner silent for ``silent_rounds`` is dropped from the view and its open transfers
+are taken back (a crashed DG: its inverter still makes the set-point changes its agent
+committed before the crash, then holds).
+
+The relay (distributed Smith's, :func:`popdispatch.reference.relay_matrix`): a DG that is
+blocked (at a limit, or without receiver weight) announces to its neighbours the best
+receiver of its group it knows (an unblocked neighbour with room, or what its own blocked
+neighbours announce, with the route); a DG sends mass to an announced receiver beyond its
+neighbours at the same rate ``w_b v_a [f_b - f_a]_+``, the transfer and its acknowledgement
+relayed hop by hop along the route (one message and one round per hop).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from popdispatch.algorithms.base import Algorithm, Minute, balanced_start, controller_name
+from popdispatch.algorithms.network import Message, Network
+from popdispatch.dynamics import communication_graph
+from popdispatch.dynamics.pairwise import RELAY_MASS
+from popdispatch.game.fitness import generator_fitness
+from popdispatch.online import RunSettings
+from popdispatch.reference import pair_flows, weights
+
+
+@dataclass(frozen=True)
+class SmithParams:
+    """step: the Euler step of one round in units of :func:`stable_step` (dimensionless);
+    price_rate: exact mode's price rate
+    (dimensionless, :class:`~popdispatch.modes.exact.ExactConstants`; None: its default);
+    graph: the communication graph (complete, or a sparse one of
+    :data:`popdispatch.dynamics.GRAPHS`); silent_rounds: rounds without a report after which
+    a partner counts as gone."""
+
+    step: float = 0.1
+    price_rate: float | None = 100.0
+    graph: str = "complete"
+    silent_rounds: int = 40
+
+
+class PopulationDynamics(Algorithm):
+    """Smith (complete graph) or distributed Smith (sparse graph) in exact mode."""
+
+    loss_handling = ("stale reports and prices; transfers resent until acknowledged (same "
+                     "identity, accepted once); a silent partner dropped, its transfers taken "
+                     "back")  # fmt: skip
+
+    def __init__(self, minute: Minute, network: Network, params: SmithParams):
+        super().__init__(minute, network, params)
+        problem, n = minute.problem, len(minute.names)
+        from popdispatch.modes.exact import ExactConstants
+
+        exact = ExactConstants() if params.price_rate is None else \
+            ExactConstants(price_rate=params.price_rate)  # fmt: skip
+        settings = RunSettings(mode="exact", dynamics="smith", exact=exact)
+        self.fp = settings.game_constants(problem)
+        self.field = settings.field
+        self.rate = settings.revision_rates(problem)
+        self.h = params.step * stable_step(minute, self.fp)
+        self.graph = communication_graph(params.graph, minute.names)
+        self.neighbours = [np.flatnonzero(self.graph[i]) for i in range(n)]
+        self.complete = bool((self.graph + np.eye(n) > 0).all())
+        self.p = balanced_start(minute)
+        self.below = problem.down > 0.5  # (lines, generators)
+        self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
+        self.z = np.zeros((len(problem.limit), 2))
+        # each DG's view: the last report of each partner (f, w, p) and its round
+        self.report = np.zeros((n, n, 4))
+        self.heard = np.zeros((n, n), dtype=int)
+        self.gone = np.zeros((n, n), dtype=bool)
+        self.nu = np.zeros((n, len(problem.limit)))  # each DG's last price from each line
+        self.nu_round = np.full((n, len(problem.limit)), -1)
+        self.seq = np.zeros(n, dtype=int)
+        self.outstanding: list[dict] = [{} for _ in range(n)]  # key -> [to, amount, sent, tries]
+        self.accepted: list[dict] = [{} for _ in range(n)]  # key -> amount accepted
+        self.debits: list[list] = [[] for _ in range(n)]  # (round, amount) due
+        self.own = np.zeros((n, 4))
+        self.announced: list[dict] = [{} for _ in range(n)]  # blocked neighbour -> its best
+        self.send_cost_curves(lambda i: [minute.names[j] for j in self.neighbours[i]])
+        for i in range(n):
+            for j in self.neighbours[i]:
+                self.report[i, j] = (0.0, 0.0, self.p[j], 0.0)
+
+    def agents(self) -> list[str]:
+        return self.m.names + self.controllers
+
+    def applied_mw(self) -> np.ndarray:
+        return self.p.copy()
+
+    # -- a round -------------------------------------------------------------------------
+    def local_update(self, inbox: dict[str, list[Message]], round_: int) -> None:
+        self._controllers(inbox, round_)
+        for i, name in enumerate(self.m.names):
+            due = [a for r, a in self.debits[i] if r <= round_]
+            self.debits[i] = [(r, a) for r, a in self.debits[i] if r > round_]
+            self.p[i] -= sum(due)  # the inverter's schedule, kept by a crashed DG's too
+            if self.net.crashed(name):
+                continue
+            for message in inbox.get(name, []):
+                self._receive(i, message, round_)
+            self._resend(i, round_)
+            self._forget_silent(i, round_)
+
+    def exchange(self, round_: int) -> None:
+        for i, name in enumerate(self.m.names):
+            if self.net.crashed(name):
+                continue
+            self._transfers(i, round_)
+            for j in self._partners(i):
+                self.net.send(name, self.m.names[j], "report", self.own[i], reveals="fitness")
+            if self.own[i, 3] and not self.complete:
+                self._announce(i, round_)
+
+    # -- node controllers ----------------------------------------------------------------
+    def _controllers(self, inbox, round_: int) -> None:
+        h, fp = self.h, self.fp
+        flows = self.m.flows(self.p)  # measured
+        limit = self.m.problem.limit
+        for k, name in enumerate(self.controllers):
+            if self.net.crashed(name):
+                continue
+            excess = np.array([flows[k] - limit[k], -flows[k] - limit[k]])
+            mu = np.maximum(0.0, self.z[k] + fp.C * excess)
+            self.z[k] = np.maximum(self.z[k] + h * fp.price_rate * excess, 0.0)
+            for dg in self.m.names:
+                self.net.send(name, dg, "price", [mu[0] - mu[1]], reveals="line price")
+
+    # -- generators ----------------------------------------------------------------------
+    def _partners(self, i: int) -> list[int]:
+        return [j for j in self.neighbours[i] if not self.gone[i, j]]
+
+    def _receive(self, i: int, message: Message, round_: int) -> None:
+        names = self.m.names
+        if message.kind == "price":
+            k = self.controllers.index(message.sender)
+            if message.sent > self.nu_round[i, k]:
+                self.nu[i, k], self.nu_round[i, k] = message.values[0], message.sent
+        elif message.kind == "report":
+            j = names.index(message.sender)
+            if message.sent > self.heard[i, j]:
+                self.report[i, j], self.heard[i, j] = message.values, message.sent
+                self.gone[i, j] = False
+        elif message.kind == "transfer":
+            if message.key not in self.accepted[i]:
+                refunds = sum(e[1] for e in self.outstanding[i].values())
+                room = max(self.m.hi[i] - self.p[i] - refunds, 0.0)
+                take = min(message.values[0], room)
+                self.accepted[i][message.key] = take
+                self.p[i] += take
+            self.net.send(names[i], message.sender, "ack", [self.accepted[i][message.key]],
+                          key=message.key, via=message.via[::-1])  # fmt: skip
+        elif message.kind == "relay":
+            k = names.index(message.sender)
+            self.announced[i][k] = (message.key[0], *message.values, message.key[1],
+                                    message.sent)  # fmt: skip
+        elif message.kind == "ack":
+            open_ = self.outstanding[i].pop(message.key, None)
+            if open_ is not None:
+                self.p[i] += open_[1] - message.values[0]
+
+    def _resend(self, i: int, round_: int) -> None:
+        wait = 2 * (1 + self.net.faults.delay_max) + 1
+        for key, entry in self.outstanding[i].items():
+            to, amount, sent, _, via = entry
+            if round_ - sent >= wait * (1 + len(via)):
+                entry[2], entry[3] = round_, entry[3] + 1
+                self.net.send(self.m.names[i], self.m.names[to], "transfer", [amount, sent],
+                              key=key, via=via)  # fmt: skip
+
+    def _forget_silent(self, i: int, round_: int) -> None:
+        for j in self.neighbours[i]:
+            if not self.gone[i, j] and round_ - self.heard[i, j] > self.params.silent_rounds:
+                self.gone[i, j] = True
+                for key in [k for k, e in self.outstanding[i].items() if e[0] == j]:
+                    self.p[i] += self.outstanding[i].pop(key)[1]  # taken back
+
+    def _transfers(self, i: int, round_: int) -> None:
+        """Compute the own report and send this round's transfers to better partners."""
+        m = self.m
+        view = [i] + self._partners(i)
+        p_view = np.array([self.p[i]] + [self.report[i, j, 2] for j in view[1:]])
+        signal = np.where(self.below[:, i], 0.5, -0.5) @ self.nu[i]
+        f_i = self._fitness(i, signal)
+        x = p_view / m.demand
+        lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w, v, room, mass = weights(self.field, x, lo, hi, hi > lo, self.rate[view])
+        blocked = not (w[0] > 0 and mass[0] > RELAY_MASS and room[0] > RELAY_MASS)
+        refunds = sum(e[1] for e in self.outstanding[i].values())
+        self.own[i] = (f_i, w[0], self.p[i] + refunds, float(blocked))  # p: at most, once
+        # the open transfers' refunds are back (the room partners may fill)
+        targets, routes = self._relay_targets(i, view, round_)
+        if len(view) == 1 and not targets:
+            return
+        f_view = np.array([f_i] + [self.report[i, j, 0] for j in view[1:]]
+                          + [t[1] for t in targets])  # fmt: skip
+        w_view = np.array([w[0]] + [self.report[i, j, 1] for j in view[1:]]
+                          + [t[2] for t in targets])  # fmt: skip
+        p_all = np.concatenate([p_view, [t[3] for t in targets]])
+        view = view + [t[0] for t in targets]
+        routes = [()] * (len(view) - 1 - len(targets)) + routes
+        hops = np.array([1 + len(r) for r in routes])
+        out = self._limited_outflows(view, f_view, w_view, p_all, hops)
+        pending = sum(a for _, a in self.debits[i])
+        movable = max(self.p[i] - m.lo[i] - pending, 0.0)
+        total = out.sum()
+        if total > movable:
+            out = out * (movable / total)
+        for j, amount, via in zip(view[1:], out, routes, strict=True):
+            if amount > 1e-12 * m.demand:
+                self._send_transfer(i, j, amount, round_, via)
+
+    def _limited_outflows(self, view, f, w, p, hops) -> np.ndarray:
+        """The MW ``view[0]`` sends each other member of its view this round: ``h D w_j v_i
+        [f_j - f_i]_+``, each receiver's share cut by the reference's receiver limiter
+        (``room_j / (h inflow_j)``, the inflow from every member of the view as this DG
+        knows them: :func:`popdispatch.reference.pair_flows`), and at most the receiver's
+        reported room over ``4 (1 + delay) hops (N - 1)``: the senders of the rounds of transfers
+        its report does not yet show (two on a perfect network, each wave at most a quarter
+        of a room that shrinks by at most that much a round) cannot overfill it, so no
+        transfer is turned back and supply = demand every round."""
+        m, h = self.m, self.h
+        x = p / m.demand
+        lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
+        with np.errstate(divide="ignore", invalid="ignore"):
+            _, v, room, mass = weights(self.field, x, lo, hi, hi > lo, self.rate[view])
+        everyone = np.ones((len(view), len(view))) - np.eye(len(view))
+        inflow, _ = pair_flows(f, w, v, everyone, mass, room)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
+        out = h * beta[1:] * w[1:] * v[0] * np.maximum(f[1:] - f[0], 0.0) * m.demand
+        waves = 4 * (1 + self.net.faults.delay_max) * hops * max(1, len(self.m.names) - 1)
+        return np.minimum(out, np.maximum(m.hi[view[1:]] - p[1:], 0.0) / waves)
+
+    def _fitness(self, i: int, signal: float) -> float:
+        """DG ``i``'s exact-mode fitness (the engine's kernel, as the reference calls it)."""
+        pr, one = self.m.problem, slice(i, i + 1)
+        fp = self.fp
+        return float(generator_fitness(self.p[one], pr.b[one], pr.c[one], self.m.lo[one],
+                                       self.m.hi[one], float(fp.B), float(fp.m),
+                                       np.array([signal]), float(fp.gain), False)[0])  # fmt: skip
+
+    def _send_transfer(self, i: int, j: int, amount: float, round_: int, via=()) -> None:
+        key = (self.m.names[i], int(self.seq[i]))
+        self.seq[i] += 1
+        self.outstanding[i][key] = [j, amount, round_, 0, via]
+        self.debits[i].append((round_ + 1 + len(via), amount))
+        self.net.send(self.m.names[i], self.m.names[j], "transfer", [amount, round_ + 1],
+                      reveals="set point change", key=key, via=via)  # fmt: skip
+
+    def _fresh(self, round_: int) -> int:
+        return 2 * (1 + self.net.faults.delay_max) + 2
+
+    def _relay_targets(self, i: int, view: list[int], round_: int) -> tuple[list, list]:
+        """The best receivers blocked neighbours announce beyond the view (the relay):
+        ``([(b, f_b, w_b, p_b), ...], [route, ...])``, the shortest route to each."""
+        best: dict[int, tuple] = {}
+        for k, (b, f, w, p, via, sent) in self.announced[i].items():
+            if self.gone[i, k] or round_ - sent > self._fresh(round_) or b == i or b in view:
+                continue
+            if i in via:
+                continue
+            route = (self.m.names[k],) + tuple(via)
+            if b not in best or len(route) < len(best[b][1]):
+                best[b] = ((b, f, w, p), route)
+        return [t for t, _ in best.values()], [r for _, r in best.values()]
+
+    def _announce(self, i: int, round_: int) -> None:
+        """A blocked DG tells its neighbours the best receiver of its group it knows: an
+        unblocked neighbour with room, or what its blocked neighbours announce (route)."""
+        names, m = self.m.names, self.m
+        candidates = []
+        for j in self._partners(i):
+            f, w, p, blocked = self.report[i, j]
+            if not blocked and w > 0 and m.hi[j] - p > RELAY_MASS * m.demand:
+                candidates.append((f, -j, j, w, p, ()))
+        for k, (b, f, w, p, via, sent) in self.announced[i].items():
+            if self.gone[i, k] or round_ - sent > self._fresh(round_) or i in via or b == i:
+                continue
+            candidates.append((f, -b, b, w, p, (names[k],) + tuple(via)))
+        if not candidates:
+            return
+        f, _, b, w, p, via = max(candidates, key=lambda c: (c[0], c[1]))
+        for j in self._partners(i):
+            if j != b and names[j] not in via:
+                self.net.send(names[i], names[j], "relay", [f, w, p], key=(b, via),
+                              reveals="fitness")  # fmt: skip
+
+
+def stable_step(minute: Minute, fp) -> float:
+    """The engine's largest stable step over the fastest rate of exact mode's dynamics, s:
+    ``STABLE_STEP / (gain max(S, D max_i (2 c_i + C)))`` (``S`` the marginal-cost spread,
+    ``D`` the demand, ``C`` the price weight; the agents' round step, docs/agents.md)."""
+    from popdispatch.integrate import STABLE_STEP
+    from popdispatch.modes.exact import scales
+
+    problem = minute.problem
+    priced = np.where(problem.generator_line >= 0, fp.C, 0.0)
+    own = float(np.max(minute.demand * (2.0 * problem.c + priced)))
+    return STABLE_STEP / (float(fp.gain) * max(scales(problem)[0], own))

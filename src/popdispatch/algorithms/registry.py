@@ -1,0 +1,27 @@
+"""The registry: one line per algorithm (its class and its default parameters, the
+equal-effort tuning's winners, docs/comparison.md)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+
+from popdispatch.algorithms.admm import Admm, AdmmParams
+from popdispatch.algorithms.dual import DualDecomposition, DualParams
+from popdispatch.algorithms.population import PopulationDynamics, SmithParams
+
+
+@dataclass(frozen=True)
+class Entry:
+    """An algorithm of the registry: its class and its default parameters' factory."""
+
+    cls: type
+    params: object
+
+
+ALGORITHMS: dict[str, Entry] = {
+    "smith": Entry(PopulationDynamics, SmithParams),
+    "distributed-smith": Entry(PopulationDynamics, partial(SmithParams, graph="ring")),
+    "dual-decomposition": Entry(DualDecomposition, DualParams),
+    "admm": Entry(Admm, AdmmParams),
+}

@@ -1,0 +1,56 @@
+"""``popdispatch compare`` in a subprocess: bad input is one line and exit 2 before any work;
+a run prints its table, writes compare.csv, summary.json and the figure, and its JSON
+agrees with the library's run of the same algorithm."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cli"))
+from popdispatch.algorithms import ALGORITHMS, Faults, RunOptions, run_algorithm  # noqa: E402
+from popdispatch.cli.compare import ALGORITHM_NAMES  # noqa: E402
+from popdispatch.scenarios import CONGESTION_PATH, elv_problem  # noqa: E402
+
+from test_commands import assert_one_line_error, run  # noqa: E402
+
+
+def test_the_command_knows_the_registry():
+    assert set(ALGORITHM_NAMES) == set(ALGORITHMS)
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["--algorithms", "smith,newton"], ["--algorithms", "newton"]),
+    (["--algorithms", ","], ["--algorithms", "no algorithm"]),
+    (["--crash", "G114"], ["--crash", "GEN@ROUND"]),
+    (["--crash", "G999@5"], ["--crash", "G999"]),
+    (["--loss", "1.5"], ["--loss"]),
+    (["--seeds", "0"], ["--seeds"]),
+])  # fmt: skip
+def test_bad_input_is_one_line_and_exit_2(args, words):
+    result = run("compare", "--minute", "566", *args)
+    assert_one_line_error(result, 2, *words)
+
+
+def test_a_run_writes_its_files_and_agrees_with_the_library(tmp_path):
+    out = tmp_path / "cmp"
+    result = run("compare", "--minute", "566", "--limit", "505:666=28", "--algorithms",
+                 "dual-decomposition,admm", "--loss", "0.1", "--seeds", "2", "--max-rounds",
+                 "60", "--out", str(out), "--json", "--quiet")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    payload = json.loads(result.stdout)
+    assert [row["algorithm"] for row in payload["algorithms"]] == ["dual-decomposition", "admm"]
+    table = pd.read_csv(out / "compare.csv")
+    assert len(table) == 4 and set(table.seed) == {0, 1}
+    assert (out / "distance.png").is_file() and (out / "summary.json").is_file()
+    problem = elv_problem(limits=[CONGESTION_PATH])
+    lib = run_algorithm("admm", problem, 566, Faults(loss=0.1, seed=1),
+                        options=RunOptions(max_rounds=60))  # fmt: skip
+    row = table[(table.algorithm == "admm") & (table.seed == 1)].iloc[0]
+    assert row.messages_total == lib.messages[-1]
+    assert row.final_distance_kw == pytest.approx(lib.distance_kw[-1], rel=1e-9)
+    assert row.status == "not_converged"  # 60 rounds: far from the DC-OPF, and it says so
