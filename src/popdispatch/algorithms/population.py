@@ -214,9 +214,10 @@ class PopulationDynamics(Algorithm):
         signal = np.where(self.below[:, i], 0.5, -0.5) @ self.nu[i]
         f_i = self._fitness(i, signal)
         x = p_view / m.demand
+        f_view = np.array([f_i] + [self.report[i, j, 0] for j in view[1:]])
         lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
         with np.errstate(divide="ignore", invalid="ignore"):
-            w, v, room, mass = weights(self.field, x, lo, hi, hi > lo, self.rate[view])
+            w, v, room, mass = weights(self.field, x, f_view, lo, hi, hi > lo, self.rate[view])
         blocked = not (w[0] > 0 and mass[0] > RELAY_MASS and room[0] > RELAY_MASS)
         refunds = sum(e[1] for e in self.outstanding[i].values())
         self.own[i] = (f_i, w[0], self.p[i] + refunds, float(blocked))  # p: at most, once
@@ -255,7 +256,7 @@ class PopulationDynamics(Algorithm):
         x = p / m.demand
         lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
         with np.errstate(divide="ignore", invalid="ignore"):
-            _, v, room, mass = weights(self.field, x, lo, hi, hi > lo, self.rate[view])
+            _, v, room, mass = weights(self.field, x, f, lo, hi, hi > lo, self.rate[view])
         everyone = np.ones((len(view), len(view))) - np.eye(len(view))
         inflow, _ = pair_flows(f, w, v, everyone, mass, room)
         with np.errstate(divide="ignore", invalid="ignore"):
