@@ -36,14 +36,38 @@ class Signals:
 
 @json_serializable
 @dataclass(frozen=True)
+class Standing:
+    """Generator -> neighbour, at the start of ``round`` on a communication graph that is not
+    complete, under the curvature-scaled field (dynamics/newton.py): its revision ``rate``
+    (dimensionless), its ``room`` below ``Pmax`` and its movable ``mass`` above ``Pmin``
+    (shares). Each receiver normalises its weight by the rates of its closed neighbourhood
+    inside their limits (``neighbourhood_receivers``), which it learns from these."""
+
+    round: int
+    rate: float
+    room: float
+    mass: float
+
+
+@json_serializable
+@dataclass(frozen=True)
 class Status:
-    """Generator -> neighbour: fitness ``f`` (EUR/MW), receiver weight ``w`` and movable mass
-    ``v`` (shares) at the start of ``round`` (the pairwise-flow inputs, dynamics/pairwise.py)."""
+    """Generator -> neighbour: fitness ``f`` (EUR/MW), receiver weight ``w``, sender weight
+    ``v``, movable ``mass`` and ``room`` (shares) at the start of ``round`` (the pairwise-flow
+    inputs, dynamics/pairwise.py; mass and room tell who relays).
+
+    Under the curvature-scaled field ``v`` is the generator's revision rate where it has mass
+    to move, and ``w`` its rate where it has room, normalised: on a sparse graph by the
+    receiver itself (from its neighbours' :class:`Standing`), on the complete graph by every
+    listener, who holds every status of the round and so the common normalisation
+    (:meth:`popdispatch.agents.generator.GeneratorAgent._receiver_weights`)."""
 
     round: int
     f: float
     w: float
     v: float
+    mass: float = 0.0
+    room: float = 0.0
     index: int = -1  # the generator's position (ties between best receivers of a relay group)
 
 
@@ -128,6 +152,7 @@ class Relayed:
 ALL_MESSAGES = (
     Measurement,
     Signals,
+    Standing,
     Status,
     Offer,
     Accept,

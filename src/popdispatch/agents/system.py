@@ -372,8 +372,8 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
         raise OptionError(f"the agents run with every generator online (offline: {off})")
     check_settings(settings)
     mode = get_mode(settings.mode)
-    dynamics = get_dynamics(settings.dynamics)
-    field_code = dynamics.bounded_field if mode.bounded else dynamics.field
+    field_code = settings.field
+    rates = settings.revision_rates(problem)
     fp = game_constants(problem, settings)
     demand = float(problem.demand[minute - 1])
     network = LossyNetwork(faults)
@@ -386,7 +386,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
             float(problem.b[i]), float(problem.c[i]), float(problem.pmin[i]),
             float(problem.pmax[i]), float(fp.B), float(fp.m),
             float(fp.gain) if mode.bounded else 1.0, not mode.bounded, int(field_code),
-            demand, step_s,
+            demand, step_s, float(rates[i]) if len(rates) else 0.0,
         )  # fmt: skip
         neighbours = [n for n in names if graph.has_edge(name, n)]
         generators.append(
