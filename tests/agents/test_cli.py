@@ -34,6 +34,21 @@ def test_json_has_snapshot_and_message_keys(congestion_problem):
     assert np.abs(setpoints - opf).max() < 0.01
     assert s["lost"] == 0 and s["messages"] > 0
     assert abs(s["max_imbalance_w"]) < 1.0
+    assert s["dynamics_status"] == "converged"
+    assert s["distance_bound_kw"] <= s["accuracy_kw"]
+    assert np.abs(setpoints - opf).max() <= s["accuracy_kw"]
+
+
+def test_a_run_stopped_early_says_what_it_proved():
+    """Exit 1; the JSON and the text say not converged with the bound above the accuracy."""
+    result = CliRunner().invoke(agents, [*CONGESTION, "--json", "--max-rounds", "10"])
+    assert result.exit_code == 1, result.output
+    s = json.loads(result.stdout)
+    assert s["dynamics_status"] == "not_converged" and s["converged_iteration"] is None
+    assert s["distance_bound_kw"] > s["accuracy_kw"] > 0
+    text = CliRunner().invoke(agents, [*CONGESTION, "--max-rounds", "10"]).stdout
+    assert f"proved within {s['distance_bound_kw']:.3g} kW of the DC-OPF" in text
+    assert f"accuracy {s['accuracy_kw']:.3g} kW" in text
 
 
 def test_loss_is_reported():

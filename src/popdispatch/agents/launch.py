@@ -118,7 +118,7 @@ def warm_up(config: LaunchConfig) -> None:
     from popdispatch.agents.system import AgentSettings, _simulate
 
     _, system = _system(config)
-    opts = AgentSettings(max_rounds=WARM_UP_ROUNDS, drain_rounds=0)
+    opts = AgentSettings(max_rounds=WARM_UP_ROUNDS, drain_rounds=0, tol_kw=0.0)
     asyncio.run(_simulate(system, opts, opts.window, None))
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import networkx as nx
@@ -31,6 +32,7 @@ from popdispatch.game.controllers import NodeControllers
 from popdispatch.game.parameters import MinuteInputs, PriceLaw
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import STABLE_STEP
+from popdispatch.integrate.stopping import windows_agree
 from popdispatch.modes import get_mode
 from popdispatch.modes.exact import price_weights, scales
 from popdispatch.online.settings import RunSettings, initial_shares
@@ -38,6 +40,8 @@ from popdispatch.warm_start import SHARES, warm_start
 
 #: Watts per MW.
 W_PER_MW = 1.0e6
+#: Paper mode's rest tolerance, kW (it claims a rest point of its dynamics, no accuracy).
+PAPER_TOL_KW = 1e-3
 
 
 @dataclass(frozen=True)
@@ -51,7 +55,7 @@ class AgentSettings:
     window : rounds over which the set points must move less than ``tol_kw`` to be at rest
         (and every controller's residual, modes/exact.py, be within ``tol_kw``: a price may
         still be decaying on a slack line while the set points wait at their limits).
-    tol_kw : rest tolerance, kW.
+    tol_kw : rest tolerance, kW (None: :meth:`tol_for`, the engine's).
     drain_rounds : most rounds after rest to decide and acknowledge every transaction.
     timeout : rounds an offer stays open (None: ``2 * delay_max + 1`` of the faults, so that
         an offer and its acceptance can both arrive as late as the network delays them).
@@ -71,7 +75,7 @@ class AgentSettings:
     step_s: float | None = None
     max_rounds: int = 4000
     window: int = 10
-    tol_kw: float = 1e-3
+    tol_kw: float | None = None
     drain_rounds: int = 200
     timeout: int | None = None
     lag: int | None = None
@@ -79,6 +83,17 @@ class AgentSettings:
     decision_copies: int | None = None
     engine_limiter: bool | None = None
     stale_rounds: int = 10
+
+    def tol_for(self, problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+        """The rest tolerance in force, kW: the given one, else the engine's in a mode that
+        claims the DC-OPF (``settings.stepping``: a tenth of the accuracy's floor or its
+        relative part, ``max(accuracy_rel P_d, accuracy_kw / 10)``, so that the rest is what
+        the distance certificate then proves), else :data:`PAPER_TOL_KW`."""
+        if self.tol_kw is not None:
+            return float(self.tol_kw)
+        if not get_mode(settings.mode).claims_dc_opf:
+            return PAPER_TOL_KW
+        return settings.stepping.tol_mw(float(problem.demand[minute - 1])) * KW_PER_MW
 
     def stale_for(self, faults: Faults) -> int:
         """Rounds of silence after which a price or a neighbour's status counts as stale
@@ -130,17 +145,29 @@ class AgentSettings:
 
 
 def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
-    """An estimate of the fastest rate of exact mode's dynamics at ``minute``, 1/s: the
-    largest sensitivity of a generator's fitness to its own share,
-    ``gain * D * (2 c_i + C_i)`` (``D`` the minute's demand, MW; ``C_i`` the price weight of
-    the lines above it, :func:`popdispatch.modes.exact.price_weights`, 0 for a generator below
-    none), and at least ``gain * S``, the revision rate of a fitness gap of one marginal-cost
-    spread ``S`` (:func:`popdispatch.modes.exact.scales`). Dimensionless constants
-    (:class:`~popdispatch.modes.exact.ExactConstants`), so the same on a feeder scaled by 100.
+    """An estimate of the fastest rate of exact mode's dynamics at ``minute``, 1/s
+    (docs/agents.md, "The round step").
 
-    It counts one priced line above a generator: limits nested several deep along one path
-    (the synthetic feeders with every line limited) make the complete graph stiffer than this
-    (docs/agents.md, "The round step")."""
+    Curvature-scaled field (dynamics/newton.py), the largest of
+
+    - ``kappa D g max_i r_i (2 c_i + C_i)``: a generator's own relaxation rate (``kappa`` the
+      revision gain per EUR/MW, ``D`` the minute's demand, MW, ``r_i`` its revision rate,
+      ``C_i`` the price weight of the nearest limited line above it,
+      :func:`popdispatch.modes.exact.price_weights`, 0 below none), at least ``kappa D g S /
+      P``, the rate at which every interior marginal cost relaxes; ``g`` the most receivers a
+      sender's weights can sum over: 1 on the complete graph (``sum_i r_i / R = 1``), the
+      largest degree plus one on a sparse graph (each neighbour's weight ``r_i / R_i`` is at
+      most 1, and a sender relays to one best receiver per group it belongs to);
+    - ``2 STABLE_STEP alpha / C`` where a line is limited: a line's price and the set points
+      below it, in their proportional and integral regime, move as ``s^2 + a s + b = 0``
+      with ``b / a = alpha / C`` whatever the generators; Euler's factor ``1 + h s`` of a
+      complex pair has ``|1 + h s|^2 = 1 - h a + h^2 b``, below 1 for ``h < C / alpha`` and
+      smallest at ``h = C / (2 alpha)``, the step this gives.
+
+    Capacity-constrained Smith (``ExactConstants(revision="capacity")``): ``kappa max(S, D
+    max_i (2 c_i + C_i))``. Dimensionless constants, so the same on a feeder scaled by 100.
+    Counts one priced line above a generator: limits nested several deep along one path (the
+    synthetic feeders with every line limited) are stiffer than this."""
     fp = settings.game_constants(problem)
     row = np.array([minute - 1])
     weight = np.broadcast_to(price_weights(problem, settings.exact.price_law, fp.C, row),
@@ -149,8 +176,17 @@ def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int)
     limited = problem.generator_line >= 0
     below[limited] = weight[problem.generator_line[limited]]
     demand = float(problem.demand[minute - 1])
-    own = float(np.max(demand * (2.0 * problem.c + below)))
-    return float(fp.gain) * max(scales(problem)[0], own)
+    spread, reference = scales(problem)
+    rates = settings.revision_rates(problem)
+    if not len(rates):
+        own = float(np.max(demand * (2.0 * problem.c + below)))
+        return float(fp.gain) * max(spread, own)
+    graph = generator_graph(problem, settings)
+    fan = 1 if _complete(graph) else max(d for _, d in graph.degree) + 1
+    own = float(np.max(rates * (2.0 * problem.c + below)))
+    field = float(fp.gain) * demand * fan * max(own, spread / reference)
+    price = 2.0 * STABLE_STEP * float(fp.price_rate) / float(fp.C) if len(problem.limit) else 0.0
+    return max(field, price)
 
 
 def default_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
@@ -180,6 +216,9 @@ class AgentSystem:
     events: list = field(default_factory=list)
     price_cap: float = np.inf  # EUR/MW: a line price beyond it means no dispatch relieves it
     line_names: list[str] = field(default_factory=list)  # "line A-B" per limited line
+    prove: Callable[[AgentSystem], float] | None = None  # the distance bound now, MW
+    extrapolate: bool = False  # the rest rule projects the geometric tail (exact mode)
+    accuracy_mw: float = 0.0  # what a rest must prove to end the run (with ``prove``)
 
     @property
     def agents(self) -> list:
@@ -298,37 +337,57 @@ class AgentRun:
     stall_reason: str | None = None
     horizon_reason: str | None = None
     infeasible: bool = False
+    certified: bool = False
+    distance_bound_kw: float | None = None
+    accuracy_kw: float | None = None
 
     @property
     def status(self) -> str:
-        """``converged`` (at rest and, in exact mode, at a KKT point of the DC-OPF),
-        ``stalled`` (at rest elsewhere: ``stall_reason``), ``infeasible`` (the line prices ran
-        away: ``horizon_reason``) or ``not_converged`` (never at rest: ``horizon_reason``)."""
+        """As the engine's snapshot: ``converged`` (in exact mode the distance certificate
+        proves every set point within ``accuracy_kw`` of the DC-OPF; in paper mode, at rest),
+        ``stalled`` (at rest without that proof: ``stall_reason``), ``infeasible`` (the line
+        prices ran away: ``horizon_reason``) or ``not_converged`` (never at rest and not
+        proved: ``horizon_reason``)."""
         if self.infeasible:
             return "infeasible"
-        if self.rest_round is None:
-            return "not_converged"
-        return "stalled" if self.stall_reason else "converged"
+        if self.certified:
+            return "converged"
+        return "not_converged" if self.rest_round is None else "stalled"
 
     @property
     def reason(self) -> str | None:
         """Why the run is not ``converged`` (None if it is)."""
+        if self.status == "converged":
+            return None
         return self.horizon_reason if self.rest_round is None else self.stall_reason
 
     def line_states(self, n_lines: int) -> np.ndarray:
         """Exact mode's line prices at the end, EUR/MW: ``z_up`` of every limited line, then
         ``z_down``, each the mean of its live end controllers' copies (0 in paper mode)."""
-        z, ends = np.zeros(2 * n_lines), np.zeros(n_lines)
-        for copies in self.prices.values():
-            for line, z_up, z_down in copies:
-                z[line] += z_up
-                z[n_lines + line] += z_down
-                ends[line] += 1
-        return z / np.concatenate([ends, ends]).clip(min=1)
+        return line_states(self.prices, n_lines)
 
     @property
     def messages_per_agent_round(self) -> float:
         return self.messages / max(self.agents * max(self.rounds, 1), 1)
+
+
+def line_states(prices: dict, n_lines: int) -> np.ndarray:
+    """``z_up`` of every limited line, then ``z_down`` (EUR/MW), each the mean of the copies
+    in ``prices`` (per controller, ``(line, z_up, z_down)`` of each line it ends)."""
+    z, ends = np.zeros(2 * n_lines), np.zeros(n_lines)
+    for copies in prices.values():
+        for line, z_up, z_down in copies:
+            z[line] += z_up
+            z[n_lines + line] += z_down
+            ends[line] += 1
+    return z / np.concatenate([ends, ends]).clip(min=1)
+
+
+def controller_prices(system: AgentSystem) -> dict:
+    """Each live controller's ``(line, z_up, z_down)`` of its lines (a crashed controller's
+    copies froze when it stopped: the survivor's count)."""
+    return {aid: [(end.line, end.z_up, end.z_down) for end in c.ends]
+            for aid, c in system.controllers.items() if not c.crashed}  # fmt: skip
 
 
 def initial_setpoints(problem: DispatchProblem, settings: RunSettings, minute: int) -> np.ndarray:
@@ -525,18 +584,65 @@ def run_agents(
     settings = settings or RunSettings()
     faults = faults or Faults()
     agent_settings = agent_settings or AgentSettings()
+    agent_settings = replace(agent_settings,
+                             tol_kw=agent_settings.tol_for(problem, settings, minute))
     step_s = agent_settings.step_for(problem, settings, minute)
-    run = _run(problem, minute, settings, faults, agent_settings, step_s, on_round)
-    if run.rest_round is None or not get_mode(settings.mode).claims_dc_opf:
-        return run
     tripped = [e.agent for e in faults.events if e.kind == "trip"]
-    if abs(run.source_kw) > agent_settings.tol_kw:
+    engine = _auditor(without(problem, minute, tripped), settings, agent_settings, step_s)
+    run = _run(problem, minute, settings, faults, agent_settings, step_s, on_round, engine)
+    return _judged(run, engine, minute, tripped, agent_settings.tol_kw)
+
+
+def _auditor(problem: DispatchProblem, settings: RunSettings, opts: AgentSettings,
+             step_s: float):  # fmt: skip
+    """The engine that audits a run (its distance certificate and KKT check, with the
+    agents' step, rest tolerance and window): a :class:`popdispatch.online.Engine` of
+    ``problem`` (without the tripped generators)."""
+    from popdispatch.integrate import Integrator
+    from popdispatch.online import Engine
+
+    integrator = Integrator(dt=step_s, tol_kw=max(opts.tol_kw, 1e-9), window=opts.window)
+    return Engine(problem, replace(settings, integrator=integrator))
+
+
+def _judged(run: AgentRun, engine, minute: int, tripped: list[str], tol_kw: float) -> AgentRun:
+    """``run`` with the engine's verdict (:func:`popdispatch.online.verdicts`): in a mode that
+    claims the DC-OPF, converged only when the distance certificate proves the end state
+    (set points, each line's prices: the mean of its end controllers' copies) within the
+    accuracy; a run at rest without that proof is stalled with the reason (a failing KKT
+    condition, else the bound). A source bus still carrying power after a trip is never
+    converged."""
+    from popdispatch.online import verdicts
+
+    problem = engine.problem
+    p_mw = run.setpoints_kw[None] / KW_PER_MW
+    z = run.line_states(len(problem.limit))[None]
+    if not engine.mode.claims_dc_opf:
+        z = np.zeros((1, 0))
+    rested = np.array([run.rest_round is not None])
+    verdict = verdicts(engine, np.array([minute]), p_mw, z, rested, np.array([run.infeasible]))
+    certified, reason = bool(verdict.certified[0]), verdict.reasons[0]
+    if engine.mode.claims_dc_opf and abs(run.source_kw) > tol_kw:
+        certified = False
         reason = (f"the source bus carries {run.source_kw:.4g} kW that the generators left "
                   f"after the trip of {', '.join(tripped)} cannot take")  # fmt: skip
-        return replace(run, stall_reason=reason)
-    checked = without(problem, minute, tripped)
-    return replace(run, stall_reason=_kkt_reason(checked, minute, settings, agent_settings,
-                                                 step_s, run))  # fmt: skip
+    bound = None if verdict.bound_kw is None else float(verdict.bound_kw[0])
+    accuracy = None if verdict.accuracy_kw is None else float(verdict.accuracy_kw[0])
+    return replace(run, certified=certified, stall_reason=reason if rested[0] else None,
+                   distance_bound_kw=bound, accuracy_kw=accuracy)  # fmt: skip
+
+
+def proved_distance_mw(engine, minute: int):
+    """``prove(system)``: the distance bound (MW) the certificate gives the agents' state now
+    (the inverters' set points and the live controllers' prices), with ``engine`` (see
+    :func:`_auditor`)."""
+
+    def prove(system: AgentSystem) -> float:
+        p_mw = system.inverters.p[None]
+        z = line_states(controller_prices(system), len(engine.problem.limit))[None]
+        return engine.certificates(np.array([minute]), p_mw, z)[0].distance_mw
+
+    return prove
 
 
 def without(problem: DispatchProblem, minute: int, names: list[str]) -> DispatchProblem:
@@ -549,22 +655,11 @@ def without(problem: DispatchProblem, minute: int, names: list[str]) -> Dispatch
     return replace(problem, online=online)
 
 
-def _kkt_reason(problem, minute, settings, opts: AgentSettings, step_s: float, run) -> str | None:
-    """The engine's own KKT check of the rest state (:meth:`popdispatch.online.Engine.
-    stall_reasons`, with the agents' step, rest tolerance and window): set points and each
-    line's prices (the mean of its two end controllers' copies)."""
-    from popdispatch.integrate import Integrator
-    from popdispatch.online import Engine
-
-    z = run.line_states(len(problem.limit))
-    integrator = Integrator(dt=step_s, tol_kw=max(opts.tol_kw, 1e-9), window=opts.window)
-    engine = Engine(problem, replace(settings, integrator=integrator))
-    p_mw = run.setpoints_kw[None] / KW_PER_MW
-    return engine.stall_reasons(np.array([minute]), p_mw, z[None], np.array([True]))[0]
-
-
-def _run(problem, minute, settings, faults, agent_settings, step_s, on_round) -> AgentRun:
-    """Build the agents and run them in mango's simulated world."""
+def _run(problem, minute, settings, faults, agent_settings, step_s, on_round,
+         engine=None) -> AgentRun:  # fmt: skip
+    """Build the agents and run them in mango's simulated world; with an auditing ``engine``
+    (:func:`_auditor`) in a mode that claims the DC-OPF, a rest the certificate does not
+    prove within the accuracy runs on (see :func:`_simulate`)."""
     system = build_agents(problem, minute, settings, step_s, faults,
                           agent_settings.timeout_for(faults), agent_settings.lag_for(faults),
                           agent_settings.copies_for(faults),
@@ -575,11 +670,20 @@ def _run(problem, minute, settings, faults, agent_settings, step_s, on_round) ->
         ticks = max(ticks, relay_phase_ticks(len(system.generators), faults.delay_max))
     for agent in system.agents:
         agent.phase_ticks = ticks
+    if engine is not None and engine.mode.claims_dc_opf:
+        system.prove = proved_distance_mw(engine, minute)
+        system.accuracy_mw = float(settings.accuracy_mw(problem.demand[minute - 1]))
+    system.extrapolate = bool(settings.stepping.extrapolate)
     window = agent_settings.rest_window(faults)
     return asyncio.run(_simulate(system, agent_settings, window, on_round))
 
 
 async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_round) -> AgentRun:
+    """Step the world round by round until the set points come to rest (or the horizon),
+    then drain. With ``system.prove``, a rest whose proved distance bound is above the
+    accuracy runs on for another window as long as each rest proves at least half the bound
+    of the one before (the engine's rule, :func:`popdispatch.online.run_snapshot`): the rest
+    window can stop a run whose last watts still move."""
     from mango import AgentAddress, create_world, graph_topology, per_node
 
     world = create_world(communication_sim=system.network, record_messages=False)
@@ -600,6 +704,8 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
     infeasible = False
     max_imbalance = max_transient = 0.0
     last_event = max((_last_round(e) for e in system.network.faults.events), default=-1)
+    check_after = last_event + window  # no rest declared before the last fault
+    last_bound = np.inf
     async with world:
         rnd, quiet = 0, False
         while True:
@@ -611,8 +717,12 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
             if on_round is not None:
                 on_round(system, rnd)
             if not quiet:
-                due = rnd > last_event + window  # no rest declared before the last fault
-                rest_round, unrest, infeasible = _verdict(system, rnd, opts, window, due)
+                rest_round, unrest, infeasible = _verdict(system, rnd, opts, window,
+                                                          rnd > check_after)  # fmt: skip
+                if rest_round is not None and system.prove is not None and rnd < opts.max_rounds:
+                    bound = system.prove(system)
+                    if bound > system.accuracy_mw and bound < 0.5 * last_bound:
+                        rest_round, last_bound, check_after = None, bound, rnd + window
                 quiet = rest_round is not None or unrest is not None
                 for gen in system.parties if quiet else ():
                     gen.quiet = True  # the drain: no new offers, open transactions decided
@@ -623,11 +733,7 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
             _raise_agent_errors(system)
             rnd += 1
     wall = time.perf_counter() - start
-    prices = {  # a crashed controller's copies froze when it stopped: the survivor's count
-        aid: [(end.line, end.z_up, end.z_down) for end in c.ends]
-        for aid, c in system.controllers.items()
-        if not c.crashed
-    }
+    prices = controller_prices(system)
     residual = max((c.residual_mw() for c in system.controllers.values()), default=0.0)
     trajectory = np.array(system.plant.history) * KW_PER_MW
     return AgentRun(
@@ -668,7 +774,8 @@ def _verdict(system: AgentSystem, rnd: int, opts: AgentSettings, window: int,
     tol = opts.tol_kw / KW_PER_MW
     live = [c for c in system.controllers.values() if not c.crashed]
     residual = max((c.residual_mw() for c in live), default=0.0)
-    if due and residual <= tol and _at_rest(system.plant.history, window, tol):
+    if due and residual <= tol and _at_rest(system.plant.history, window, tol,
+                                            system.extrapolate):
         return len(system.plant.history) - 1, None, False
     ran_away = runaway(system, live)
     if ran_away is not None:
@@ -747,9 +854,13 @@ CYCLE_ROUNDS = 30
 CYCLE_PATH = 3.0
 
 
-def _at_rest(history: list[np.ndarray], window: int, tol_mw: float) -> bool:
-    """Whether the set points moved less than ``tol_mw`` over the last ``window`` rounds."""
-    if len(history) <= window:
+def _at_rest(history: list[np.ndarray], window: int, tol_mw: float, extrapolate: bool) -> bool:
+    """The engine's stopping rule on the rounds (:func:`popdispatch.integrate.stopping.
+    windows_agree`): the mean set points of the last ``window`` rounds differ from those of
+    the ``window`` before by at most ``tol_mw``, and with ``extrapolate`` (exact mode) so
+    does the geometric tail still to go."""
+    need = (3 if extrapolate else 2) * window
+    if len(history) < need:
         return False
-    recent = np.array(history[-window - 1 :])
-    return bool(np.abs(recent - recent[-1]).max() <= tol_mw)
+    ring = np.ascontiguousarray(history[-need:], dtype=float)
+    return bool(windows_agree(ring, need - 1, window, tol_mw, extrapolate))

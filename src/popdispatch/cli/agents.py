@@ -195,7 +195,7 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         settings=settings,
         generators=problem.generators,
         trajectory_kw=np.vstack([run.trajectory_kw, run.setpoints_kw]),
-        converged_at=run.rest_round if run.status == "converged" else None,
+        converged_at=_converged_at(run),
         first_congestion=next((i for i, o in enumerate(overflow) if o), None),
         overflow_kw=overflow_kw(problem, final_mw, minute),
         flows_kw=limited_flows_mw(problem, final_mw, minute) * 1000.0,
@@ -206,6 +206,8 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         infeasible=run.infeasible,
         line_price_eur_per_mwh=line_prices,
         voltage_price_eur_per_mwh=voltage_prices,
+        distance_bound_kw=run.distance_bound_kw,
+        accuracy_kw=run.accuracy_kw,
     )
     # the yardstick: the DC-OPF without the tripped DGs
     remaining = without(problem, minute, [e.agent for e in faults.events if e.kind == "trip"])
@@ -242,6 +244,23 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
     return summary
 
 
+def _converged_at(run) -> int | None:
+    """The round a converged run is reported converged at (its rest round, else its last
+    round: proved without coming to rest), None if it is not converged."""
+    if run.status != "converged":
+        return None
+    return run.rest_round if run.rest_round is not None else run.rounds
+
+
+def _proved_text(s: dict) -> str:
+    """The distance certificate's bound against the accuracy (modes that claim the DC-OPF)."""
+    if s.get("accuracy_kw") is None:
+        return ""
+    bound = s.get("distance_bound_kw")
+    shown = "nothing (unbounded)" if bound is None else f"within {bound:.3g} kW"
+    return f"; proved {shown} of the DC-OPF, accuracy {s['accuracy_kw']:.3g} kW"
+
+
 def agents_text(s: dict) -> str:
     """What people read: set points against the DC-OPF and what the messages did."""
     from popdispatch.report.text import limits_text
@@ -260,6 +279,7 @@ def agents_text(s: dict) -> str:
             if s["rest_iteration"] is not None
             else ""
         )
+        + _proved_text(s)
         + (f"\nstalled: {s['stall_reason']}" if s["stall_reason"] else "")
         + (f"\n{s['horizon_reason']}" if s["horizon_reason"] else ""),
         f"{'generator':>10} {'setpoint_kw':>12} {'opf_kw':>10}",
