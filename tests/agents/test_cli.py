@@ -26,13 +26,15 @@ def test_json_has_snapshot_and_message_keys(congestion_problem):
     result = CliRunner().invoke(agents, [*CONGESTION, "--json"])
     assert result.exit_code == 0, result.output
     s = json.loads(result.output)
-    for key in ("status", "minute", "demand_kw", "generators", "iterations",
-                "max_abs_error_kw", "messages", "lost", "max_imbalance_w"):  # fmt: skip
+    for key in ("status", "minute", "demand_kw", "generators", "iterations", "rounds",
+                "max_abs_error_kw", "messages", "scalars_sent", "lost",
+                "max_imbalance_w"):  # fmt: skip
         assert key in s
     opf = solve_opf(congestion_problem, 566).p_kw  # the yardstick, solved here
     setpoints = np.array([g["setpoint_kw"] for g in s["generators"]])
     assert np.abs(setpoints - opf).max() < 0.01
     assert s["lost"] == 0 and s["messages"] > 0
+    assert s["scalars_sent"] > s["messages"]  # a status alone carries 5
     assert abs(s["max_imbalance_w"]) < 1.0
     assert s["dynamics_status"] == "converged"
     assert s["distance_bound_kw"] <= s["accuracy_kw"]

@@ -8,7 +8,7 @@ connection between processes; in mango's simulated world they are handed over as
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, is_dataclass
 
 from mango import json_serializable
 
@@ -162,3 +162,19 @@ ALL_MESSAGES = (
     Relayed,
     Heartbeat,
 )
+
+
+def scalars(content) -> int:
+    """The real numbers a message carries (its payload: every ``float`` in its fields, in a
+    dict's values and in a relayed message's content); rounds, indices, flags and names are
+    its envelope and are not counted. The measure of communication that algorithms of
+    different message shapes share (``scalars_sent``)."""
+    if isinstance(content, float):
+        return 1
+    if isinstance(content, dict):
+        return sum(scalars(value) for value in content.values())
+    if isinstance(content, tuple | list):
+        return sum(scalars(value) for value in content)
+    if is_dataclass(content) and not isinstance(content, type):
+        return sum(scalars(getattr(content, f.name)) for f in fields(content))
+    return 0

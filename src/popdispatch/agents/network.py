@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 from mango import CommunicationSimulation, CommunicationSimulationResult, PackageResult
 
+from popdispatch.agents.messages import scalars
 from popdispatch.agents.schedule import HOP_TICKS, TICKS_PER_ROUND
 from popdispatch.errors import OptionError
 
@@ -110,14 +111,16 @@ class LossyNetwork(CommunicationSimulation):
         self.faults = faults
         self.rng = random.Random(faults.seed)
         self.sent = 0
+        self.scalars = 0  # real numbers carried by the sent messages (messages.scalars)
         self.lost = 0
         self.duplicated = 0
 
     def calculate_communication(self, current_time, messages) -> CommunicationSimulationResult:
         results = []
         extra_max = int(self.faults.delay_max) * TICKS_PER_ROUND
-        for _ in messages:
+        for package in messages:
             self.sent += 1
+            self.scalars += scalars(package.content[0])
             reached = self.rng.random() >= self.faults.loss
             self.lost += not reached
             extra = (

@@ -295,8 +295,9 @@ class AgentRun:
     ``trajectory_kw``: set points at the start of every round (rows), as the plant saw them;
     ``setpoints_kw``: after the drain; ``rest_round``: the round the set points came to rest
     (None if never); ``messages``: every message sent (lost ones and duplicate copies
-    included); ``lost``: of them lost; ``duplicated``: messages the network delivered
-    twice; ``max_imbalance_w``: largest |supply - demand| of the
+    included); ``scalars_sent``: the real numbers those messages carried
+    (:func:`popdispatch.agents.messages.scalars`); ``lost``: of them lost; ``duplicated``:
+    messages the network delivered twice; ``max_imbalance_w``: largest |supply - demand| of the
     committed state at any round; ``max_transient_w``: largest |supply - demand| of the
     inverters as they were at a measurement (taken up by the source bus while a commit is in
     flight); ``final_imbalance_w``: of the inverters after the drain; ``open_transactions``:
@@ -333,6 +334,7 @@ class AgentRun:
     prices: dict = field(default_factory=dict)
     events: list = field(default_factory=list)
     source_kw: float = 0.0
+    scalars_sent: int = 0
 
     stall_reason: str | None = None
     horizon_reason: str | None = None
@@ -743,6 +745,7 @@ async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_ro
         rounds=len(trajectory) - 1,
         rest_round=rest_round,
         messages=system.network.sent,
+        scalars_sent=system.network.scalars,
         lost=system.network.lost,
         duplicated=system.network.duplicated,
         max_imbalance_w=max_imbalance * W_PER_MW,

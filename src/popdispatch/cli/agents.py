@@ -5,9 +5,9 @@ network's faults (``--loss``, ``--delay-max``, ``--duplicate``, ``--noise-kw``, 
 the round's Euler step (``--step-s``). The output is the snapshot's (``--json``: the snapshot
 keys, with ``iterations`` counting rounds) plus what the messages did: ``messages``, ``lost``,
 ``max_imbalance_w`` (committed state), ``max_transient_w`` (taken up by the source bus),
-``final_imbalance_w``, ``open_transactions``, ``rounds``, ``agents`` and
-``messages_per_agent_round``. ``agents launch`` runs the agents as one OS process each over
-TCP on localhost (:mod:`popdispatch.agents.launch`). Register the group in the main one with
+``final_imbalance_w``, ``open_transactions``, ``rounds``, ``agents``, ``scalars_sent`` (the
+real numbers the messages carried) and ``messages_per_agent_round``. ``agents launch`` runs
+the agents as one OS process each over TCP on localhost (:mod:`popdispatch.agents.launch`). Register the group in the main one with
 ``cli.add_command(agents)`` (:mod:`popdispatch.cli.commands`).
 """
 
@@ -228,6 +228,7 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         seed=faults.seed,
         agents=run.agents,
         messages=run.messages,
+        scalars_sent=run.scalars_sent,
         lost=run.lost,
         messages_per_agent_round=run.messages_per_agent_round,
         max_imbalance_w=run.max_imbalance_w,
@@ -294,7 +295,8 @@ def agents_text(s: dict) -> str:
         + f", max overflow {s['max_overflow_kw']:.4f} kW",
         *_price_lines(s["line_prices"]),
         f"messages {s['messages']} ({s['lost']} lost, {s['messages_per_agent_round']:.2f} per "
-        f"agent per round); imbalance: committed max {s['max_imbalance_w']:.3g} W, source bus "
+        f"agent per round; {s['scalars_sent']} scalars sent); imbalance: committed max "
+        f"{s['max_imbalance_w']:.3g} W, source bus "
         f"max {s['max_transient_w']:.3g} W, final {s['final_imbalance_w']:.3g} W, open "
         f"transactions {s['open_transactions']}",
     ]
