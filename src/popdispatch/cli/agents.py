@@ -7,8 +7,9 @@ keys, with ``iterations`` counting rounds) plus what the messages did: ``message
 ``max_imbalance_w`` (committed state), ``max_transient_w`` (taken up by the source bus),
 ``final_imbalance_w``, ``open_transactions``, ``rounds``, ``agents``, ``scalars_sent`` (the
 real numbers the messages carried) and ``messages_per_agent_round``. ``agents launch`` runs
-the agents as one OS process each over TCP on localhost (:mod:`popdispatch.agents.launch`). Register the group in the main one with
-``cli.add_command(agents)`` (:mod:`popdispatch.cli.commands`).
+the agents as one OS process each over TCP on localhost (:mod:`popdispatch.agents.launch`).
+Register the group in the main one with ``cli.add_command(agents)``
+(:mod:`popdispatch.cli.commands`).
 """
 
 from __future__ import annotations
