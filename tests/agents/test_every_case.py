@@ -21,13 +21,8 @@ pytest.importorskip(
 )
 
 from popdispatch.agents.network import Faults  # noqa: E402
-from popdispatch.agents.system import (  # noqa: E402
-    AgentSettings,
-    build_agents,
-    controller_id,
-    default_step,
-    run_agents,
-)
+from popdispatch.agents.population import build_agents, controller_id, default_step  # noqa: E402
+from popdispatch.agents.system import AgentSettings, run_agents  # noqa: E402
 from popdispatch.constants import KW_PER_MW  # noqa: E402
 from popdispatch.errors import OptionError  # noqa: E402
 from popdispatch.integrate import Integrator  # noqa: E402

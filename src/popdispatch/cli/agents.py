@@ -86,15 +86,22 @@ def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, dupl
     if minute is None:
         raise click.MissingParameter(param_hint="'--minute'", param_type="option")
     progress = Progress(quiet)
-    settings = settings_from(dynamics, mode, x0, graph, None, constants, price_law)
     events = {"trip": trips, "crash": crashes, "controller-crash": controller_crashes}
     faults = _faults(loss, delay_max, duplicate, noise_kw, seed, events)
-    from popdispatch.agents.system import check_settings
+    from popdispatch.agents.algorithms import (
+        DEFAULT_ALGORITHM,
+        get_algorithm,
+        refuse_mode,
+        refuse_options,
+    )
 
-    check_settings(settings)  # before the feeder is read
+    algorithm = get_algorithm(DEFAULT_ALGORITHM)
+    refuse_mode(algorithm, mode)  # before the mode's own options are asked for (--vmin)
+    settings = settings_from(dynamics, mode, x0, graph, None, constants, price_law)
+    options = AgentOptions(step_s, max_rounds, pace)
+    refuse_options(algorithm, settings, _agent_settings(options), faults)  # before any work
     problem = _problem(source, profiles, minute, limits, progress)
     with progress.step(f"minute {minute}: {dynamics} dynamics by agents"):
-        options = AgentOptions(step_s, max_rounds, pace)
         summary = agents_summary(problem, minute, settings, faults, options, limits)
     emit(stamp(summary), as_json, agents_text(summary))
     if summary["status"] == "infeasible":
@@ -161,11 +168,19 @@ class AgentOptions(NamedTuple):
     paced: bool
 
 
+def _agent_settings(options: AgentOptions):
+    """The :class:`~popdispatch.agents.system.AgentSettings` of the command's options."""
+    from popdispatch.agents.system import AgentSettings
+
+    return AgentSettings(step_s=options.step_s, max_rounds=options.max_rounds,
+                         paced=options.paced)  # fmt: skip
+
+
 def agents_summary(problem, minute, settings, faults, options: AgentOptions, limits) -> dict:
     """The snapshot summary of the agents' run against the DC-OPF, plus the messages' keys."""
     import numpy as np
 
-    from popdispatch.agents.system import AgentSettings, run_agents, without
+    from popdispatch.agents.system import run_agents, without
     from popdispatch.modes import get_mode
     from popdispatch.modes.exact import price_weights
     from popdispatch.online import SnapshotResult, limited_flows_mw, overflow_kw
@@ -176,9 +191,7 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
     from popdispatch.scenarios import SnapshotComparison
 
     check_x0(settings.x0, problem.generators)
-    opts = AgentSettings(step_s=options.step_s, max_rounds=options.max_rounds,
-                         paced=options.paced)  # fmt: skip
-    run = run_agents(problem, minute, settings, faults, opts)
+    run = run_agents(problem, minute, settings, faults, _agent_settings(options))
     final_mw = run.setpoints_kw / 1000.0
     line_prices = voltage_prices = None
     if get_mode(settings.mode).claims_dc_opf:  # the prices the controllers broadcast at the end
