@@ -218,3 +218,21 @@ def test_line_prices_that_run_away_end_the_run_as_infeasible(tmp_path):
     assert "ran away: line 1-3's price" in s["horizon_reason"]
     assert s["rounds"] < 1000
     assert len(result.stderr.strip().splitlines()) == 1 and "infeasible" in result.stderr
+
+
+def test_voltage_mode_is_refused_in_one_line_before_any_work(tmp_path):
+    """The agents price lines only (and the command has no --vmin): exit 2, one line naming
+    --mode, no output, before the feeder is read (a feeder file that is not MATPOWER is not
+    what is reported)."""
+    bad = tmp_path / "bad.m"
+    bad.write_text("this is not a MATPOWER case\n")
+    script = Path(sys.executable).with_name("popdispatch")
+    base = [str(script)] if script.exists() else [sys.executable, "-m", "popdispatch.cli"]
+    command = [*base, "agents", "--minute", "1", "--mode", "voltage", "--net", str(bad),
+               "--json", "-q"]  # fmt: skip
+    result = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2, result.stderr
+    assert result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--mode" in lines[0] and "paper and exact" in lines[0]
+    assert "Traceback" not in result.stderr
