@@ -159,6 +159,8 @@ class GeneratorAgent(RoundAgent):
     round's offers, as the engine does), else by the room left over all offers received
     (see step 3)."""
 
+    ROUND = Phase
+
     def __init__(self, rule: GeneratorRule, index: int, inverters: Inverters,
                  neighbours: list[str], timeout: int = 1, lag: int = 0, copies: int = 1,
                  engine_limiter: bool = True, network=None):  # fmt: skip

@@ -299,7 +299,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     rates = settings.revision_rates(problem)
     fp = game_constants(problem, settings)
     demand = float(problem.demand[minute - 1])
-    network = LossyNetwork(faults)
+    network = LossyNetwork(faults, TICKS_PER_ROUND)
     inverters = Inverters(initial_setpoints(problem, settings, minute))
     graph = generator_graph(problem, settings)
     names = list(problem.generators)
@@ -524,7 +524,7 @@ def prepared(problem, minute, settings, faults, opts: AgentSettings, step_s: flo
     system = build_agents(problem, minute, settings, step_s, faults, opts.timeout_for(faults),
                           opts.lag_for(faults), opts.copies_for(faults),
                           opts.engine_limiter_for(faults), opts.stale_for(faults))  # fmt: skip
-    ticks = opts.phase_ticks_for(faults)
+    ticks = opts.phase_ticks_for(faults, TICKS_PER_ROUND)
     if system.generators[0].relay:
         ticks = max(ticks, relay_phase_ticks(len(system.generators), faults.delay_max))
     for agent in system.agents:

@@ -16,7 +16,6 @@ import numpy as np
 
 from popdispatch.agents.algorithms import DEFAULT_ALGORITHM, get_algorithm, refuse_options
 from popdispatch.agents.network import Faults
-from popdispatch.agents.schedule import TICKS_PER_ROUND
 from popdispatch.constants import KW_PER_MW
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.modes import get_mode
@@ -110,11 +109,11 @@ class AgentSettings:
             return self.timeout
         return 1 if self.paced else 2 * int(faults.delay_max) + 1
 
-    def phase_ticks_for(self, faults: Faults) -> int:
+    def phase_ticks_for(self, faults: Faults, ticks_per_round: int) -> int:
         """Ticks per phase: 1, or in paced rounds one more than the longest simulated delay
-        (``delay_max`` unpaced rounds), so that every message of a phase is in before the
-        next phase acts."""
-        return 1 + TICKS_PER_ROUND * int(faults.delay_max) if self.paced else 1
+        (``delay_max`` unpaced rounds of the algorithm's ``ticks_per_round`` ticks), so that
+        every message of a phase is in before the next phase acts."""
+        return 1 + ticks_per_round * int(faults.delay_max) if self.paced else 1
 
     def rest_window(self, faults: Faults) -> int:
         """Rounds of rest required: ``window`` times ``1 + delay_max`` (a late network can
