@@ -468,7 +468,7 @@ class GeneratorAgent(RoundAgent):
     def forget(self, aid: str) -> None:
         """A neighbour that tripped (the protection's report): drop its status, the offers
         to it and from it, and the decisions it will never acknowledge (the source bus
-        carries what they moved, :func:`popdispatch.agents.system.trip`)."""
+        carries what they moved, :meth:`popdispatch.agents.population.AgentSystem.trip`)."""
         self.neighbours = [n for n in self.neighbours if n != aid]
         self.statuses.pop(aid, None)
         self.standings.pop(aid, None)
