@@ -26,14 +26,31 @@ def test_json_has_snapshot_and_message_keys(congestion_problem):
     result = CliRunner().invoke(agents, [*CONGESTION, "--json"])
     assert result.exit_code == 0, result.output
     s = json.loads(result.output)
-    for key in ("status", "minute", "demand_kw", "generators", "iterations",
-                "max_abs_error_kw", "messages", "lost", "max_imbalance_w"):  # fmt: skip
+    for key in ("status", "minute", "demand_kw", "generators", "iterations", "rounds",
+                "max_abs_error_kw", "messages", "scalars_sent", "lost",
+                "max_imbalance_w"):  # fmt: skip
         assert key in s
     opf = solve_opf(congestion_problem, 566).p_kw  # the yardstick, solved here
     setpoints = np.array([g["setpoint_kw"] for g in s["generators"]])
     assert np.abs(setpoints - opf).max() < 0.01
     assert s["lost"] == 0 and s["messages"] > 0
+    assert s["scalars_sent"] > s["messages"]  # a status alone carries 5
     assert abs(s["max_imbalance_w"]) < 1.0
+    assert s["dynamics_status"] == "converged"
+    assert s["distance_bound_kw"] <= s["accuracy_kw"]
+    assert np.abs(setpoints - opf).max() <= s["accuracy_kw"]
+
+
+def test_a_run_stopped_early_says_what_it_proved():
+    """Exit 1; the JSON and the text say not converged with the bound above the accuracy."""
+    result = CliRunner().invoke(agents, [*CONGESTION, "--json", "--max-rounds", "10"])
+    assert result.exit_code == 1, result.output
+    s = json.loads(result.stdout)
+    assert s["dynamics_status"] == "not_converged" and s["converged_iteration"] is None
+    assert s["distance_bound_kw"] > s["accuracy_kw"] > 0
+    text = CliRunner().invoke(agents, [*CONGESTION, "--max-rounds", "10"]).stdout
+    assert f"proved within {s['distance_bound_kw']:.3g} kW of the DC-OPF" in text
+    assert f"accuracy {s['accuracy_kw']:.3g} kW" in text
 
 
 def test_loss_is_reported():
@@ -201,3 +218,21 @@ def test_line_prices_that_run_away_end_the_run_as_infeasible(tmp_path):
     assert "ran away: line 1-3's price" in s["horizon_reason"]
     assert s["rounds"] < 1000
     assert len(result.stderr.strip().splitlines()) == 1 and "infeasible" in result.stderr
+
+
+def test_voltage_mode_is_refused_in_one_line_before_any_work(tmp_path):
+    """The agents price lines only (and the command has no --vmin): exit 2, one line naming
+    --mode, no output, before the feeder is read (a feeder file that is not MATPOWER is not
+    what is reported)."""
+    bad = tmp_path / "bad.m"
+    bad.write_text("this is not a MATPOWER case\n")
+    script = Path(sys.executable).with_name("popdispatch")
+    base = [str(script)] if script.exists() else [sys.executable, "-m", "popdispatch.cli"]
+    command = [*base, "agents", "--minute", "1", "--mode", "voltage", "--net", str(bad),
+               "--json", "-q"]  # fmt: skip
+    result = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 2, result.stderr
+    assert result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--mode" in lines[0] and "paper and exact" in lines[0]
+    assert "Traceback" not in result.stderr

@@ -21,13 +21,8 @@ pytest.importorskip(
 )
 
 from popdispatch.agents.network import Faults  # noqa: E402
-from popdispatch.agents.system import (  # noqa: E402
-    AgentSettings,
-    build_agents,
-    controller_id,
-    default_step,
-    run_agents,
-)
+from popdispatch.agents.population import build_agents, controller_id, default_step  # noqa: E402
+from popdispatch.agents.system import AgentSettings, run_agents  # noqa: E402
 from popdispatch.constants import KW_PER_MW  # noqa: E402
 from popdispatch.errors import OptionError  # noqa: E402
 from popdispatch.integrate import Integrator  # noqa: E402
@@ -47,8 +42,6 @@ NETWORK_IDS = [f"{name}-{limits}" for name, limits, _ in NETWORKS]
 GRAPHS = {"complete": "smith", "ring": "distributed-smith"}
 #: Rounds compared with the engine's Euler steps.
 ROUNDS = 20
-#: The agents' rest tolerance (AgentSettings.tol_kw) times 10, kW: their documented accuracy.
-OPF_ATOL_KW = 10 * AgentSettings().tol_kw
 #: Accuracy of a line price at rest, as a share of the marginal-cost spread (EUR/MWh).
 PRICE_RTOL = 1e-3
 #: "To the watt": largest |supply - demand| of any committed state, W.
@@ -101,17 +94,26 @@ def test_agents_follow_the_engine_euler_steps(name, limits, build, graph, mode):
     np.testing.assert_allclose(agents[:n], engine[:n], rtol=0.0, atol=atol)
 
 
+def accuracy_kw(settings: RunSettings, problem) -> float:
+    """The accuracy a converged minute proves, kW (max(0.001 kW, 1e-6 of the demand))."""
+    return float(settings.accuracy_mw(problem.demand[0])) * KW_PER_MW
+
+
 @pytest.mark.parametrize("graph", list(GRAPHS))
 @pytest.mark.parametrize(("name", "limits", "build"), NETWORKS, ids=NETWORK_IDS)
 def test_agents_reach_the_dc_opf_on_every_network(name, limits, build, graph):
-    """Exact mode, default settings: converged (at rest, KKT check passed) within the
-    documented accuracy of the DC-OPF, the binding line priced at the DC-OPF's dual."""
+    """Exact mode, default settings: converged (the distance certificate proves the end
+    state within the accuracy) and within that accuracy of Clarabel's DC-OPF, the binding
+    line priced at the DC-OPF's dual."""
     problem, opf = case(name, limits)
     assert opf.status == "optimal"
     settings = settings_for("exact", graph)
     run = run_agents(problem, 1, settings, Faults())
     assert run.status == "converged", run.reason
-    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= OPF_ATOL_KW
+    accuracy = accuracy_kw(settings, problem)
+    assert run.accuracy_kw == pytest.approx(accuracy)
+    assert run.distance_bound_kw <= accuracy
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= accuracy
     weight = settings.game_constants(problem).C
     prices = net_prices(problem, np.array([1]), run.setpoints_kw[None] / KW_PER_MW,
                         run.line_states(len(problem.limit))[None], weight)[0][0]  # fmt: skip
@@ -140,10 +142,10 @@ def test_the_synthetic_feeder_reaches_the_dc_opf_on_a_ring():
     about 2100 rounds (its complete graph needs a step below 1.2e-4 s and 12,000 rounds, 11 min
     of CPU: measured in docs/agents.md, not run here)."""
     problem, opf = case("synthetic-1k", "every line")
-    run = run_agents(problem, 1, settings_for("exact", "ring"), Faults(),
-                     AgentSettings(max_rounds=6000))  # fmt: skip
+    settings = settings_for("exact", "ring")
+    run = run_agents(problem, 1, settings, Faults(), AgentSettings(max_rounds=6000))
     assert run.status == "converged", run.reason
-    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= OPF_ATOL_KW
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= accuracy_kw(settings, problem)
     assert abs(run.max_imbalance_w) < BALANCE_W
 
 

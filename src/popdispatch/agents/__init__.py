@@ -6,7 +6,9 @@ agents (:mod:`~popdispatch.agents.controller`) and the plant
 (:mod:`~popdispatch.agents.plant`), in rounds (:mod:`~popdispatch.agents.schedule`), over
 mango's simulated world with seeded loss, delay and duplication
 (:mod:`~popdispatch.agents.network`); :func:`run_agents` runs one minute
-(:mod:`~popdispatch.agents.system`). Needs the ``agents`` extra (mango-agents):
+(:mod:`~popdispatch.agents.system`) of an algorithm (:mod:`~popdispatch.agents.algorithms`:
+today :mod:`~popdispatch.agents.population`) in the generic world
+(:mod:`~popdispatch.agents.world`). Needs the ``agents`` extra (mango-agents):
 ``pip install "popdispatch[agents]"``.
 """
 
@@ -26,11 +28,16 @@ def require_mango() -> None:
 
 def __getattr__(name: str):
     """Lazy access to the run API, so importing this package does not import mango."""
-    if name in ("AgentRun", "AgentSettings", "run_agents", "build_agents"):
+    if name in ("AgentRun", "AgentSettings", "run_agents"):
         require_mango()
         from popdispatch.agents import system
 
         return getattr(system, name)
+    if name == "build_agents":
+        require_mango()
+        from popdispatch.agents import population
+
+        return population.build_agents
     if name == "Faults":
         require_mango()
         from popdispatch.agents.network import Faults

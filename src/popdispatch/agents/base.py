@@ -8,11 +8,12 @@ neither acts nor hears (its process is gone); a restarted one resumes with what 
 
 from __future__ import annotations
 
+from enum import IntEnum
 from typing import Any
 
 from mango import Agent, AgentAddress
 
-from popdispatch.agents.schedule import TICKS_PER_ROUND, Phase, tick_of
+from popdispatch.agents.clock import tick_of
 
 #: Clock seconds per tick.
 TICK_S = 1.0
@@ -42,17 +43,21 @@ class RoundAgent(Agent):
         self.sent = 0  # real time: messages this agent sent (dropped ones included)
         self.dropped = 0
 
+    #: The algorithm's round: its phases, one tick each (:mod:`popdispatch.agents.clock`).
+    ROUND: type[IntEnum]
     #: The ticks of a round this agent acts at (each its own periodic task: an agent that
-    #: woke at every tick only to find nothing to do cost the simulation a third of its time).
-    PHASES: tuple[Phase, ...] = tuple(Phase)
+    #: woke at every tick only to find nothing to do cost the simulation a third of its time);
+    #: empty: every phase of ``ROUND``.
+    PHASES: tuple[IntEnum, ...] = ()
 
     def on_ready(self) -> None:
+        phases = self.PHASES or tuple(self.ROUND)
         if self.wall_clock:
-            for phase in self.PHASES:
+            for phase in phases:
                 self.schedule_instant_task(self._deadlines(phase))
             return
         start = self.context.current_timestamp
-        for phase in self.PHASES:
+        for phase in phases:
             self.schedule_timestamp_task(
                 self._start(), start + phase * self.phase_ticks * self.tick_s
             )
@@ -60,7 +65,7 @@ class RoundAgent(Agent):
     async def _start(self) -> None:
         self.schedule_periodic_task(self._tick, delay=self.round_ticks * self.tick_s)
 
-    async def _deadlines(self, phase: Phase) -> None:
+    async def _deadlines(self, phase: IntEnum) -> None:
         """Real time: this phase's tick of every round at its absolute time from ``t0``."""
         clock = self.context.clock
         k = 0
@@ -77,7 +82,7 @@ class RoundAgent(Agent):
     @property
     def round_ticks(self) -> int:
         """Ticks per round."""
-        return TICKS_PER_ROUND * self.phase_ticks
+        return len(self.ROUND) * self.phase_ticks
 
     async def _tick(self) -> None:
         if self.crashed:
@@ -99,10 +104,11 @@ class RoundAgent(Agent):
                     continue
                 await self.send_message(content, receiver_addr=self.addresses[aid])
 
-    def now(self) -> tuple[int, Phase]:
+    def now(self) -> tuple[int, IntEnum]:
         """``(round, phase)`` of the clock now."""
         elapsed = (self.context.current_timestamp - self.t0) / self.tick_s
-        return tick_of(elapsed, self.phase_ticks)
+        rnd, phase = tick_of(elapsed, len(self.ROUND), self.phase_ticks)
+        return rnd, self.ROUND(phase)
 
     def send(self, content: Any, aid: str) -> None:
         """Queue ``content`` for agent ``aid`` (sent at the end of this tick)."""
@@ -112,7 +118,7 @@ class RoundAgent(Agent):
         if not self.crashed:
             self.receive(content, meta.get("sender_id"))
 
-    def act(self, rnd: int, phase: Phase) -> None:
+    def act(self, rnd: int, phase: IntEnum) -> None:
         """What the agent does at tick ``phase`` of round ``rnd``."""
 
     def receive(self, content: Any, sender: str | None) -> None:

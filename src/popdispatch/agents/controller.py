@@ -115,6 +115,8 @@ class ControllerAgent(RoundAgent):
     """The node controller of one key node (see the module docstring). ``step_s``: the
     round's Euler step ``h``, s."""
 
+    ROUND = Phase
+
     PHASES = (Phase.SIGNAL,)
 
     def __init__(self, ends: list[LineEnd], step_s: float, network=None,

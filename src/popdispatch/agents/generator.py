@@ -2,11 +2,19 @@
 
 Each round (:mod:`popdispatch.agents.schedule`) the generator
 
+0. (tick 0, a sparse graph under the curvature-scaled field only) sends its revision rate,
+   room and movable mass to its neighbours (:class:`~popdispatch.agents.messages.Standing`);
 1. (tick 2) computes its fitness from its own set point and the latest signal of every
    limited line (the engine's kernel :func:`popdispatch.game.fitness.fitness_into`, eqs.
-   5-7) and its weights (:func:`popdispatch.dynamics.fields.field_weights`: receiver weight
-   ``w``, movable mass ``v``, room), and sends ``(f, w, v)`` to its neighbours in the
-   communication graph;
+   5-7) and its weights (:func:`popdispatch.dynamics.fields.rated_field_weights`: receiver
+   weight ``w``, sender weight ``v``, room, movable mass), and sends them with ``f`` to its
+   neighbours in the communication graph. Under the curvature-scaled field (exact mode,
+   dynamics/newton.py) ``v`` is its revision rate ``r`` (from its own cost curve) where it
+   has mass to move and ``w`` is ``r / R`` where it has room, ``R`` the rates of the
+   generators inside their limits: on a sparse graph those of its closed neighbourhood,
+   which it normalises itself from the standings of tick 0
+   (:func:`~popdispatch.dynamics.newton.neighbourhood_receivers`); on the complete graph
+   those of the whole fleet, which every listener normalises from the statuses it holds;
 2. (tick 3) from the latest statuses of its neighbours, sums its pairwise in- and outflow
    (:func:`popdispatch.dynamics.pairwise.graph_flows` on its own star of edges, eqs. 13-14)
    and applies the steppers' flux limiter to its own side: a sender whose outflow over the
@@ -36,6 +44,7 @@ limited weights).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -48,12 +57,14 @@ from popdispatch.agents.messages import (
     Output,
     Relayed,
     Signals,
+    Standing,
     Status,
 )
 from popdispatch.agents.plant import Inverters
 from popdispatch.agents.schedule import Phase
-from popdispatch.dynamics.fields import field_weights
-from popdispatch.dynamics.pairwise import blocked, graph_flows
+from popdispatch.dynamics.fields import Field, rated_field_weights
+from popdispatch.dynamics.newton import neighbourhood_receivers
+from popdispatch.dynamics.pairwise import RELAY_MASS, blocked, graph_flows
 from popdispatch.game.fitness import fitness_into
 from popdispatch.game.parameters import share_bounds
 
@@ -63,11 +74,44 @@ from popdispatch.game.parameters import share_bounds
 LIMIT_ULPS = 16
 
 
-def relays(w: float, v: float) -> bool:
-    """A generator with receiver weight ``w`` and movable mass ``v`` (shares) cannot take part
-    in a comparison both ways and relays (:func:`popdispatch.dynamics.pairwise.blocked` of
-    its one status)."""
-    return bool(blocked(np.array([w]), np.array([v]), 0))
+def relays(w: float, mass: float, room: float) -> bool:
+    """A generator with receiver weight ``w``, movable ``mass`` and ``room`` (shares) cannot
+    take part in a comparison both ways and relays (:func:`popdispatch.dynamics.pairwise.
+    blocked` of its one status)."""
+    return bool(blocked(np.array([w]), np.array([mass]), np.array([room]), 0))
+
+
+def receives(status: Status) -> bool:
+    """Whether the generator of ``status`` can be a relay group's best receiver (the
+    engine's ``relay_groups``: ``w > 0`` and room above ``RELAY_MASS``)."""
+    return status.w > 0.0 and status.room > RELAY_MASS
+
+
+def star(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """CSR adjacency (``indptr``, ``indices``) of the star of node 0 and ``n - 1`` leaves: one
+    generator's own edges."""
+    indptr = np.array([0, n - 1, *range(n, 2 * n - 1)], dtype=np.int64)
+    indices = np.array([*range(1, n), *([0] * (n - 1))], dtype=np.int64)
+    return indptr, indices
+
+
+def complete(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """CSR adjacency (``indptr``, ``indices``) of the complete graph on ``n`` nodes."""
+    indptr = np.arange(n + 1, dtype=np.int64) * (n - 1)
+    indices = np.array([j for i in range(n) for j in range(n) if j != i], dtype=np.int64)
+    return indptr, indices
+
+
+class Own(NamedTuple):
+    """A generator's status inputs at the round's status tick: fitness ``f`` (EUR/MW),
+    receiver weight ``w``, sender weight ``v``, ``room`` below ``Pmax`` and movable ``mass``
+    above ``Pmin`` (shares; :func:`popdispatch.dynamics.fields.rated_field_weights`)."""
+
+    f: float
+    w: float
+    v: float
+    room: float
+    mass: float
 
 
 @dataclass(frozen=True)
@@ -75,8 +119,10 @@ class GeneratorRule:
     """What one generator knows of the game: its cost ``b`` (EUR/MWh), ``c`` (EUR/(MW^2 h)),
     limits ``pmin``/``pmax`` (MW), the fitness constants ``B``, ``m`` (EUR/MW, EUR/MW^2) and
     revision ``gain``, whether the barrier applies (paper mode), the dynamic's field code
-    (:class:`~popdispatch.dynamics.fields.Field`), the demand ``demand_mw`` (MW) and the
-    Euler step ``step_s`` (s)."""
+    (:class:`~popdispatch.dynamics.fields.Field`), the demand ``demand_mw`` (MW), the Euler
+    step ``step_s`` (s) and its revision ``rate`` (dimensionless, from its own cost curve:
+    :func:`popdispatch.dynamics.newton.revision_rates`; read by the curvature-scaled field
+    only)."""
 
     b: float
     c: float
@@ -89,6 +135,13 @@ class GeneratorRule:
     field: int
     demand_mw: float
     step_s: float
+    rate: float = 0.0
+
+    @property
+    def scaled(self) -> bool:
+        """Whether the field is the curvature-scaled one, whose receiver weights are
+        normalised by the rates of a neighbourhood (dynamics/newton.py)."""
+        return self.field == Field.CAPACITY_NEWTON
 
 
 class GeneratorAgent(RoundAgent):
@@ -106,7 +159,7 @@ class GeneratorAgent(RoundAgent):
     round's offers, as the engine does), else by the room left over all offers received
     (see step 3)."""
 
-    PHASES = (Phase.STATUS, Phase.OFFER, Phase.ACCEPT, Phase.COMMIT)
+    ROUND = Phase
 
     def __init__(self, rule: GeneratorRule, index: int, inverters: Inverters,
                  neighbours: list[str], timeout: int = 1, lag: int = 0, copies: int = 1,
@@ -127,7 +180,8 @@ class GeneratorAgent(RoundAgent):
         self.quiet = False  # no new offers (drain)
         self.signals: dict[str, tuple[int, float]] = {}
         self.statuses: dict[str, Status] = {}
-        self.own: tuple[float, float, float, float] | None = None  # f, w, v, room
+        self.standings: dict[str, Standing] = {}  # sparse graph, curvature-scaled field
+        self.own: Own | None = None
         self.offers_in: list[tuple[str, Offer]] = []
         self.open_offers: dict[str, tuple[str, int, float]] = {}  # txid: receiver, round, MW
         self.accepted: dict[str, float] = {}  # txid: MW, as the receiver accepted
@@ -181,11 +235,31 @@ class GeneratorAgent(RoundAgent):
 
     # -- messages as they arrive -------------------------------------------------------------
 
+    @property
+    def PHASES(self) -> tuple[Phase, ...]:  # noqa: N802  (RoundAgent's name)
+        """The ticks this generator acts at: on a sparse graph under the curvature-scaled
+        field also the first, to send its :class:`Standing`."""
+        if self.normalises_itself:
+            return (Phase.MEASURE, Phase.STATUS, Phase.OFFER, Phase.ACCEPT, Phase.COMMIT)
+        return (Phase.STATUS, Phase.OFFER, Phase.ACCEPT, Phase.COMMIT)
+
+    @property
+    def normalises_itself(self) -> bool:
+        """Whether this generator normalises its own receiver weight (a sparse graph under
+        the curvature-scaled field: by its closed neighbourhood, from their standings); on
+        the complete graph every listener normalises every receiver weight by the rates of
+        all (:meth:`_receiver_weights`)."""
+        return self.relay and self.rule.scaled
+
     def receive(self, content, sender) -> None:
         if isinstance(content, Signals):
             for line, value in content.values.items():
                 if content.round >= self.signals.get(line, (-1, 0.0))[0]:
                     self.signals[line] = (content.round, value)
+        elif isinstance(content, Standing):
+            old = self.standings.get(sender)
+            if old is None or content.round >= old.round:
+                self.standings[sender] = content
         elif isinstance(content, Status):
             old = self.statuses.get(sender)
             if old is None or content.round >= old.round:
@@ -209,8 +283,8 @@ class GeneratorAgent(RoundAgent):
     @property
     def blocked(self) -> bool:
         """Whether this generator cannot take part in a comparison this round (at a limit:
-        ``w = 0`` or ``v = 0``): it relays."""
-        return self.own is not None and relays(self.own[1], self.own[2])
+        no room, or no movable mass): it relays."""
+        return self.own is not None and relays(self.own.w, self.own.mass, self.own.room)
 
     def _flood(self, origin: str, status: Status, route: tuple) -> None:
         """A blocked generator passes every status of this round on to its other
@@ -261,8 +335,8 @@ class GeneratorAgent(RoundAgent):
         ``(best receiver, members, hops to it)`` each (members: ``(id, status)``, itself
         included; hops None when it is itself the best receiver)."""
         rnd = self.status_round
-        f0, w0, v0, _ = self.own
-        me = Status(rnd, f0, w0, v0, self.index)
+        own = self.own
+        me = Status(rnd, own.f, own.w, own.v, own.mass, own.room, self.index)
         status = {self.aid: me}
         direct = {a: s for a, s in self.statuses.items() if s.round == rnd}
         status.update(direct)
@@ -286,15 +360,15 @@ class GeneratorAgent(RoundAgent):
         for o, st, route in heard:
             for a, b in zip(route, route[1:], strict=False):
                 union(a, b)
-            if relays(st.w, st.v):
+            if relays(st.w, st.mass, st.room):
                 union(o, route[0])
             if self.blocked:
                 union(self.aid, route[-1])
         for a, st in direct.items():
-            if relays(st.w, st.v) and self.blocked:
+            if relays(st.w, st.mass, st.room) and self.blocked:
                 union(self.aid, a)
         for a, st in direct.items():
-            if relays(st.w, st.v):
+            if relays(st.w, st.mass, st.room):
                 comps.add(find(a))
                 members.setdefault(find(a), {})[a] = st
         for o, st, route in heard:
@@ -309,7 +383,7 @@ class GeneratorAgent(RoundAgent):
         for c in comps:
             group = members.get(c, {})
             group[self.aid] = me
-            receivers = [(st.f, -st.index, a) for a, st in group.items() if st.w > 0.0]
+            receivers = [(st.f, -st.index, a) for a, st in group.items() if receives(st)]
             if not receivers:
                 continue
             best = max(receivers)[2]
@@ -333,7 +407,7 @@ class GeneratorAgent(RoundAgent):
         rate ``w_b v_a [f_b - f_a]_+`` of dynamics/pairwise.py ``relay_flows``."""
         if not self.relay or self.own is None:
             return 0.0, []
-        f0, w0, v0, _ = self.own
+        f0, w0, v0 = self.own.f, self.own.w, self.own.v
         inflow, out = 0.0, []
         for best, group, hops in self._groups():
             if best == self.aid:
@@ -366,7 +440,9 @@ class GeneratorAgent(RoundAgent):
     # -- the round ---------------------------------------------------------------------------
 
     def act(self, rnd: int, phase: Phase) -> None:
-        if phase == Phase.STATUS:
+        if phase == Phase.MEASURE:
+            self._standing(rnd)
+        elif phase == Phase.STATUS:
             self._status(rnd)
         elif phase == Phase.OFFER:
             self._offer(rnd)
@@ -392,9 +468,10 @@ class GeneratorAgent(RoundAgent):
     def forget(self, aid: str) -> None:
         """A neighbour that tripped (the protection's report): drop its status, the offers
         to it and from it, and the decisions it will never acknowledge (the source bus
-        carries what they moved, :func:`popdispatch.agents.system.trip`)."""
+        carries what they moved, :meth:`popdispatch.agents.population.AgentSystem.trip`)."""
         self.neighbours = [n for n in self.neighbours if n != aid]
         self.statuses.pop(aid, None)
+        self.standings.pop(aid, None)
 
         def other(txid: str) -> str:
             sender, _, receiver = txid.split("/")[:3]
@@ -406,11 +483,53 @@ class GeneratorAgent(RoundAgent):
                 del book[txid]
         self.offers_in = [(s, o) for s, o in self.offers_in if s != aid]
 
+    def _weights(self) -> tuple[float, float, float, float]:
+        """``(w, v, room, mass)`` of the field at the planned set point (shares; mass already
+        committed away cannot move again): under the curvature-scaled field ``w`` is the
+        revision rate where there is room, before its normalisation, ``v`` the rate where
+        there is mass to move."""
+        r = self.rule
+        one = np.ones(1)
+        lo, hi = np.empty(1), np.empty(1)
+        active = np.ones(1, dtype=np.bool_)
+        share_bounds(r.pmin * one, r.pmax * one, active, r.demand_mw, lo, hi)
+        w, v, room, mass = np.empty(1), np.empty(1), np.empty(1), np.empty(1)
+        x = np.array([self.planned]) / r.demand_mw
+        rated_field_weights(r.field, x, lo, hi, active, r.rate * one, w, v, room, mass)
+        if r.scaled:
+            w[0] = r.rate if room[0] > 0.0 else 0.0
+        return float(w[0]), float(v[0]), float(room[0]), float(mass[0])
+
+    def _standing(self, rnd: int) -> None:
+        """Sparse graph, curvature-scaled field: rate, room and movable mass to the
+        neighbours, from which each normalises its receiver weight at the status tick."""
+        _, _, room, mass = self._weights()
+        standing = Standing(rnd, self.rule.rate, room, mass)
+        for aid in self.neighbours:
+            self.send(standing, aid)
+
+    def _own_receiver_weight(self, w: float, room: float, mass: float) -> float:
+        """The own receiver weight ``r / R`` with ``R`` the rates of the closed neighbourhood
+        inside their limits, else of those with room (the engine's
+        :func:`~popdispatch.dynamics.newton.neighbourhood_receivers` on the own star, with the
+        neighbours' latest standings)."""
+        if w <= 0.0:
+            return 0.0
+        known = [self.standings[aid] for aid in self.neighbours if aid in self.standings]
+        rate = np.array([self.rule.rate, *(s.rate for s in known)])
+        rooms = np.array([room, *(s.room for s in known)])
+        masses = np.array([mass, *(s.mass for s in known)])
+        weights = np.zeros(len(rate))
+        weights[0] = w
+        neighbourhood_receivers(*star(len(rate)), rate, weights, rooms, masses)
+        return float(weights[0])
+
     def _status(self, rnd: int) -> None:
         """Fitness and weights at the own set point; status to the neighbours."""
         self._watch_signals(rnd)
-        for aid in [a for a, st in self.statuses.items() if rnd - st.round > self.stale_rounds]:
-            del self.statuses[aid]  # a neighbour silent that long takes no part
+        for book in (self.statuses, self.standings):  # a neighbour silent that long: no part
+            for aid in [a for a, st in book.items() if rnd - st.round > self.stale_rounds]:
+                del book[aid]
         r = self.rule
         one = np.ones(1)
         p = np.array([self.p])  # the inverter's output: what the lines carry
@@ -420,43 +539,47 @@ class GeneratorAgent(RoundAgent):
         f = np.empty(1)
         fitness_into(p, r.b * one, r.c * one, r.pmin * one, r.pmax * one, r.B, r.m, r.gain,
                      signal, r.barrier, f)  # fmt: skip
-        lo, hi = np.empty(1), np.empty(1)
-        active = np.ones(1, dtype=np.bool_)
-        share_bounds(r.pmin * one, r.pmax * one, active, r.demand_mw, lo, hi)
-        w, v, room = np.empty(1), np.empty(1), np.empty(1)
-        # weights on the planned set point: mass already committed away cannot move again
-        x = np.array([self.planned]) / r.demand_mw
-        field_weights(r.field, x, lo, hi, active, w, v, room)
-        self.own = (float(f[0]), float(w[0]), float(v[0]), float(room[0]))
+        w, v, room, mass = self._weights()
+        if self.normalises_itself:
+            w = self._own_receiver_weight(w, room, mass)
+        self.own = Own(float(f[0]), w, v, room, mass)
         self.status_round = rnd
         self.heard = {}
         self.forwarded = set()
-        status = Status(rnd, *self.own[:3], self.index)
+        status = Status(rnd, self.own.f, w, v, mass, room, self.index)
         for aid in self.neighbours:
             self.send(status, aid)
+
+    def _receiver_weights(self, w: np.ndarray, room: np.ndarray, mass: np.ndarray) -> None:
+        """Complete graph, curvature-scaled field: every receiver weight of the own star (the
+        whole fleet) normalised in place by the rates of all generators inside their limits,
+        else of those with room (the engine's ``newton_weights``; ``w`` holds the rates where
+        there is room, and the kernel reads a rate only there)."""
+        neighbourhood_receivers(*complete(len(w)), w.copy(), w, room, mass)
 
     def _offer(self, rnd: int) -> None:
         """Own pairwise in/outflow, the limiter's factors, offers to better neighbours."""
         if self.own is None:
             return
-        f0, w0, v0, room0 = self.own
+        f0, v0, room0, mass0 = self.own.f, self.own.v, self.own.room, self.own.mass
         known = [self.statuses[aid] for aid in self.neighbours if aid in self.statuses]
         names = [aid for aid in self.neighbours if aid in self.statuses]
         n = len(known) + 1
         f = np.array([f0] + [s.f for s in known])
-        w = np.array([w0] + [s.w for s in known])
+        w = np.array([self.own.w] + [s.w for s in known])
         v = np.array([v0] + [s.v for s in known])
-        # the own star: node 0 joined to every known neighbour
-        indptr = np.array([0, n - 1] + list(range(n, 2 * n - 1)), dtype=np.int64)
-        indices = np.array(list(range(1, n)) + [0] * (n - 1), dtype=np.int64)
+        if self.rule.scaled and not self.relay:
+            self._receiver_weights(w, np.array([room0] + [s.room for s in known]),
+                                   np.array([mass0] + [s.mass for s in known]))  # fmt: skip
         inflow, outflow = np.zeros(n), np.zeros(n)
-        graph_flows(f, w, v, indptr, indices, inflow, outflow)
+        graph_flows(f, w, v, *star(n), inflow, outflow)
         relay_in, relay_out = self._relay_flows()
         inflow[0] += relay_in
         outflow[0] += sum(rate for _, rate, _ in relay_out)
         h = self.rule.step_s
-        # the flux limiter of integrate/steppers.py (euler_steps), own side only
-        lim_v = v0 * (v0 / (h * outflow[0])) if h * outflow[0] > v0 else v0
+        # the flux limiter of integrate/steppers.py (euler_steps), own side only: the sender
+        # weight scaled so that the outflow empties the movable mass
+        lim_v = v0 * (mass0 / (h * outflow[0])) if h * outflow[0] > mass0 else v0
         self.room_share = room0  # the receiver's side of the limiter, in _accept
         if self.quiet:
             return
@@ -472,7 +595,7 @@ class GeneratorAgent(RoundAgent):
                 amounts[(aid, f"/r{k}")] = h * (rate * (lim_v / v0)) * demand
                 hops_of[(aid, f"/r{k}")] = hops
         # what is still offered from earlier rounds is not movable again
-        movable = v0 * demand - sum(amount for _, _, amount in self.open_offers.values())
+        movable = mass0 * demand - sum(amount for _, _, amount in self.open_offers.values())
         total = sum(amounts.values())
         scale = max(movable, 0.0) / total if total > max(movable, 0.0) else 1.0
         for (aid, tag), amount in amounts.items():

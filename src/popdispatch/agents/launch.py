@@ -113,7 +113,8 @@ def _codec():
 def _system(config: LaunchConfig):
     """The problem and the agents, built the same way in every process."""
     from popdispatch.agents.network import Faults
-    from popdispatch.agents.system import AgentSettings, build_agents
+    from popdispatch.agents.population import build_agents
+    from popdispatch.agents.system import AgentSettings
     from popdispatch.online import RunSettings
     from popdispatch.runs import FeederSource, load_run
 
@@ -130,11 +131,14 @@ def _system(config: LaunchConfig):
 def warm_up(config: LaunchConfig) -> None:
     """Run the agents of ``config`` for :data:`WARM_UP_ROUNDS` rounds in mango's simulation:
     every kernel they call is compiled (and cached on disk) or loaded before the clock runs."""
-    from popdispatch.agents.system import AgentSettings, _simulate
+    from popdispatch.agents.network import Faults
+    from popdispatch.agents.population import world_options
+    from popdispatch.agents.system import AgentSettings
+    from popdispatch.agents.world import run_world
 
     _, system = _system(config)
-    opts = AgentSettings(max_rounds=WARM_UP_ROUNDS, drain_rounds=0)
-    asyncio.run(_simulate(system, opts, opts.window, None))
+    opts = AgentSettings(max_rounds=WARM_UP_ROUNDS, drain_rounds=0, tol_kw=0.0)
+    run_world(system, world_options(opts, Faults()))
 
 
 def agent_ids(system) -> dict:
@@ -249,7 +253,7 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
     ``base_port``: first TCP port (0: free ports the OS hands out); ``startup_s``: longest
     wait, s, for every process to be ready (round 0 starts as soon as all are); ``step_s``:
     the round's Euler step
-    (None: :func:`popdispatch.agents.system.default_step`); ``loss``: probability
+    (None: :func:`popdispatch.agents.population.default_step`); ``loss``: probability
     that each message is dropped by its sender (``seed``: of the draws; decisions then go out
     in 3 copies, as in the simulation); ``transport``: ``tcp`` (localhost) or ``mqtt``
     (``broker``: ``(host, port)``; None: a mosquitto started for the run on 127.0.0.1);
@@ -261,12 +265,12 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
 
     problem, _ = load_run(FeederSource(), None, minute, [tuple(x) for x in limits])
     from popdispatch.agents.network import Faults
-    from popdispatch.agents.system import build_agents
+    from popdispatch.agents.population import build_agents
     from popdispatch.online import RunSettings
 
     settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph)
     if step_s is None:
-        from popdispatch.agents.system import default_step
+        from popdispatch.agents.population import default_step
 
         step_s = default_step(problem, settings, minute)
     ids = list(agent_ids(build_agents(problem, minute, settings, step_s, Faults())))

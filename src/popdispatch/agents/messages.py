@@ -8,7 +8,7 @@ connection between processes; in mango's simulated world they are handed over as
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, is_dataclass
 
 from mango import json_serializable
 
@@ -36,14 +36,38 @@ class Signals:
 
 @json_serializable
 @dataclass(frozen=True)
+class Standing:
+    """Generator -> neighbour, at the start of ``round`` on a communication graph that is not
+    complete, under the curvature-scaled field (dynamics/newton.py): its revision ``rate``
+    (dimensionless), its ``room`` below ``Pmax`` and its movable ``mass`` above ``Pmin``
+    (shares). Each receiver normalises its weight by the rates of its closed neighbourhood
+    inside their limits (``neighbourhood_receivers``), which it learns from these."""
+
+    round: int
+    rate: float
+    room: float
+    mass: float
+
+
+@json_serializable
+@dataclass(frozen=True)
 class Status:
-    """Generator -> neighbour: fitness ``f`` (EUR/MW), receiver weight ``w`` and movable mass
-    ``v`` (shares) at the start of ``round`` (the pairwise-flow inputs, dynamics/pairwise.py)."""
+    """Generator -> neighbour: fitness ``f`` (EUR/MW), receiver weight ``w``, sender weight
+    ``v``, movable ``mass`` and ``room`` (shares) at the start of ``round`` (the pairwise-flow
+    inputs, dynamics/pairwise.py; mass and room tell who relays).
+
+    Under the curvature-scaled field ``v`` is the generator's revision rate where it has mass
+    to move, and ``w`` its rate where it has room, normalised: on a sparse graph by the
+    receiver itself (from its neighbours' :class:`Standing`), on the complete graph by every
+    listener, who holds every status of the round and so the common normalisation
+    (:meth:`popdispatch.agents.generator.GeneratorAgent._receiver_weights`)."""
 
     round: int
     f: float
     w: float
     v: float
+    mass: float = 0.0
+    room: float = 0.0
     index: int = -1  # the generator's position (ties between best receivers of a relay group)
 
 
@@ -128,6 +152,7 @@ class Relayed:
 ALL_MESSAGES = (
     Measurement,
     Signals,
+    Standing,
     Status,
     Offer,
     Accept,
@@ -137,3 +162,19 @@ ALL_MESSAGES = (
     Relayed,
     Heartbeat,
 )
+
+
+def scalars(content) -> int:
+    """The real numbers a message carries (its payload: every ``float`` in its fields, in a
+    dict's values and in a relayed message's content); rounds, indices, flags and names are
+    its envelope and are not counted. The measure of communication that algorithms of
+    different message shapes share (``scalars_sent``)."""
+    if isinstance(content, float):
+        return 1
+    if isinstance(content, dict):
+        return sum(scalars(value) for value in content.values())
+    if isinstance(content, tuple | list):
+        return sum(scalars(value) for value in content)
+    if is_dataclass(content) and not isinstance(content, type):
+        return sum(scalars(getattr(content, f.name)) for f in fields(content))
+    return 0

@@ -3,13 +3,14 @@
 mango's :class:`~mango.simulation.SimulationWorld` asks its communication simulation, for every
 message sent, whether it arrives and after how long; this module answers with a seeded
 :class:`random.Random`, so a run is repeatable. Time is counted in *ticks* (1 s of simulated
-clock each): a revision round has :data:`popdispatch.agents.schedule.TICKS_PER_ROUND` ticks and
-agents act on whole ticks, so every message takes half a tick (it is in the receiver's inbox
-before the receiver's next tick) plus a random whole number of rounds up to ``delay_max``
-(whole rounds: arrivals then fall on few instants, and mango's world steps once per
-instant). Duplication is decided by the sender's outbox (:meth:`LossyNetwork.copies`): mango's
-package result is one delivery per send, so a duplicated packet is sent twice, each copy with
-its own loss and delay draw (hence also reordered).
+clock each): a round has the algorithm's ``ticks_per_round`` ticks
+(:mod:`popdispatch.agents.clock`) and agents act on whole ticks, so every message takes half
+a tick (it is in the receiver's inbox before the receiver's next tick) plus a random whole
+number of rounds up to ``delay_max`` (whole rounds: arrivals then fall on few instants, and
+mango's world steps once per instant). Duplication is decided by the sender's outbox
+(:meth:`LossyNetwork.copies`): mango's package result is one delivery per send, so a
+duplicated packet is sent twice, each copy with its own loss and delay draw (hence also
+reordered).
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ from dataclasses import dataclass
 
 from mango import CommunicationSimulation, CommunicationSimulationResult, PackageResult
 
-from popdispatch.agents.schedule import HOP_TICKS, TICKS_PER_ROUND
+from popdispatch.agents.clock import HOP_TICKS
+from popdispatch.agents.messages import scalars
 from popdispatch.errors import OptionError
 
 #: The agent faults a run can be given (:class:`FaultEvent`).
@@ -106,22 +108,25 @@ class LossyNetwork(CommunicationSimulation):
     """mango communication simulation of :class:`Faults` (seeded loss and whole-tick delays),
     counting what it was asked to carry."""
 
-    def __init__(self, faults: Faults):
+    def __init__(self, faults: Faults, ticks_per_round: int):
         self.faults = faults
+        self.ticks_per_round = int(ticks_per_round)  # the unit of ``delay_max``
         self.rng = random.Random(faults.seed)
         self.sent = 0
+        self.scalars = 0  # real numbers carried by the sent messages (messages.scalars)
         self.lost = 0
         self.duplicated = 0
 
     def calculate_communication(self, current_time, messages) -> CommunicationSimulationResult:
         results = []
-        extra_max = int(self.faults.delay_max) * TICKS_PER_ROUND
-        for _ in messages:
+        extra_max = int(self.faults.delay_max) * self.ticks_per_round
+        for package in messages:
             self.sent += 1
+            self.scalars += scalars(package.content[0])
             reached = self.rng.random() >= self.faults.loss
             self.lost += not reached
             extra = (
-                self.rng.randint(0, int(self.faults.delay_max)) * TICKS_PER_ROUND
+                self.rng.randint(0, int(self.faults.delay_max)) * self.ticks_per_round
                 if extra_max
                 else 0
             )

@@ -40,6 +40,8 @@ class PlantAgent(RoundAgent):
     noise.
     """
 
+    ROUND = Phase
+
     PHASES = (Phase.MEASURE,)
 
     def __init__(self, problem: DispatchProblem, minute: int, inverters: Inverters,

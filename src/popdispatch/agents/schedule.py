@@ -1,4 +1,5 @@
-"""The synchronous round: which agent acts at which tick of a revision round.
+"""The population dynamics' round: which agent acts at which tick of a revision round (the
+generic clock: :mod:`popdispatch.agents.clock`).
 
 One round is one Euler step of the mean dynamics (``h`` seconds of the dynamics' time,
 integrate/steppers.py): measure the lines, price them, compare fitness with the neighbours,
@@ -36,13 +37,3 @@ class Phase(IntEnum):
 
 #: Ticks (simulated seconds) per round.
 TICKS_PER_ROUND = len(Phase)
-#: Transit time of every message, ticks: delivered before the receiver's next tick.
-HOP_TICKS = 0.5
-
-
-def tick_of(time_s: float, phase_ticks: int = 1) -> tuple[int, Phase]:
-    """``(round, phase)`` of the clock time ``time_s`` (ticks) when each phase lasts
-    ``phase_ticks`` ticks (1: the rounds of the table above; more: rounds paced to a slow
-    network, see :class:`popdispatch.agents.system.AgentSettings`)."""
-    tick = int(round(time_s)) // phase_ticks
-    return tick // TICKS_PER_ROUND, Phase(tick % TICKS_PER_ROUND)

@@ -6,7 +6,7 @@ trips, its output is imported at once. The source bus's controller is the agent 
 that import and so the only one that sees the step. It holds the step as its *committed
 position* (MW): the committed state of the feeder is then the generators' set points, the
 transactions in flight and this position, and it balances exactly at every instant
-(:meth:`popdispatch.agents.system.AgentSystem.committed_imbalance_mw`). Every round it offers
+(:meth:`popdispatch.agents.population.AgentSystem.committed_imbalance_mw`). Every round it offers
 its position to the live generators in equal parts (offer, accept, commit, as between two
 generators: :mod:`popdispatch.agents.generator`); each accepts what its room allows, and the
 position decays to zero as long as the others have the room. The generators' own dynamics

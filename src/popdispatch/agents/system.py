@@ -1,44 +1,30 @@
-"""The dispatch as a system of agents in mango's simulated world, and its result.
+"""Running the agents of a dispatch algorithm, and their result.
 
-:func:`run_agents` builds one agent per generator, one per node controller and the plant
-(:func:`build_agents`), registers them in a mango :class:`~mango.SimulationWorld` whose
-communication simulation is the seeded :class:`~popdispatch.agents.network.LossyNetwork`,
-places the generators on the communication graph as a mango topology, and steps the clock
-round by round until the set points come to rest (or ``max_rounds``). Then no new offers are
-made and the clock runs on until every transaction is decided and acknowledged (the drain),
-and the run is compared with nothing: callers compare it with the DC-OPF or the engine.
+:func:`run_agents` picks the algorithm by name (:mod:`popdispatch.agents.algorithms`), refuses
+what it cannot use before any work, and lets it build its agents and run them in the generic
+world (:mod:`popdispatch.agents.world`: registration, topology, clock, faults, rest, message
+metrics). :class:`AgentSettings` are the run's options (the world's and the algorithm's),
+:class:`AgentRun` its result; the run is compared with nothing here: callers compare it with
+the DC-OPF or the engine.
 """
 
 from __future__ import annotations
 
-import asyncio
-import time
 from dataclasses import dataclass, field, replace
 
-import networkx as nx
 import numpy as np
 
-from popdispatch.agents.controller import PAYOFFS, ControllerAgent, LineEnd, LinePrice
-from popdispatch.agents.generator import GeneratorAgent, GeneratorRule
-from popdispatch.agents.network import FaultEvent, Faults, LossyNetwork
-from popdispatch.agents.plant import Inverters, PlantAgent
-from popdispatch.agents.schedule import TICKS_PER_ROUND
-from popdispatch.agents.source import SOURCE_ID, SourceAgent
+from popdispatch.agents.algorithms import DEFAULT_ALGORITHM, get_algorithm, refuse_options
+from popdispatch.agents.network import Faults
 from popdispatch.constants import KW_PER_MW
-from popdispatch.dynamics import communication_graph, get_dynamics
-from popdispatch.dynamics.fields import field_of
-from popdispatch.errors import OptionError
-from popdispatch.game.controllers import NodeControllers
-from popdispatch.game.parameters import MinuteInputs, PriceLaw
 from popdispatch.game.problem import DispatchProblem
-from popdispatch.integrate import STABLE_STEP
 from popdispatch.modes import get_mode
-from popdispatch.modes.exact import price_weights, scales
-from popdispatch.online.settings import RunSettings, initial_shares
-from popdispatch.warm_start import SHARES, warm_start
+from popdispatch.online.settings import RunSettings
 
 #: Watts per MW.
 W_PER_MW = 1.0e6
+#: Paper mode's rest tolerance, kW (it claims a rest point of its dynamics, no accuracy).
+PAPER_TOL_KW = 1e-3
 
 
 @dataclass(frozen=True)
@@ -52,7 +38,7 @@ class AgentSettings:
     window : rounds over which the set points must move less than ``tol_kw`` to be at rest
         (and every controller's residual, modes/exact.py, be within ``tol_kw``: a price may
         still be decaying on a slack line while the set points wait at their limits).
-    tol_kw : rest tolerance, kW.
+    tol_kw : rest tolerance, kW (None: :meth:`tol_for`, the engine's).
     drain_rounds : most rounds after rest to decide and acknowledge every transaction.
     timeout : rounds an offer stays open (None: ``2 * delay_max + 1`` of the faults, so that
         an offer and its acceptance can both arrive as late as the network delays them).
@@ -72,7 +58,7 @@ class AgentSettings:
     step_s: float | None = None
     max_rounds: int = 4000
     window: int = 10
-    tol_kw: float = 1e-3
+    tol_kw: float | None = None
     drain_rounds: int = 200
     timeout: int | None = None
     lag: int | None = None
@@ -80,6 +66,17 @@ class AgentSettings:
     decision_copies: int | None = None
     engine_limiter: bool | None = None
     stale_rounds: int = 10
+
+    def tol_for(self, problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+        """The rest tolerance in force, kW: the given one, else the engine's in a mode that
+        claims the DC-OPF (``settings.stepping``: a tenth of the accuracy's floor or its
+        relative part, ``max(accuracy_rel P_d, accuracy_kw / 10)``, so that the rest is what
+        the distance certificate then proves), else :data:`PAPER_TOL_KW`."""
+        if self.tol_kw is not None:
+            return float(self.tol_kw)
+        if not get_mode(settings.mode).claims_dc_opf:
+            return PAPER_TOL_KW
+        return settings.stepping.tol_mw(float(problem.demand[minute - 1])) * KW_PER_MW
 
     def stale_for(self, faults: Faults) -> int:
         """Rounds of silence after which a price or a neighbour's status counts as stale
@@ -112,142 +109,18 @@ class AgentSettings:
             return self.timeout
         return 1 if self.paced else 2 * int(faults.delay_max) + 1
 
-    def phase_ticks_for(self, faults: Faults) -> int:
+    def phase_ticks_for(self, faults: Faults, ticks_per_round: int) -> int:
         """Ticks per phase: 1, or in paced rounds one more than the longest simulated delay
-        (``delay_max`` unpaced rounds), so that every message of a phase is in before the
-        next phase acts."""
-        return 1 + TICKS_PER_ROUND * int(faults.delay_max) if self.paced else 1
+        (``delay_max`` unpaced rounds of the algorithm's ``ticks_per_round`` ticks), so that
+        every message of a phase is in before the next phase acts."""
+        return 1 + ticks_per_round * int(faults.delay_max) if self.paced else 1
 
     def rest_window(self, faults: Faults) -> int:
         """Rounds of rest required: ``window`` times ``1 + delay_max`` (a late network can
         hold every transaction up for ``delay_max`` rounds; ``window`` in paced rounds)."""
         return self.window * (1 if self.paced else 1 + int(faults.delay_max))
 
-    def step_for(self, problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
-        """The Euler step in force, s: the given one, else :func:`default_step`."""
-        if self.step_s is not None:
-            return self.step_s
-        return default_step(problem, settings, minute)
 
-
-def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
-    """An estimate of the fastest rate of exact mode's dynamics at ``minute``, 1/s: the
-    largest sensitivity of a generator's fitness to its own share,
-    ``gain * D * (2 c_i + C_i)`` (``D`` the minute's demand, MW; ``C_i`` the price weight of
-    the lines above it, :func:`popdispatch.modes.exact.price_weights`, 0 for a generator below
-    none), and at least ``gain * S``, the revision rate of a fitness gap of one marginal-cost
-    spread ``S`` (:func:`popdispatch.modes.exact.scales`). Dimensionless constants
-    (:class:`~popdispatch.modes.exact.ExactConstants`), so the same on a feeder scaled by 100.
-
-    It counts one priced line above a generator: limits nested several deep along one path
-    (the synthetic feeders with every line limited) make the complete graph stiffer than this
-    (docs/agents.md, "The round step")."""
-    fp = settings.game_constants(problem)
-    row = np.array([minute - 1])
-    weight = np.broadcast_to(price_weights(problem, settings.exact.price_law, fp.C, row),
-                             (1, len(problem.limit)))[0]  # fmt: skip
-    below = np.zeros(problem.n_generators)
-    limited = problem.generator_line >= 0
-    below[limited] = weight[problem.generator_line[limited]]
-    demand = float(problem.demand[minute - 1])
-    own = float(np.max(demand * (2.0 * problem.c + below)))
-    return float(fp.gain) * max(scales(problem)[0], own)
-
-
-def default_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
-    """The default round step, s: in exact mode ``STABLE_STEP / rate``
-    (:data:`popdispatch.integrate.STABLE_STEP`, the largest ``h * rate`` the engine's Heun
-    steps take; ``rate``: :func:`stiffness_rate`); in paper mode the engine's own Euler
-    substep (the mode's integrator: ``dt / substeps``)."""
-    if not get_mode(settings.mode).bounded:
-        stepping = settings.stepping
-        return stepping.dt / stepping.substeps
-    return STABLE_STEP / stiffness_rate(problem, settings, minute)
-
-
-@dataclass
-class AgentSystem:
-    """The agents of one run and what they share: the plant, the controllers by id, the
-    generators in the problem's order, the inverters and the simulated network."""
-
-    plant: PlantAgent
-    controllers: dict[str, ControllerAgent]
-    generators: list[GeneratorAgent]
-    inverters: Inverters
-    network: LossyNetwork
-    graph: nx.Graph
-    demand_mw: float
-    source: SourceAgent | None = None
-    events: list = field(default_factory=list)
-    price_cap: float = np.inf  # EUR/MW: a line price beyond it means no dispatch relieves it
-    line_names: list[str] = field(default_factory=list)  # "line A-B" per limited line
-
-    @property
-    def agents(self) -> list:
-        extra = [self.source] if self.source is not None else []
-        return [self.plant, *self.controllers.values(), *self.generators, *extra]
-
-    @property
-    def parties(self) -> list[GeneratorAgent]:
-        """Everyone who commits power: the generators and the source bus."""
-        return [*self.generators, *([self.source] if self.source is not None else [])]
-
-    def apply(self, event: FaultEvent, rnd: int) -> None:
-        """Start or end ``event`` at round ``rnd`` (see :class:`FaultEvent`)."""
-        if event.kind == "trip":
-            if rnd == event.round:
-                self.trip(event.agent, rnd)
-            return
-        agent = (self.controllers.get(event.agent) if event.kind == "controller-crash"
-                 else self._generator_or_none(event.agent))  # fmt: skip
-        end = None if event.rounds is None else event.round + event.rounds
-        if rnd == event.round:
-            agent.crashed = True
-            self.events.append({"round": rnd, "event": event.kind, "agent": event.agent})
-        elif rnd == end:
-            agent.crashed = False
-            self.events.append({"round": rnd, "event": "restart", "agent": event.agent})
-
-    def _generator_or_none(self, name: str):
-        return next((g for g in self.generators if g.aid == name), None)
-
-    def trip(self, name: str, rnd: int) -> None:
-        """DG ``name`` trips: its output goes to 0 at once and its agent stops for good; the
-        protection reports it, so the others forget it (its transactions, its status) and the
-        source bus takes over at once what the committed state now lacks (the tripped output
-        and the transactions the trip cut), as its committed position
-        (:mod:`popdispatch.agents.source`)."""
-        gen = self._generator_or_none(name)
-        gen.crashed = gen.tripped = True
-        self.inverters.p[gen.index] = 0.0
-        for book in (gen.pending_in, gen.pending_out, gen.committed, gen.undelivered,
-                     gen.open_offers, gen.reserved, gen.accepted):  # fmt: skip
-            book.clear()
-        for other in self.parties:
-            if other is not gen:
-                other.forget(name)
-        taken = -self.committed_imbalance_mw()
-        self.source.position_mw += taken
-        self.events.append({"round": rnd, "event": "trip", "agent": name,
-                            "source_takes_kw": taken * KW_PER_MW})  # fmt: skip
-
-    def committed_imbalance_mw(self) -> float:
-        """Supply minus demand of the committed state: every set point, plus each committed
-        transaction whose receiver has not applied it yet (in flight: among the decisions its
-        sender has not seen acknowledged, since a receiver acknowledges what it applied). Zero
-        up to rounding if every transaction is applied exactly once at each end."""
-        parties = {g.aid: g for g in self.parties}
-        in_flight = sum(
-            decision.amount_mw for g in parties.values()
-            for txid, (aid, decision) in g.undelivered.items()
-            if decision.commit and txid not in getattr(parties.get(aid), "applied", ())
-        )  # fmt: skip
-        planned = sum(g.planned for g in parties.values())
-        return float(planned + in_flight - self.demand_mw)
-
-    def physical_imbalance_mw(self) -> float:
-        """Supply minus demand of the set points as they are: what the source bus takes up."""
-        return float(self.inverters.p.sum() - self.demand_mw)
 
 
 @dataclass(frozen=True)
@@ -257,8 +130,9 @@ class AgentRun:
     ``trajectory_kw``: set points at the start of every round (rows), as the plant saw them;
     ``setpoints_kw``: after the drain; ``rest_round``: the round the set points came to rest
     (None if never); ``messages``: every message sent (lost ones and duplicate copies
-    included); ``lost``: of them lost; ``duplicated``: messages the network delivered
-    twice; ``max_imbalance_w``: largest |supply - demand| of the
+    included); ``scalars_sent``: the real numbers those messages carried
+    (:func:`popdispatch.agents.messages.scalars`); ``lost``: of them lost; ``duplicated``:
+    messages the network delivered twice; ``max_imbalance_w``: largest |supply - demand| of the
     committed state at any round; ``max_transient_w``: largest |supply - demand| of the
     inverters as they were at a measurement (taken up by the source bus while a commit is in
     flight); ``final_imbalance_w``: of the inverters after the drain; ``open_transactions``:
@@ -295,219 +169,56 @@ class AgentRun:
     prices: dict = field(default_factory=dict)
     events: list = field(default_factory=list)
     source_kw: float = 0.0
+    scalars_sent: int = 0
 
     stall_reason: str | None = None
     horizon_reason: str | None = None
     infeasible: bool = False
+    certified: bool = False
+    distance_bound_kw: float | None = None
+    accuracy_kw: float | None = None
 
     @property
     def status(self) -> str:
-        """``converged`` (at rest and, in exact mode, at a KKT point of the DC-OPF),
-        ``stalled`` (at rest elsewhere: ``stall_reason``), ``infeasible`` (the line prices ran
-        away: ``horizon_reason``) or ``not_converged`` (never at rest: ``horizon_reason``)."""
+        """As the engine's snapshot: ``converged`` (in exact mode the distance certificate
+        proves every set point within ``accuracy_kw`` of the DC-OPF; in paper mode, at rest),
+        ``stalled`` (at rest without that proof: ``stall_reason``), ``infeasible`` (the line
+        prices ran away: ``horizon_reason``) or ``not_converged`` (never at rest and not
+        proved: ``horizon_reason``)."""
         if self.infeasible:
             return "infeasible"
-        if self.rest_round is None:
-            return "not_converged"
-        return "stalled" if self.stall_reason else "converged"
+        if self.certified:
+            return "converged"
+        return "not_converged" if self.rest_round is None else "stalled"
 
     @property
     def reason(self) -> str | None:
         """Why the run is not ``converged`` (None if it is)."""
+        if self.status == "converged":
+            return None
         return self.horizon_reason if self.rest_round is None else self.stall_reason
 
     def line_states(self, n_lines: int) -> np.ndarray:
         """Exact mode's line prices at the end, EUR/MW: ``z_up`` of every limited line, then
         ``z_down``, each the mean of its live end controllers' copies (0 in paper mode)."""
-        z, ends = np.zeros(2 * n_lines), np.zeros(n_lines)
-        for copies in self.prices.values():
-            for line, z_up, z_down in copies:
-                z[line] += z_up
-                z[n_lines + line] += z_down
-                ends[line] += 1
-        return z / np.concatenate([ends, ends]).clip(min=1)
+        return line_states(self.prices, n_lines)
 
     @property
     def messages_per_agent_round(self) -> float:
         return self.messages / max(self.agents * max(self.rounds, 1), 1)
 
 
-def initial_setpoints(problem: DispatchProblem, settings: RunSettings, minute: int) -> np.ndarray:
-    """Initial set points (MW) as :meth:`popdispatch.online.Engine.run_minute` starts: the
-    initial shares, projected onto the limits in bounded modes, times the demand."""
-    inputs = MinuteInputs.of(problem, minute)
-    x = initial_shares(problem, settings.x0, minute)
-    weight = np.empty_like(x)
-    warm_start(int(SHARES), get_mode(settings.mode).bounded, x, 0.0, inputs.demand,
-               problem.pmin, problem.pmax, inputs.active, weight)  # fmt: skip
-    return x * inputs.demand
+def line_states(prices: dict, n_lines: int) -> np.ndarray:
+    """``z_up`` of every limited line, then ``z_down`` (EUR/MW), each the mean of the copies
+    in ``prices`` (per controller, ``(line, z_up, z_down)`` of each line it ends)."""
+    z, ends = np.zeros(2 * n_lines), np.zeros(n_lines)
+    for copies in prices.values():
+        for line, z_up, z_down in copies:
+            z[line] += z_up
+            z[n_lines + line] += z_down
+            ends[line] += 1
+    return z / np.concatenate([ends, ends]).clip(min=1)
 
-
-def game_constants(problem: DispatchProblem, settings: RunSettings):
-    """The game's constants (EUR/MW: ``B``, ``m``, ``C``, ``gain``, ``price_rate``) exactly as
-    the engine runs them for this problem and settings: read from the engine's own
-    :class:`~popdispatch.game.parameters.GameParameters`, so that a mode whose constants
-    depend on the problem (scaled ones) needs no copy of that rule here."""
-    from popdispatch.online import Engine
-
-    return Engine(problem, settings).params
-
-
-def generator_graph(problem: DispatchProblem, settings: RunSettings) -> nx.Graph:
-    """The communication graph over generator names (complete for dynamics without one)."""
-    names = list(problem.generators)
-    dynamics = get_dynamics(settings.dynamics)
-    kind = settings.graph if dynamics.uses_graph else "complete"
-    adjacency = communication_graph(kind, names)
-    return nx.relabel_nodes(nx.from_numpy_array(adjacency), dict(enumerate(names)))
-
-
-def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
-                 step_s: float, faults: Faults, timeout: int = 1, lag: int = 0,
-                 copies: int = 1, engine_limiter: bool = True,
-                 stale_rounds: int = 10) -> AgentSystem:  # fmt: skip
-    """The agents of one minute (not yet registered anywhere); ``timeout``: rounds an offer
-    stays open; ``lag``: rounds from a commit to the inverters' change."""
-    if not problem.online[minute - 1].all():
-        off = ", ".join(problem.generators[~problem.online[minute - 1]])
-        raise OptionError(f"the agents run with every generator online (offline: {off})")
-    check_settings(settings)
-    mode = get_mode(settings.mode)
-    dynamics = get_dynamics(settings.dynamics)
-    field_code = field_of(dynamics, mode.bounded)
-    fp = game_constants(problem, settings)
-    demand = float(problem.demand[minute - 1])
-    network = LossyNetwork(faults)
-    inverters = Inverters(initial_setpoints(problem, settings, minute))
-    graph = generator_graph(problem, settings)
-    names = list(problem.generators)
-    generators = []
-    for i, name in enumerate(names):
-        rule = GeneratorRule(
-            float(problem.b[i]), float(problem.c[i]), float(problem.pmin[i]),
-            float(problem.pmax[i]), float(fp.B), float(fp.m),
-            float(fp.gain) if mode.bounded else 1.0, not mode.bounded, int(field_code),
-            demand, step_s,
-        )  # fmt: skip
-        neighbours = [n for n in names if graph.has_edge(name, n)]
-        generators.append(
-            GeneratorAgent(
-                rule, i, inverters, neighbours, timeout, lag, copies, engine_limiter, network
-            )  # fmt: skip
-        )
-    relay = not _complete(graph)
-    for gen in generators:
-        gen.relay = relay
-        gen.stale_rounds = stale_rounds
-    controllers, line_ends = _controllers(problem, settings, fp, step_s, network)
-    for controller in controllers.values():  # the generators report a silence first
-        controller.stale_rounds = 2 * stale_rounds
-    plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
-                       network)  # fmt: skip
-    source = SourceAgent(names, timeout, copies, network)
-    _check_ids(names, controllers)
-    _check_events(faults.events, names, controllers)
-    cap = mode.price_cap(problem) if mode.bounded else np.inf
-    return AgentSystem(plant, controllers, generators, inverters, network, graph, demand,
-                       source, price_cap=cap, line_names=_line_names(problem))  # fmt: skip
-
-
-def _line_names(problem: DispatchProblem) -> list[str]:
-    """``line A-B`` of every limited line (its end buses as the feeder names them)."""
-    lines = problem.feeder.lines.iloc[np.asarray(problem.lines, dtype=int)]
-    return [f"line {bus_name(a)}-{bus_name(b)}"
-            for a, b in zip(lines.from_bus, lines.to_bus, strict=True)]  # fmt: skip
-
-
-def check_settings(settings: RunSettings) -> None:
-    """Refuse run settings the agents cannot honour: a mode other than paper and exact (their
-    node controllers price limited lines only), a price law other than plain (they hear only
-    their own lines; the tree law needs its neighbours' excesses, the scaled law the count of
-    tradable generators below each line)."""
-    if get_mode(settings.mode).code not in PAYOFFS:
-        raise OptionError(f"the agents run paper and exact mode, not {settings.mode}", "--mode")
-    if settings.exact.price_law != PriceLaw.PLAIN:
-        raise OptionError(
-            "the agents' node controllers run the plain price law (each hears only its own "
-            "lines; the tree law needs its neighbours' excesses, the scaled law the count of "
-            "tradable generators below each line)",
-            "--price-law",
-        )
-
-
-def _check_ids(generators: list[str], controllers: dict) -> None:
-    """No generator may carry another agent's id (the plant, the source bus, a node
-    controller ``C<bus>``): one-line error naming it."""
-    others = {"plant": "the plant", SOURCE_ID: "the source bus"}
-    others.update({aid: "a node controller" for aid in controllers})
-    for name in generators:
-        if str(name) in others:
-            raise OptionError(f"generator {name!r} has the agent id of {others[str(name)]}: "
-                              "rename it in the fleet", "--fleet")  # fmt: skip
-
-
-def _check_events(events, generators: list[str], controllers: dict) -> None:
-    """Every fault names an agent of its kind (one-line error naming it)."""
-    for event in events:
-        known = list(controllers) if event.kind == "controller-crash" else generators
-        if event.agent not in known:
-            what = "node controller" if event.kind == "controller-crash" else "generator"
-            raise OptionError(f"{event.kind}: no {what} {event.agent!r} (known: "
-                              f"{', '.join(map(str, known))})", "--" + event.kind)  # fmt: skip
-
-
-def _complete(graph: nx.Graph) -> bool:
-    n = graph.number_of_nodes()
-    return graph.number_of_edges() == n * (n - 1) // 2
-
-
-def relay_phase_ticks(n_generators: int, delay_max: int) -> int:
-    """Ticks per phase that let a relayed message cross the longest chain of relays: at
-    most ``n - 1`` hops, each half a tick plus up to ``delay_max`` rounds of
-    :data:`TICKS_PER_ROUND` ticks (relays pass messages on as they arrive)."""
-    hops = max(n_generators - 1, 1)
-    return int(hops * (0.5 + TICKS_PER_ROUND * int(delay_max))) + 1
-
-
-def bus_name(bus) -> str:
-    """An original bus as the source format names it (a whole number read into a float
-    column, ``505.0``, as ``505``)."""
-    if isinstance(bus, float) and bus.is_integer():
-        bus = int(bus)
-    return str(bus)
-
-
-def controller_id(bus) -> str:
-    """Agent id of the node controller at original bus ``bus`` (``C505``)."""
-    return f"C{bus_name(bus)}"
-
-
-def _controllers(problem, settings: RunSettings, fp, step_s: float, network):
-    """``({id: controller}, line_ends)`` from the problem's controller table; each line priced
-    by the mode's own payoff map (:class:`~popdispatch.agents.controller.LinePrice`) with the
-    problem's limit of the line."""
-    table = NodeControllers.from_problem(problem).table
-    position = {line: k for k, line in enumerate(problem.lines)}
-    payoff = PAYOFFS[get_mode(settings.mode).code]
-    n_states = 2 if get_mode(settings.mode).bounded else 0
-    ends: dict[str, list[LineEnd]] = {}
-    line_ends: list[list[str]] = [[] for _ in problem.lines]
-    for row in table.itertuples():
-        aid = controller_id(row.bus)
-        k = position[row.line]
-        price = LinePrice(payoff, float(problem.limit[k]), float(fp.C), float(fp.price_rate),
-                          n_states)  # fmt: skip
-        ends.setdefault(aid, []).append(
-            LineEnd(k, int(row.orientation), price, list(row.receivers))
-        )
-        line_ends[k].append(aid)
-    for aid, own in ends.items():  # each end knows its partner and the other side
-        for end in own:
-            partner = next(a for a in line_ends[end.line] if a != aid)
-            end.partner = partner
-            end.other_receivers = next(e.receivers for e in ends[partner] if e.line == end.line)
-    controllers = {aid: ControllerAgent(own, step_s, network) for aid, own in ends.items()}
-    return controllers, [tuple(e) for e in line_ends]
 
 
 def run_agents(
@@ -517,27 +228,23 @@ def run_agents(
     faults: Faults | None = None,
     agent_settings: AgentSettings | None = None,
     on_round=None,
+    algorithm: str = DEFAULT_ALGORITHM,
 ) -> AgentRun:
     """One minute of dispatch by the agents in mango's simulated world (module docstring).
 
     ``on_round(system, rnd)``: called after every round's measurement (fault injection,
-    probes); it may crash, restart or trip agents of ``system``.
+    probes); it may crash, restart or trip agents of ``system``. ``algorithm``: a name of
+    :data:`popdispatch.agents.algorithms.ALGORITHMS`; options and settings it cannot use are
+    refused before any work (:func:`popdispatch.agents.algorithms.refuse_options`).
     """
     settings = settings or RunSettings()
     faults = faults or Faults()
     agent_settings = agent_settings or AgentSettings()
-    step_s = agent_settings.step_for(problem, settings, minute)
-    run = _run(problem, minute, settings, faults, agent_settings, step_s, on_round)
-    if run.rest_round is None or not get_mode(settings.mode).claims_dc_opf:
-        return run
-    tripped = [e.agent for e in faults.events if e.kind == "trip"]
-    if abs(run.source_kw) > agent_settings.tol_kw:
-        reason = (f"the source bus carries {run.source_kw:.4g} kW that the generators left "
-                  f"after the trip of {', '.join(tripped)} cannot take")  # fmt: skip
-        return replace(run, stall_reason=reason)
-    checked = without(problem, minute, tripped)
-    return replace(run, stall_reason=_kkt_reason(checked, minute, settings, agent_settings,
-                                                 step_s, run))  # fmt: skip
+    chosen = get_algorithm(algorithm)
+    refuse_options(chosen, settings, agent_settings, faults)
+    agent_settings = replace(agent_settings,
+                             tol_kw=agent_settings.tol_for(problem, settings, minute))
+    return chosen.run(problem, minute, settings, faults, agent_settings, on_round)
 
 
 def without(problem: DispatchProblem, minute: int, names: list[str]) -> DispatchProblem:
@@ -550,207 +257,3 @@ def without(problem: DispatchProblem, minute: int, names: list[str]) -> Dispatch
     return replace(problem, online=online)
 
 
-def _kkt_reason(problem, minute, settings, opts: AgentSettings, step_s: float, run) -> str | None:
-    """The engine's own KKT check of the rest state (:meth:`popdispatch.online.Engine.
-    stall_reasons`, with the agents' step, rest tolerance and window): set points and each
-    line's prices (the mean of its two end controllers' copies)."""
-    from popdispatch.integrate import Integrator
-    from popdispatch.online import Engine
-
-    z = run.line_states(len(problem.limit))
-    integrator = Integrator(dt=step_s, tol_kw=max(opts.tol_kw, 1e-9), window=opts.window)
-    engine = Engine(problem, replace(settings, integrator=integrator))
-    p_mw = run.setpoints_kw[None] / KW_PER_MW
-    return engine.stall_reasons(np.array([minute]), p_mw, z[None], np.array([True]))[0]
-
-
-def _run(problem, minute, settings, faults, agent_settings, step_s, on_round) -> AgentRun:
-    """Build the agents and run them in mango's simulated world."""
-    system = build_agents(problem, minute, settings, step_s, faults,
-                          agent_settings.timeout_for(faults), agent_settings.lag_for(faults),
-                          agent_settings.copies_for(faults),
-                          agent_settings.engine_limiter_for(faults),
-                          agent_settings.stale_for(faults))  # fmt: skip
-    ticks = agent_settings.phase_ticks_for(faults)
-    if system.generators[0].relay:
-        ticks = max(ticks, relay_phase_ticks(len(system.generators), faults.delay_max))
-    for agent in system.agents:
-        agent.phase_ticks = ticks
-    window = agent_settings.rest_window(faults)
-    return asyncio.run(_simulate(system, agent_settings, window, on_round))
-
-
-async def _simulate(system: AgentSystem, opts: AgentSettings, window: int, on_round) -> AgentRun:
-    from mango import AgentAddress, create_world, graph_topology, per_node
-
-    world = create_world(communication_sim=system.network, record_messages=False)
-    world.register(system.plant, suggested_aid="plant")
-    for aid, agent in system.controllers.items():
-        world.register(agent, suggested_aid=aid)
-    for gen, name in zip(system.generators, system.graph.nodes, strict=True):
-        world.register(gen, suggested_aid=name)
-    world.register(system.source, suggested_aid=SOURCE_ID)
-    topology = graph_topology(system.graph.copy())
-    for name, node in zip(system.graph.nodes, per_node(topology), strict=True):
-        node.add(world.agents[name])
-    addresses = {aid: AgentAddress(world.addr, aid) for aid in world.agents}
-    for agent in system.agents:
-        agent.addresses = addresses
-    start = time.perf_counter()
-    rest_round = unrest = None
-    infeasible = False
-    max_imbalance = max_transient = 0.0
-    last_event = max((_last_round(e) for e in system.network.faults.events), default=-1)
-    async with world:
-        rnd, quiet = 0, False
-        while True:
-            max_imbalance = max(max_imbalance, abs(system.committed_imbalance_mw()))
-            max_transient = max(max_transient, abs(system.physical_imbalance_mw()))
-            for event in system.network.faults.events:
-                system.apply(event, rnd)
-            max_imbalance = max(max_imbalance, abs(system.committed_imbalance_mw()))
-            if on_round is not None:
-                on_round(system, rnd)
-            if not quiet:
-                due = rnd > last_event + window  # no rest declared before the last fault
-                rest_round, unrest, infeasible = _verdict(system, rnd, opts, window, due)
-                quiet = rest_round is not None or unrest is not None
-                for gen in system.parties if quiet else ():
-                    gen.quiet = True  # the drain: no new offers, open transactions decided
-            busy = any(g.busy for g in system.parties if not g.crashed)
-            if (quiet and not busy) or rnd >= opts.max_rounds + opts.drain_rounds:
-                break
-            await world.step_until(system.plant.round_ticks)
-            _raise_agent_errors(system)
-            rnd += 1
-    wall = time.perf_counter() - start
-    prices = {  # a crashed controller's copies froze when it stopped: the survivor's count
-        aid: [(end.line, end.z_up, end.z_down) for end in c.ends]
-        for aid, c in system.controllers.items()
-        if not c.crashed
-    }
-    residual = max((c.residual_mw() for c in system.controllers.values()), default=0.0)
-    trajectory = np.array(system.plant.history) * KW_PER_MW
-    return AgentRun(
-        generators=list(system.graph.nodes),
-        trajectory_kw=trajectory,
-        setpoints_kw=system.inverters.p * KW_PER_MW,
-        rounds=len(trajectory) - 1,
-        rest_round=rest_round,
-        messages=system.network.sent,
-        lost=system.network.lost,
-        duplicated=system.network.duplicated,
-        max_imbalance_w=max_imbalance * W_PER_MW,
-        max_transient_w=max_transient * W_PER_MW,
-        final_imbalance_w=system.physical_imbalance_mw() * W_PER_MW,
-        open_transactions=sum(
-            len(g.open_offers) + len(g.undelivered) + len(g.reserved) for g in system.parties
-        ),
-        residual_kw=residual * KW_PER_MW,
-        wall_seconds=wall,
-        agents=len(system.agents),
-        step_s=system.generators[0].rule.step_s,
-        phase_ticks=system.plant.phase_ticks,
-        prices=prices,
-        events=sorted(_events(system), key=lambda e: e["round"]),
-        source_kw=system.source.position_mw * KW_PER_MW,
-        horizon_reason=unrest,
-        infeasible=infeasible,
-    )
-
-
-def _verdict(system: AgentSystem, rnd: int, opts: AgentSettings, window: int,
-             due: bool) -> tuple[int | None, str | None, bool]:  # fmt: skip
-    """``(rest round, reason, infeasible)`` of a run at round ``rnd``: at rest (the set points
-    still over ``window`` rounds and every live controller's residual within ``tol_kw``, once
-    ``due``: after the last fault), or why it stops without: a line price past the cap
-    (:func:`runaway`; infeasible), the horizon (:func:`horizon_reason`); all None and False
-    while it runs on."""
-    tol = opts.tol_kw / KW_PER_MW
-    live = [c for c in system.controllers.values() if not c.crashed]
-    residual = max((c.residual_mw() for c in live), default=0.0)
-    if due and residual <= tol and _at_rest(system.plant.history, window, tol):
-        return len(system.plant.history) - 1, None, False
-    ran_away = runaway(system, live)
-    if ran_away is not None:
-        return None, ran_away, True
-    if rnd >= opts.max_rounds:
-        step = system.generators[0].rule.step_s
-        return None, horizon_reason(system.plant.history, window, tol, step, residual), False
-    return None, None, False
-
-
-def runaway(system: AgentSystem, controllers: list[ControllerAgent]) -> str | None:
-    """Why the line prices ran away, if one of ``controllers``' prices passed the mode's cap
-    (:meth:`popdispatch.modes.mechanism.Mode.price_cap`: no dispatch relieves the line, as in
-    the engine's stopping rule), else None."""
-    for controller in controllers:
-        for end in controller.ends:
-            price = max(end.z_up, end.z_down)
-            if price > system.price_cap:
-                line = system.line_names[end.line]
-                return (f"the line prices ran away: {line}'s price {price:.4g} EUR/MWh passed "
-                        f"{system.price_cap:.4g} EUR/MWh, which no dispatch within the limits "
-                        "needs (the line limits cannot be met)")
-    return None
-
-
-def _last_round(event: FaultEvent) -> int:
-    """The round a fault event last changes something (its start or its restart)."""
-    return event.round + (event.rounds or 0)
-
-
-def _events(system: AgentSystem) -> list[dict]:
-    """The run's fault events and what the agents noticed."""
-    noticed = [e for a in [*system.generators, *system.controllers.values()] for e in a.events]
-    return [*system.events, *noticed]
-
-
-def _raise_agent_errors(system: AgentSystem) -> None:
-    """Re-raise the first error an agent's tick met (mango would only log it)."""
-    for agent in system.agents:
-        if agent.error is not None:
-            raise RuntimeError(f"agent {agent.aid} failed: {agent.error!r}") from agent.error
-
-
-def horizon_reason(history: list[np.ndarray], window: int, tol_mw: float, step_s: float,
-                   residual_mw: float = 0.0) -> str:  # fmt: skip
-    """Why set points ``history`` (MW per round) with the controllers' largest residual
-    ``residual_mw`` (MW) are not at rest. Over the last :data:`CYCLE_ROUNDS` rounds (or
-    ``window``, if longer) their path is at least :data:`CYCLE_PATH` times the range they
-    stay in (an oscillation: the round step ``step_s`` is past the stability limit of the
-    Euler rule on this problem), or they still move, or a line is still away from
-    complementary slackness (more rounds needed)."""
-    rounds = len(history) - 1
-    recent = np.array(history[-max(window, CYCLE_ROUNDS) - 1 :]) * KW_PER_MW
-    path = float(np.abs(np.diff(recent, axis=0)).max(axis=1).sum()) if len(recent) else 0.0
-    spread = float(np.ptp(recent, axis=0).max()) if len(recent) else 0.0
-    tol_kw = tol_mw * KW_PER_MW
-    if spread > tol_kw and path >= CYCLE_PATH * spread:
-        return (f"not at rest after {rounds} rounds: the set points oscillate (a path of "
-                f"{path:.4g} kW over the last {len(recent) - 1} rounds within a range of "
-                f"{spread:.4g} kW); the round step {step_s:.4g} s is past the stability limit "
-                "of the Euler rule on this problem (give a smaller step)")
-    recent = recent[-window - 1 :]
-    moved = float(np.abs(recent - recent[-1]).max()) if len(recent) else 0.0
-    return (f"not at rest after {rounds} rounds (at rest: within {tol_kw:g} kW): the set "
-            f"points still moved {moved:.4g} kW over the last {len(recent) - 1} rounds and a "
-            f"line is {residual_mw * KW_PER_MW:.4g} kW from complementary slackness (give "
-            "more rounds)")
-
-
-#: Rounds over which :func:`horizon_reason` looks for an oscillation.
-CYCLE_ROUNDS = 30
-#: Path over range of the set points (:func:`horizon_reason`) from which they oscillate:
-#: about 1 when they move one way; 27 on the synthetic 1k feeder's complete graph at the
-#: default step (6 kW a round within 6.7 kW), 9 when case69 flips between 0 and 300 kW
-#: every three rounds (a step 13 times its default).
-CYCLE_PATH = 3.0
-
-
-def _at_rest(history: list[np.ndarray], window: int, tol_mw: float) -> bool:
-    """Whether the set points moved less than ``tol_mw`` over the last ``window`` rounds."""
-    if len(history) <= window:
-        return False
-    recent = np.array(history[-window - 1 :])
-    return bool(np.abs(recent - recent[-1]).max() <= tol_mw)

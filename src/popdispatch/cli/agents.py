@@ -5,10 +5,11 @@ network's faults (``--loss``, ``--delay-max``, ``--duplicate``, ``--noise-kw``, 
 the round's Euler step (``--step-s``). The output is the snapshot's (``--json``: the snapshot
 keys, with ``iterations`` counting rounds) plus what the messages did: ``messages``, ``lost``,
 ``max_imbalance_w`` (committed state), ``max_transient_w`` (taken up by the source bus),
-``final_imbalance_w``, ``open_transactions``, ``rounds``, ``agents`` and
-``messages_per_agent_round``. ``agents launch`` runs the agents as one OS process each over
-TCP on localhost (:mod:`popdispatch.agents.launch`). Register the group in the main one with
-``cli.add_command(agents)`` (:mod:`popdispatch.cli.commands`).
+``final_imbalance_w``, ``open_transactions``, ``rounds``, ``agents``, ``scalars_sent`` (the
+real numbers the messages carried) and ``messages_per_agent_round``. ``agents launch`` runs
+the agents as one OS process each over TCP on localhost (:mod:`popdispatch.agents.launch`).
+Register the group in the main one with ``cli.add_command(agents)``
+(:mod:`popdispatch.cli.commands`).
 """
 
 from __future__ import annotations
@@ -85,15 +86,22 @@ def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, dupl
     if minute is None:
         raise click.MissingParameter(param_hint="'--minute'", param_type="option")
     progress = Progress(quiet)
-    settings = settings_from(dynamics, mode, x0, graph, None, constants, price_law, eta=eta)
     events = {"trip": trips, "crash": crashes, "controller-crash": controller_crashes}
     faults = _faults(loss, delay_max, duplicate, noise_kw, seed, events)
-    from popdispatch.agents.system import check_settings
+    from popdispatch.agents.algorithms import (
+        DEFAULT_ALGORITHM,
+        get_algorithm,
+        refuse_mode,
+        refuse_options,
+    )
 
-    check_settings(settings)  # before the feeder is read
+    algorithm = get_algorithm(DEFAULT_ALGORITHM)
+    refuse_mode(algorithm, mode)  # before the mode's own options are asked for (--vmin)
+    settings = settings_from(dynamics, mode, x0, graph, None, constants, price_law, eta=eta)
+    options = AgentOptions(step_s, max_rounds, pace)
+    refuse_options(algorithm, settings, _agent_settings(options), faults)  # before any work
     problem = _problem(source, profiles, minute, limits, progress)
     with progress.step(f"minute {minute}: {dynamics} dynamics by agents"):
-        options = AgentOptions(step_s, max_rounds, pace)
         summary = agents_summary(problem, minute, settings, faults, options, limits)
     emit(stamp(summary), as_json, agents_text(summary))
     if summary["status"] == "infeasible":
@@ -160,11 +168,19 @@ class AgentOptions(NamedTuple):
     paced: bool
 
 
+def _agent_settings(options: AgentOptions):
+    """The :class:`~popdispatch.agents.system.AgentSettings` of the command's options."""
+    from popdispatch.agents.system import AgentSettings
+
+    return AgentSettings(step_s=options.step_s, max_rounds=options.max_rounds,
+                         paced=options.paced)  # fmt: skip
+
+
 def agents_summary(problem, minute, settings, faults, options: AgentOptions, limits) -> dict:
     """The snapshot summary of the agents' run against the DC-OPF, plus the messages' keys."""
     import numpy as np
 
-    from popdispatch.agents.system import AgentSettings, run_agents, without
+    from popdispatch.agents.system import run_agents, without
     from popdispatch.compare import SnapshotComparison
     from popdispatch.modes import get_mode
     from popdispatch.modes.exact import price_weights
@@ -175,9 +191,7 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
     from popdispatch.runs import check_x0
 
     check_x0(settings.x0, problem.generators)
-    opts = AgentSettings(step_s=options.step_s, max_rounds=options.max_rounds,
-                         paced=options.paced)  # fmt: skip
-    run = run_agents(problem, minute, settings, faults, opts)
+    run = run_agents(problem, minute, settings, faults, _agent_settings(options))
     final_mw = run.setpoints_kw / 1000.0
     line_prices = voltage_prices = None
     if get_mode(settings.mode).claims_dc_opf:  # the prices the controllers broadcast at the end
@@ -195,7 +209,7 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         settings=settings,
         generators=problem.generators,
         trajectory_kw=np.vstack([run.trajectory_kw, run.setpoints_kw]),
-        converged_at=run.rest_round if run.status == "converged" else None,
+        converged_at=_converged_at(run),
         first_congestion=next((i for i, o in enumerate(overflow) if o), None),
         overflow_kw=overflow_kw(problem, final_mw, minute),
         flows_kw=limited_flows_mw(problem, final_mw, minute) * 1000.0,
@@ -206,6 +220,8 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         infeasible=run.infeasible,
         line_price_eur_per_mwh=line_prices,
         voltage_price_eur_per_mwh=voltage_prices,
+        distance_bound_kw=run.distance_bound_kw,
+        accuracy_kw=run.accuracy_kw,
     )
     # the yardstick: the DC-OPF without the tripped DGs
     remaining = without(problem, minute, [e.agent for e in faults.events if e.kind == "trip"])
@@ -226,6 +242,7 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         seed=faults.seed,
         agents=run.agents,
         messages=run.messages,
+        scalars_sent=run.scalars_sent,
         lost=run.lost,
         messages_per_agent_round=run.messages_per_agent_round,
         max_imbalance_w=run.max_imbalance_w,
@@ -240,6 +257,23 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         source_kw=run.source_kw,
     )
     return summary
+
+
+def _converged_at(run) -> int | None:
+    """The round a converged run is reported converged at (its rest round, else its last
+    round: proved without coming to rest), None if it is not converged."""
+    if run.status != "converged":
+        return None
+    return run.rest_round if run.rest_round is not None else run.rounds
+
+
+def _proved_text(s: dict) -> str:
+    """The distance certificate's bound against the accuracy (modes that claim the DC-OPF)."""
+    if s.get("accuracy_kw") is None:
+        return ""
+    bound = s.get("distance_bound_kw")
+    shown = "nothing (unbounded)" if bound is None else f"within {bound:.3g} kW"
+    return f"; proved {shown} of the DC-OPF, accuracy {s['accuracy_kw']:.3g} kW"
 
 
 def agents_text(s: dict) -> str:
@@ -260,6 +294,7 @@ def agents_text(s: dict) -> str:
             if s["rest_iteration"] is not None
             else ""
         )
+        + _proved_text(s)
         + (f"\nstalled: {s['stall_reason']}" if s["stall_reason"] else "")
         + (f"\n{s['horizon_reason']}" if s["horizon_reason"] else ""),
         f"{'generator':>10} {'setpoint_kw':>12} {'opf_kw':>10}",
@@ -274,7 +309,8 @@ def agents_text(s: dict) -> str:
         + f", max overflow {s['max_overflow_kw']:.4f} kW",
         *_price_lines(s["line_prices"]),
         f"messages {s['messages']} ({s['lost']} lost, {s['messages_per_agent_round']:.2f} per "
-        f"agent per round); imbalance: committed max {s['max_imbalance_w']:.3g} W, source bus "
+        f"agent per round; {s['scalars_sent']} scalars sent); imbalance: committed max "
+        f"{s['max_imbalance_w']:.3g} W, source bus "
         f"max {s['max_transient_w']:.3g} W, final {s['final_imbalance_w']:.3g} W, open "
         f"transactions {s['open_transactions']}",
     ]

@@ -1,0 +1,593 @@
+"""The population dynamics as agents: today's algorithm of :mod:`popdispatch.agents`.
+
+One agent per generator (:mod:`~popdispatch.agents.generator`: fitness, the pairwise
+revision rule, power moved only in offer-accept-commit transactions), one per node
+controller (:mod:`~popdispatch.agents.controller`: the mode's line prices), the plant
+(:mod:`~popdispatch.agents.plant`: set points to flows) and the source bus
+(:mod:`~popdispatch.agents.source`), in the six-phase round of
+:mod:`~popdispatch.agents.schedule`. :func:`build_agents` builds them, :func:`run` runs them in
+the generic world (:func:`popdispatch.agents.world.run_world`) and judges the end state with
+the engine's distance certificate (:func:`popdispatch.online.verdicts`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import networkx as nx
+import numpy as np
+
+from popdispatch.agents.controller import PAYOFFS, ControllerAgent, LineEnd, LinePrice
+from popdispatch.agents.generator import GeneratorAgent, GeneratorRule
+from popdispatch.agents.network import FaultEvent, Faults, LossyNetwork
+from popdispatch.agents.plant import Inverters, PlantAgent
+from popdispatch.agents.schedule import TICKS_PER_ROUND
+from popdispatch.agents.source import SOURCE_ID, SourceAgent
+from popdispatch.agents.system import (
+    W_PER_MW,
+    AgentRun,
+    AgentSettings,
+    line_states,
+    without,
+)
+from popdispatch.agents.world import WorldOptions, WorldRun, run_world
+from popdispatch.constants import KW_PER_MW
+from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.errors import OptionError
+from popdispatch.game.controllers import NodeControllers
+from popdispatch.game.parameters import MinuteInputs, PriceLaw
+from popdispatch.game.problem import DispatchProblem
+from popdispatch.integrate import STABLE_STEP
+from popdispatch.modes import get_mode
+from popdispatch.modes.exact import price_weights, scales
+from popdispatch.online.settings import RunSettings, initial_shares
+from popdispatch.warm_start import SHARES, warm_start
+
+#: The name the registry (:mod:`popdispatch.agents.algorithms`) knows this algorithm by.
+NAME = "population"
+#: The modes its node controllers price (``--mode``).
+MODES = ("paper", "exact")
+#: The :class:`~popdispatch.agents.system.AgentSettings` fields it reads: all of them.
+OPTIONS = frozenset(AgentSettings.__dataclass_fields__)
+
+
+def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+    """An estimate of the fastest rate of exact mode's dynamics at ``minute``, 1/s
+    (docs/agents.md, "The round step").
+
+    Curvature-scaled field (dynamics/newton.py), the largest of
+
+    - ``kappa D g max_i r_i (2 c_i + C_i)``: a generator's own relaxation rate (``kappa`` the
+      revision gain per EUR/MW, ``D`` the minute's demand, MW, ``r_i`` its revision rate,
+      ``C_i`` the price weight of the nearest limited line above it,
+      :func:`popdispatch.modes.exact.price_weights`, 0 below none), at least ``kappa D g S /
+      P``, the rate at which every interior marginal cost relaxes; ``g`` the most receivers a
+      sender's weights can sum over: 1 on the complete graph (``sum_i r_i / R = 1``), the
+      largest degree plus one on a sparse graph (each neighbour's weight ``r_i / R_i`` is at
+      most 1, and a sender relays to one best receiver per group it belongs to);
+    - ``2 STABLE_STEP alpha / C`` where a line is limited: a line's price and the set points
+      below it, in their proportional and integral regime, move as ``s^2 + a s + b = 0``
+      with ``b / a = alpha / C`` whatever the generators; Euler's factor ``1 + h s`` of a
+      complex pair has ``|1 + h s|^2 = 1 - h a + h^2 b``, below 1 for ``h < C / alpha`` and
+      smallest at ``h = C / (2 alpha)``, the step this gives.
+
+    Capacity-constrained Smith (``ExactConstants(revision="capacity")``): ``kappa max(S, D
+    max_i (2 c_i + C_i))``. Dimensionless constants, so the same on a feeder scaled by 100.
+    Counts one priced line above a generator: limits nested several deep along one path (the
+    synthetic feeders with every line limited) are stiffer than this."""
+    fp = settings.game_constants(problem)
+    row = np.array([minute - 1])
+    weight = np.broadcast_to(price_weights(problem, settings.exact.price_law, fp.C, row),
+                             (1, len(problem.limit)))[0]  # fmt: skip
+    below = np.zeros(problem.n_generators)
+    limited = problem.generator_line >= 0
+    below[limited] = weight[problem.generator_line[limited]]
+    demand = float(problem.demand[minute - 1])
+    spread, reference = scales(problem)
+    rates = settings.revision_rates(problem)
+    if not len(rates):
+        own = float(np.max(demand * (2.0 * problem.c + below)))
+        return float(fp.gain) * max(spread, own)
+    graph = generator_graph(problem, settings)
+    fan = 1 if _complete(graph) else max(d for _, d in graph.degree) + 1
+    own = float(np.max(rates * (2.0 * problem.c + below)))
+    field = float(fp.gain) * demand * fan * max(own, spread / reference)
+    price = 2.0 * STABLE_STEP * float(fp.price_rate) / float(fp.C) if len(problem.limit) else 0.0
+    return max(field, price)
+
+
+def default_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+    """The default round step, s: in exact mode ``STABLE_STEP / rate``
+    (:data:`popdispatch.integrate.STABLE_STEP`, the largest ``h * rate`` the engine's Heun
+    steps take; ``rate``: :func:`stiffness_rate`); in paper mode the engine's own Euler
+    substep (the mode's integrator: ``dt / substeps``)."""
+    if not get_mode(settings.mode).bounded:
+        stepping = settings.stepping
+        return stepping.dt / stepping.substeps
+    return STABLE_STEP / stiffness_rate(problem, settings, minute)
+
+
+
+@dataclass
+class AgentSystem:
+    """The agents of one run and what they share: the plant, the controllers by id, the
+    generators in the problem's order, the inverters and the simulated network."""
+
+    plant: PlantAgent
+    controllers: dict[str, ControllerAgent]
+    generators: list[GeneratorAgent]
+    inverters: Inverters
+    network: LossyNetwork
+    graph: nx.Graph
+    demand_mw: float
+    source: SourceAgent | None = None
+    events: list = field(default_factory=list)
+    price_cap: float = np.inf  # EUR/MW: a line price beyond it means no dispatch relieves it
+    line_names: list[str] = field(default_factory=list)  # "line A-B" per limited line
+    prove: Callable[[AgentSystem], float] | None = None  # the distance bound now, MW
+    extrapolate: bool = False  # the rest rule projects the geometric tail (exact mode)
+    accuracy_mw: float = 0.0  # what a rest must prove to end the run (with ``prove``)
+    max_imbalance_mw: float = 0.0  # largest |supply - demand| of the committed state so far
+    max_transient_mw: float = 0.0  # largest |supply - demand| of the inverters at a round start
+
+    # -- what the world needs (popdispatch.agents.world.WorldSystem) -------------------------
+
+    def registrations(self) -> list[tuple[object, str]]:
+        """Every agent with its id: the plant, the controllers, the generators by name, the
+        source bus."""
+        return [(self.plant, "plant"), *((a, aid) for aid, a in self.controllers.items()),
+                *zip(self.generators, self.graph.nodes, strict=True),
+                (self.source, SOURCE_ID)]  # fmt: skip
+
+    @property
+    def history(self) -> list[np.ndarray]:
+        return self.plant.history
+
+    @property
+    def round_ticks(self) -> int:
+        return self.plant.round_ticks
+
+    @property
+    def step_s(self) -> float:
+        return self.generators[0].rule.step_s
+
+    def observe(self, faults_applied: bool) -> None:
+        """Track the committed state's imbalance (before and after the round's faults) and
+        the inverters' (before them: what the source bus took up during the last round)."""
+        self.max_imbalance_mw = max(self.max_imbalance_mw, abs(self.committed_imbalance_mw()))
+        if not faults_applied:
+            self.max_transient_mw = max(self.max_transient_mw,
+                                        abs(self.physical_imbalance_mw()))  # fmt: skip
+
+    def _live_controllers(self) -> list[ControllerAgent]:
+        return [c for c in self.controllers.values() if not c.crashed]
+
+    def residual_mw(self) -> float:
+        """The live controllers' largest distance from complementary slackness, MW."""
+        return max((c.residual_mw() for c in self._live_controllers()), default=0.0)
+
+    def runaway(self) -> str | None:
+        return runaway(self, self._live_controllers())
+
+    def drain(self) -> None:
+        for gen in self.parties:
+            gen.quiet = True  # no new offers; open transactions decided
+
+    def busy(self) -> bool:
+        return any(g.busy for g in self.parties if not g.crashed)
+
+    @property
+    def agents(self) -> list:
+        extra = [self.source] if self.source is not None else []
+        return [self.plant, *self.controllers.values(), *self.generators, *extra]
+
+    @property
+    def parties(self) -> list[GeneratorAgent]:
+        """Everyone who commits power: the generators and the source bus."""
+        return [*self.generators, *([self.source] if self.source is not None else [])]
+
+    def apply(self, event: FaultEvent, rnd: int) -> None:
+        """Start or end ``event`` at round ``rnd`` (see :class:`FaultEvent`)."""
+        if event.kind == "trip":
+            if rnd == event.round:
+                self.trip(event.agent, rnd)
+            return
+        agent = (self.controllers.get(event.agent) if event.kind == "controller-crash"
+                 else self._generator_or_none(event.agent))  # fmt: skip
+        end = None if event.rounds is None else event.round + event.rounds
+        if rnd == event.round:
+            agent.crashed = True
+            self.events.append({"round": rnd, "event": event.kind, "agent": event.agent})
+        elif rnd == end:
+            agent.crashed = False
+            self.events.append({"round": rnd, "event": "restart", "agent": event.agent})
+
+    def _generator_or_none(self, name: str):
+        return next((g for g in self.generators if g.aid == name), None)
+
+    def trip(self, name: str, rnd: int) -> None:
+        """DG ``name`` trips: its output goes to 0 at once and its agent stops for good; the
+        protection reports it, so the others forget it (its transactions, its status) and the
+        source bus takes over at once what the committed state now lacks (the tripped output
+        and the transactions the trip cut), as its committed position
+        (:mod:`popdispatch.agents.source`)."""
+        gen = self._generator_or_none(name)
+        gen.crashed = gen.tripped = True
+        self.inverters.p[gen.index] = 0.0
+        for book in (gen.pending_in, gen.pending_out, gen.committed, gen.undelivered,
+                     gen.open_offers, gen.reserved, gen.accepted):  # fmt: skip
+            book.clear()
+        for other in self.parties:
+            if other is not gen:
+                other.forget(name)
+        taken = -self.committed_imbalance_mw()
+        self.source.position_mw += taken
+        self.events.append({"round": rnd, "event": "trip", "agent": name,
+                            "source_takes_kw": taken * KW_PER_MW})  # fmt: skip
+
+    def committed_imbalance_mw(self) -> float:
+        """Supply minus demand of the committed state: every set point, plus each committed
+        transaction whose receiver has not applied it yet (in flight: among the decisions its
+        sender has not seen acknowledged, since a receiver acknowledges what it applied). Zero
+        up to rounding if every transaction is applied exactly once at each end."""
+        parties = {g.aid: g for g in self.parties}
+        in_flight = sum(
+            decision.amount_mw for g in parties.values()
+            for txid, (aid, decision) in g.undelivered.items()
+            if decision.commit and txid not in getattr(parties.get(aid), "applied", ())
+        )  # fmt: skip
+        planned = sum(g.planned for g in parties.values())
+        return float(planned + in_flight - self.demand_mw)
+
+    def physical_imbalance_mw(self) -> float:
+        """Supply minus demand of the set points as they are: what the source bus takes up."""
+        return float(self.inverters.p.sum() - self.demand_mw)
+
+
+
+def controller_prices(system: AgentSystem) -> dict:
+    """Each live controller's ``(line, z_up, z_down)`` of its lines (a crashed controller's
+    copies froze when it stopped: the survivor's count)."""
+    return {aid: [(end.line, end.z_up, end.z_down) for end in c.ends]
+            for aid, c in system.controllers.items() if not c.crashed}  # fmt: skip
+
+
+
+def initial_setpoints(problem: DispatchProblem, settings: RunSettings, minute: int) -> np.ndarray:
+    """Initial set points (MW) as :meth:`popdispatch.online.Engine.run_minute` starts: the
+    initial shares, projected onto the limits in bounded modes, times the demand."""
+    inputs = MinuteInputs.of(problem, minute)
+    x = initial_shares(problem, settings.x0, minute)
+    weight = np.empty_like(x)
+    warm_start(int(SHARES), get_mode(settings.mode).bounded, x, 0.0, inputs.demand,
+               problem.pmin, problem.pmax, inputs.active, weight)  # fmt: skip
+    return x * inputs.demand
+
+
+def game_constants(problem: DispatchProblem, settings: RunSettings):
+    """The game's constants (EUR/MW: ``B``, ``m``, ``C``, ``gain``, ``price_rate``) exactly as
+    the engine runs them for this problem and settings: read from the engine's own
+    :class:`~popdispatch.game.parameters.GameParameters`, so that a mode whose constants
+    depend on the problem (scaled ones) needs no copy of that rule here."""
+    from popdispatch.online import Engine
+
+    return Engine(problem, settings).params
+
+
+def generator_graph(problem: DispatchProblem, settings: RunSettings) -> nx.Graph:
+    """The communication graph over generator names (complete for dynamics without one)."""
+    names = list(problem.generators)
+    dynamics = get_dynamics(settings.dynamics)
+    kind = settings.graph if dynamics.uses_graph else "complete"
+    adjacency = communication_graph(kind, names)
+    return nx.relabel_nodes(nx.from_numpy_array(adjacency), dict(enumerate(names)))
+
+
+def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
+                 step_s: float, faults: Faults, timeout: int = 1, lag: int = 0,
+                 copies: int = 1, engine_limiter: bool = True,
+                 stale_rounds: int = 10) -> AgentSystem:  # fmt: skip
+    """The agents of one minute (not yet registered anywhere); ``timeout``: rounds an offer
+    stays open; ``lag``: rounds from a commit to the inverters' change."""
+    if not problem.online[minute - 1].all():
+        off = ", ".join(problem.generators[~problem.online[minute - 1]])
+        raise OptionError(f"the agents run with every generator online (offline: {off})")
+    check_settings(settings)
+    mode = get_mode(settings.mode)
+    field_code = settings.field
+    rates = settings.revision_rates(problem)
+    fp = game_constants(problem, settings)
+    demand = float(problem.demand[minute - 1])
+    network = LossyNetwork(faults, TICKS_PER_ROUND)
+    inverters = Inverters(initial_setpoints(problem, settings, minute))
+    graph = generator_graph(problem, settings)
+    names = list(problem.generators)
+    generators = []
+    for i, name in enumerate(names):
+        rule = GeneratorRule(
+            float(problem.b[i]), float(problem.c[i]), float(problem.pmin[i]),
+            float(problem.pmax[i]), float(fp.B), float(fp.m),
+            float(fp.gain) if mode.bounded else 1.0, not mode.bounded, int(field_code),
+            demand, step_s, float(rates[i]) if len(rates) else 0.0,
+        )  # fmt: skip
+        neighbours = [n for n in names if graph.has_edge(name, n)]
+        generators.append(
+            GeneratorAgent(
+                rule, i, inverters, neighbours, timeout, lag, copies, engine_limiter, network
+            )  # fmt: skip
+        )
+    relay = not _complete(graph)
+    for gen in generators:
+        gen.relay = relay
+        gen.stale_rounds = stale_rounds
+    controllers, line_ends = _controllers(problem, settings, fp, step_s, network)
+    for controller in controllers.values():  # the generators report a silence first
+        controller.stale_rounds = 2 * stale_rounds
+    plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
+                       network)  # fmt: skip
+    source = SourceAgent(names, timeout, copies, network)
+    _check_ids(names, controllers)
+    _check_events(faults.events, names, controllers)
+    cap = mode.price_cap(problem) if mode.bounded else np.inf
+    return AgentSystem(plant, controllers, generators, inverters, network, graph, demand,
+                       source, price_cap=cap, line_names=_line_names(problem))  # fmt: skip
+
+
+def _line_names(problem: DispatchProblem) -> list[str]:
+    """``line A-B`` of every limited line (its end buses as the feeder names them)."""
+    lines = problem.feeder.lines.iloc[np.asarray(problem.lines, dtype=int)]
+    return [f"line {bus_name(a)}-{bus_name(b)}"
+            for a, b in zip(lines.from_bus, lines.to_bus, strict=True)]  # fmt: skip
+
+
+def check_settings(settings: RunSettings) -> None:
+    """Refuse run settings the agents cannot honour: a mode other than paper and exact (their
+    node controllers price limited lines only), a price law other than plain (they hear only
+    their own lines; the tree law needs its neighbours' excesses, the scaled law the count of
+    tradable generators below each line)."""
+    if get_mode(settings.mode).code not in PAYOFFS:
+        raise OptionError(f"the agents run paper and exact mode, not {settings.mode}", "--mode")
+    if settings.exact.price_law != PriceLaw.PLAIN:
+        raise OptionError(
+            "the agents' node controllers run the plain price law (each hears only its own "
+            "lines; the tree law needs its neighbours' excesses, the scaled law the count of "
+            "tradable generators below each line)",
+            "--price-law",
+        )
+
+
+def _check_ids(generators: list[str], controllers: dict) -> None:
+    """No generator may carry another agent's id (the plant, the source bus, a node
+    controller ``C<bus>``): one-line error naming it."""
+    others = {"plant": "the plant", SOURCE_ID: "the source bus"}
+    others.update({aid: "a node controller" for aid in controllers})
+    for name in generators:
+        if str(name) in others:
+            raise OptionError(f"generator {name!r} has the agent id of {others[str(name)]}: "
+                              "rename it in the fleet", "--fleet")  # fmt: skip
+
+
+def _check_events(events, generators: list[str], controllers: dict) -> None:
+    """Every fault names an agent of its kind (one-line error naming it)."""
+    for event in events:
+        known = list(controllers) if event.kind == "controller-crash" else generators
+        if event.agent not in known:
+            what = "node controller" if event.kind == "controller-crash" else "generator"
+            raise OptionError(f"{event.kind}: no {what} {event.agent!r} (known: "
+                              f"{', '.join(map(str, known))})", "--" + event.kind)  # fmt: skip
+
+
+def _complete(graph: nx.Graph) -> bool:
+    n = graph.number_of_nodes()
+    return graph.number_of_edges() == n * (n - 1) // 2
+
+
+def relay_phase_ticks(n_generators: int, delay_max: int) -> int:
+    """Ticks per phase that let a relayed message cross the longest chain of relays: at
+    most ``n - 1`` hops, each half a tick plus up to ``delay_max`` rounds of
+    :data:`TICKS_PER_ROUND` ticks (relays pass messages on as they arrive)."""
+    hops = max(n_generators - 1, 1)
+    return int(hops * (0.5 + TICKS_PER_ROUND * int(delay_max))) + 1
+
+
+def bus_name(bus) -> str:
+    """An original bus as the source format names it (a whole number read into a float
+    column, ``505.0``, as ``505``)."""
+    if isinstance(bus, float) and bus.is_integer():
+        bus = int(bus)
+    return str(bus)
+
+
+def controller_id(bus) -> str:
+    """Agent id of the node controller at original bus ``bus`` (``C505``)."""
+    return f"C{bus_name(bus)}"
+
+
+def _controllers(problem, settings: RunSettings, fp, step_s: float, network):
+    """``({id: controller}, line_ends)`` from the problem's controller table; each line priced
+    by the mode's own payoff map (:class:`~popdispatch.agents.controller.LinePrice`) with the
+    problem's limit of the line."""
+    table = NodeControllers.from_problem(problem).table
+    position = {line: k for k, line in enumerate(problem.lines)}
+    payoff = PAYOFFS[get_mode(settings.mode).code]
+    n_states = 2 if get_mode(settings.mode).bounded else 0
+    ends: dict[str, list[LineEnd]] = {}
+    line_ends: list[list[str]] = [[] for _ in problem.lines]
+    for row in table.itertuples():
+        aid = controller_id(row.bus)
+        k = position[row.line]
+        price = LinePrice(payoff, float(problem.limit[k]), float(fp.C), float(fp.price_rate),
+                          n_states)  # fmt: skip
+        ends.setdefault(aid, []).append(
+            LineEnd(k, int(row.orientation), price, list(row.receivers))
+        )
+        line_ends[k].append(aid)
+    for aid, own in ends.items():  # each end knows its partner and the other side
+        for end in own:
+            partner = next(a for a in line_ends[end.line] if a != aid)
+            end.partner = partner
+            end.other_receivers = next(e.receivers for e in ends[partner] if e.line == end.line)
+    controllers = {aid: ControllerAgent(own, step_s, network) for aid, own in ends.items()}
+    return controllers, [tuple(e) for e in line_ends]
+
+
+
+def _auditor(problem: DispatchProblem, settings: RunSettings, opts: AgentSettings,
+             step_s: float):  # fmt: skip
+    """The engine that audits a run (its distance certificate and KKT check, with the
+    agents' step, rest tolerance and window): a :class:`popdispatch.online.Engine` of
+    ``problem`` (without the tripped generators)."""
+    from popdispatch.integrate import Integrator
+    from popdispatch.online import Engine
+
+    integrator = Integrator(dt=step_s, tol_kw=max(opts.tol_kw, 1e-9), window=opts.window)
+    return Engine(problem, replace(settings, integrator=integrator))
+
+
+def _judged(run: AgentRun, engine, minute: int, tripped: list[str], tol_kw: float) -> AgentRun:
+    """``run`` with the engine's verdict (:func:`popdispatch.online.verdicts`): in a mode that
+    claims the DC-OPF, converged only when the distance certificate proves the end state
+    (set points, each line's prices: the mean of its end controllers' copies) within the
+    accuracy; a run at rest without that proof is stalled with the reason (a failing KKT
+    condition, else the bound). A source bus still carrying power after a trip is never
+    converged."""
+    from popdispatch.online import verdicts
+
+    problem = engine.problem
+    p_mw = run.setpoints_kw[None] / KW_PER_MW
+    z = run.line_states(len(problem.limit))[None]
+    if not engine.mode.claims_dc_opf:
+        z = np.zeros((1, 0))
+    rested = np.array([run.rest_round is not None])
+    verdict = verdicts(engine, np.array([minute]), p_mw, z, rested, np.array([run.infeasible]))
+    certified, reason = bool(verdict.certified[0]), verdict.reasons[0]
+    if engine.mode.claims_dc_opf and abs(run.source_kw) > tol_kw:
+        certified = False
+        reason = (f"the source bus carries {run.source_kw:.4g} kW that the generators left "
+                  f"after the trip of {', '.join(tripped)} cannot take")  # fmt: skip
+    bound = None if verdict.bound_kw is None else float(verdict.bound_kw[0])
+    accuracy = None if verdict.accuracy_kw is None else float(verdict.accuracy_kw[0])
+    return replace(run, certified=certified, stall_reason=reason if rested[0] else None,
+                   distance_bound_kw=bound, accuracy_kw=accuracy)  # fmt: skip
+
+
+def proved_distance_mw(engine, minute: int):
+    """``prove(system)``: the distance bound (MW) the certificate gives the agents' state now
+    (the inverters' set points and the live controllers' prices), with ``engine`` (see
+    :func:`_auditor`)."""
+
+    def prove(system: AgentSystem) -> float:
+        p_mw = system.inverters.p[None]
+        z = line_states(controller_prices(system), len(engine.problem.limit))[None]
+        return engine.certificates(np.array([minute]), p_mw, z)[0].distance_mw
+
+    return prove
+
+
+
+def refuse(settings: RunSettings, opts: AgentSettings, faults: Faults) -> None:
+    """Refuse, before any work, what this algorithm cannot honour (:func:`check_settings`)."""
+    check_settings(settings)
+
+
+def step_for(opts: AgentSettings, problem: DispatchProblem, settings: RunSettings,
+             minute: int) -> float:  # fmt: skip
+    """The round's Euler step in force, s: the given one, else :func:`default_step`."""
+    return opts.step_s if opts.step_s is not None else default_step(problem, settings, minute)
+
+
+def run(problem: DispatchProblem, minute: int, settings: RunSettings, faults: Faults,
+        opts: AgentSettings, on_round=None) -> AgentRun:  # fmt: skip
+    """One minute by the population's agents in the generic world, judged by the engine's
+    distance certificate (:func:`_judged`; ``opts.tol_kw`` already in force)."""
+    step_s = step_for(opts, problem, settings, minute)
+    tripped = [e.agent for e in faults.events if e.kind == "trip"]
+    engine = _auditor(without(problem, minute, tripped), settings, opts, step_s)
+    system = prepared(problem, minute, settings, faults, opts, step_s, engine)
+    world = run_world(system, world_options(opts, faults), on_round)
+    return _judged(_result(system, world), engine, minute, tripped, opts.tol_kw)
+
+
+def world_options(opts: AgentSettings, faults: Faults) -> WorldOptions:
+    """The world's settings from the agents' (the rest window widened for unpaced rounds)."""
+    return WorldOptions(opts.max_rounds, opts.rest_window(faults), opts.tol_kw,
+                        opts.drain_rounds)  # fmt: skip
+
+
+def prepared(problem, minute, settings, faults, opts: AgentSettings, step_s: float,
+             engine=None) -> AgentSystem:  # fmt: skip
+    """The agents of the minute, paced to the network, with the certificate's ``prove`` when
+    an auditing ``engine`` (:func:`_auditor`) in a mode that claims the DC-OPF is given: a
+    rest it does not prove within the accuracy runs on
+    (:func:`popdispatch.agents.world.simulate`)."""
+    system = build_agents(problem, minute, settings, step_s, faults, opts.timeout_for(faults),
+                          opts.lag_for(faults), opts.copies_for(faults),
+                          opts.engine_limiter_for(faults), opts.stale_for(faults))  # fmt: skip
+    ticks = opts.phase_ticks_for(faults, TICKS_PER_ROUND)
+    if system.generators[0].relay:
+        ticks = max(ticks, relay_phase_ticks(len(system.generators), faults.delay_max))
+    for agent in system.agents:
+        agent.phase_ticks = ticks
+    if engine is not None and engine.mode.claims_dc_opf:
+        system.prove = proved_distance_mw(engine, minute)
+        system.accuracy_mw = float(settings.accuracy_mw(problem.demand[minute - 1]))
+    system.extrapolate = bool(settings.stepping.extrapolate)
+    return system
+
+
+def _result(system: AgentSystem, world: WorldRun) -> AgentRun:
+    """The run from what the world measured and the agents' end state."""
+    residual = max((c.residual_mw() for c in system.controllers.values()), default=0.0)
+    trajectory = np.array(system.plant.history) * KW_PER_MW
+    return AgentRun(
+        generators=list(system.graph.nodes),
+        trajectory_kw=trajectory,
+        setpoints_kw=system.inverters.p * KW_PER_MW,
+        rounds=world.rounds,
+        rest_round=world.rest_round,
+        messages=world.messages,
+        scalars_sent=world.scalars_sent,
+        lost=world.lost,
+        duplicated=world.duplicated,
+        max_imbalance_w=system.max_imbalance_mw * W_PER_MW,
+        max_transient_w=system.max_transient_mw * W_PER_MW,
+        final_imbalance_w=system.physical_imbalance_mw() * W_PER_MW,
+        open_transactions=sum(
+            len(g.open_offers) + len(g.undelivered) + len(g.reserved) for g in system.parties
+        ),
+        residual_kw=residual * KW_PER_MW,
+        wall_seconds=world.wall_seconds,
+        agents=len(system.agents),
+        step_s=system.step_s,
+        phase_ticks=system.plant.phase_ticks,
+        prices=controller_prices(system),
+        events=sorted(_events(system), key=lambda e: e["round"]),
+        source_kw=system.source.position_mw * KW_PER_MW,
+        horizon_reason=world.horizon_reason,
+        infeasible=world.infeasible,
+    )
+
+
+def runaway(system: AgentSystem, controllers: list[ControllerAgent]) -> str | None:
+    """Why the line prices ran away, if one of ``controllers``' prices passed the mode's cap
+    (:meth:`popdispatch.modes.mechanism.Mode.price_cap`: no dispatch relieves the line, as in
+    the engine's stopping rule), else None."""
+    for controller in controllers:
+        for end in controller.ends:
+            price = max(end.z_up, end.z_down)
+            if price > system.price_cap:
+                line = system.line_names[end.line]
+                return (f"the line prices ran away: {line}'s price {price:.4g} EUR/MWh passed "
+                        f"{system.price_cap:.4g} EUR/MWh, which no dispatch within the limits "
+                        "needs (the line limits cannot be met)")
+    return None
+
+
+
+def _events(system: AgentSystem) -> list[dict]:
+    """The run's fault events and what the agents noticed."""
+    noticed = [e for a in [*system.generators, *system.controllers.values()] for e in a.events]
+    return [*system.events, *noticed]
+
+
