@@ -6,7 +6,7 @@ Each round (:mod:`popdispatch.agents.schedule`) the generator
    room and movable mass to its neighbours (:class:`~popdispatch.agents.messages.Standing`);
 1. (tick 2) computes its fitness from its own set point and the latest signal of every
    limited line (the engine's kernel :func:`popdispatch.game.fitness.fitness_into`, eqs.
-   5-7) and its weights (:func:`popdispatch.dynamics.fields.rated_field_weights`: receiver
+   5-7) and its weights (:attr:`popdispatch.dynamics.law.FlowLaw.reference`: receiver
    weight ``w``, sender weight ``v``, room, movable mass), and sends them with ``f`` to its
    neighbours in the communication graph. Under the curvature-scaled field (exact mode,
    dynamics/newton.py) ``v`` is its revision rate ``r`` (from its own cost curve) where it
@@ -62,7 +62,7 @@ from popdispatch.agents.messages import (
 )
 from popdispatch.agents.plant import Inverters
 from popdispatch.agents.schedule import Phase
-from popdispatch.dynamics.fields import Field, rated_field_weights
+from popdispatch.dynamics.fields import Field, field_tag, law_of
 from popdispatch.dynamics.newton import neighbourhood_receivers
 from popdispatch.dynamics.pairwise import RELAY_MASS, blocked, graph_flows
 from popdispatch.game.fitness import fitness_into
@@ -105,7 +105,7 @@ def complete(n: int) -> tuple[np.ndarray, np.ndarray]:
 class Own(NamedTuple):
     """A generator's status inputs at the round's status tick: fitness ``f`` (EUR/MW),
     receiver weight ``w``, sender weight ``v``, ``room`` below ``Pmax`` and movable ``mass``
-    above ``Pmin`` (shares; :func:`popdispatch.dynamics.fields.rated_field_weights`)."""
+    above ``Pmin`` (shares; :attr:`popdispatch.dynamics.law.FlowLaw.reference`)."""
 
     f: float
     w: float
@@ -493,9 +493,11 @@ class GeneratorAgent(RoundAgent):
         lo, hi = np.empty(1), np.empty(1)
         active = np.ones(1, dtype=np.bool_)
         share_bounds(r.pmin * one, r.pmax * one, active, r.demand_mw, lo, hi)
-        w, v, room, mass = np.empty(1), np.empty(1), np.empty(1), np.empty(1)
         x = np.array([self.planned]) / r.demand_mw
-        rated_field_weights(r.field, x, lo, hi, active, r.rate * one, w, v, room, mass)
+        tag = field_tag(r.field)  # the comparison laws' weights read no fitness
+        with np.errstate(divide="ignore", invalid="ignore"):  # no room: w is 0 either way
+            w, v, room, mass = law_of(tag).reference(tag, x, np.zeros(1), lo, hi, active,
+                                                     r.rate * one)  # fmt: skip
         if r.scaled:
             w[0] = r.rate if room[0] > 0.0 else 0.0
         return float(w[0]), float(v[0]), float(room[0]), float(mass[0])
