@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from popdispatch.dynamics import DYNAMICS, communication_graph, field_rate
+from popdispatch.dynamics.fields import field_of
 from popdispatch.feeder.profiles import single_minute_profiles
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.game.problem import build_problem
@@ -136,12 +137,12 @@ def test_rest_points_are_equal_fitness_states(seed, n, dynamics, graph):
     f = np.where(used, 7.0, 7.0 - rng.uniform(0.5, 2.0, n))
     if field.uses_graph and graph != "complete":
         x, f = rng.dirichlet(np.ones(n)), np.full(n, 7.0)  # full support: no graph truncation
-    rate = field_rate(field.field, x, f, adjacency, bounds, bounds)
+    rate = field_rate(field_of(field, bounded=False), x, f, adjacency, bounds, bounds)
     np.testing.assert_allclose(rate, 0.0, atol=1e-12)
     # full support, unequal fitness: the state moves
     x = rng.dirichlet(np.ones(n))
     f = rng.uniform(0, 5, n)
-    rate = field_rate(field.field, x, f, adjacency, bounds, bounds)
+    rate = field_rate(field_of(field, bounded=False), x, f, adjacency, bounds, bounds)
     assert np.abs(rate).max() > 1e-6
     assert abs(np.sum(rate)) < 1e-12
 

@@ -108,9 +108,9 @@ def test_target_sums_equal_all_pairs(n):
     np.testing.assert_allclose(outflow, ref_out, rtol=1e-13, atol=1e-15)
 
 
-def compare(problem, settings, minute, iterations, atol=1e-9, min_rows=11):
+def compare(problem, settings, minute, iterations, atol=1e-9, min_rows=11, stop_slack=0):
     """Compiled and reference set points (MW) agree within ``atol`` at every iteration, and
-    both stop at the same iteration with the same status."""
+    both stop with the same status, within ``stop_slack`` iterations of each other."""
     engine = Engine(problem, settings)
     x0 = initial_shares(problem, settings.x0, minute)
     run = engine.run_minute(x0, minute, max_iterations=iterations)
@@ -123,7 +123,12 @@ def compare(problem, settings, minute, iterations, atol=1e-9, min_rows=11):
     rows = min(len(ref), len(compiled))
     assert rows >= min_rows
     np.testing.assert_allclose(compiled[:rows], ref[:rows], atol=atol, rtol=0)
-    assert (run.status, run.converged_at) == (ref_status, ref_converged)
+    assert run.status == ref_status
+    if run.converged_at is None or ref_converged is None:
+        assert run.converged_at == ref_converged
+    else:
+        assert abs(run.converged_at - ref_converged) <= stop_slack, (run.converged_at,
+                                                                     ref_converged)  # fmt: skip
     return compiled
 
 
@@ -173,7 +178,11 @@ def test_compiled_trajectories_equal_the_numpy_reference(congested, mode, dynami
     # 1.7e-8 MW at iteration 15 where it comes to rest (measured)
     atol = {("exact", "ring"): 1e-6, ("exact", "complete"): 1e-8}.get((mode, graph), 1e-9)
     atol = 1e-7 if (mode, dynamics) == ("exact", "logit") else atol
-    trajectory = compare(congested, settings, PEAK_MINUTE, iterations, atol=atol)
+    # where round-off grows tenfold an iteration the window rule may see the rest one
+    # iteration apart (exact logit: 15 and 16, measured)
+    slack = 1 if (mode, dynamics) == ("exact", "logit") else 0
+    trajectory = compare(congested, settings, PEAK_MINUTE, iterations, atol=atol,
+                         stop_slack=slack)  # fmt: skip
     assert np.ptp(trajectory, axis=0).max() > 1e-4  # things moved: the comparison is not vacuous
 
 

@@ -24,7 +24,8 @@ from helpers import find_official_folder, official_folder
 
 SCRIPT = Path(sys.executable).with_name("popdispatch")
 COMMANDS = [
-    "agents", "cases", "day", "export", "feeder", "opf", "reproduce", "snapshot", "sweep",
+    "agents", "cases", "compare", "cosim", "day", "export", "feeder", "opf", "reproduce",
+    "snapshot", "sweep",
     "sweep-report",
 ]  # fmt: skip
 

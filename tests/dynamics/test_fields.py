@@ -11,7 +11,7 @@ import pytest
 from numba.core.errors import TypingError
 
 from popdispatch.dynamics import DYNAMICS, Dynamics, Field, Kernel, field_rate
-from popdispatch.dynamics.fields import LAWS, MODULES, field_tag, field_weights, law_of
+from popdispatch.dynamics.fields import LAWS, MODULES, field_of, field_tag, field_weights, law_of
 from popdispatch.dynamics.law import FieldTag
 from popdispatch.reference import pair_flows, weights
 
@@ -35,7 +35,7 @@ def test_the_registry_builds_every_field_from_the_laws_modules():
     assert used - {None} | {law_of(Field.CAPACITY_NEWTON)} == set(LAWS)
     for dynamics in DYNAMICS.values():
         assert (dynamics.bounded_law is None) == bool(dynamics.refusal), dynamics.name
-        assert dynamics.field == Field[dynamics.law.name]
+        assert field_of(dynamics, bounded=False) == Field[dynamics.law.name]
 
 
 def random_state(seed: int, n: int = 7):

@@ -66,7 +66,7 @@ class CrashType(click.ParamType):
         return name, int(at)
 
 
-@click.command(short_help="Population dynamics against dual decomposition and ADMM by messages.")
+@click.command(short_help="Dynamics against dual decomposition and ADMM, by messages.")
 @option("--algorithms", type=AlgorithmsType(), default=",".join(ALGORITHM_NAMES),
         show_default=True, help="Algorithms to run (comma-separated).")  # fmt: skip
 @minute_option
