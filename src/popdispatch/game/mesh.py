@@ -18,7 +18,7 @@ import numpy as np
 from popdispatch.constants import KW_PER_MW
 from popdispatch.errors import FleetError
 from popdispatch.feeder.dcnet import DcNetwork
-from popdispatch.game.problem import DispatchProblem, check_capacity
+from popdispatch.game.problem import DispatchProblem, check_capacity, fleet_columns
 
 
 def build_mesh_problem(
@@ -44,12 +44,7 @@ def build_mesh_problem(
     n_lines = len(limited)
     problem = DispatchProblem(
         feeder=net,
-        generators=gens.index,
-        a=gens.a.to_numpy(float),
-        b=gens.b.to_numpy(float),
-        c=gens.c.to_numpy(float),
-        pmin=gens.pmin_kw.to_numpy(float) / KW_PER_MW,
-        pmax=gens.pmax_kw.to_numpy(float) / KW_PER_MW,
+        **fleet_columns(gens),
         lines=limited,
         limit=net.lines.limit_kw.to_numpy(float)[limited] / KW_PER_MW,
         line_up=np.full(n_lines, -1, np.int64),

@@ -195,12 +195,7 @@ def build_problem_from_loads(
     line_up, line_preorder, generator_line = limited_line_tree(feeder, limited)
     problem = DispatchProblem(
         feeder=feeder,
-        generators=gens.index,
-        a=gens.a.to_numpy(float),
-        b=gens.b.to_numpy(float),
-        c=gens.c.to_numpy(float),
-        pmin=gens.pmin_kw.to_numpy(float) / KW_PER_MW,
-        pmax=gens.pmax_kw.to_numpy(float) / KW_PER_MW,
+        **fleet_columns(gens),
         lines=limited,
         limit=feeder.lines.limit_kw.to_numpy(float)[limited] / KW_PER_MW,
         line_up=line_up,
@@ -215,6 +210,20 @@ def build_problem_from_loads(
     if check:
         check_capacity(problem)
     return problem
+
+
+def fleet_columns(gens: pd.DataFrame) -> dict:
+    """The fleet's columns as :class:`DispatchProblem` takes them: ``generators`` (names),
+    ``a`` (EUR/h), ``b`` (EUR/MWh), ``c`` (EUR/MW^2h), ``pmin`` and ``pmax`` (MW, from the
+    table's kW)."""
+    return {
+        "generators": gens.index,
+        "a": gens.a.to_numpy(float),
+        "b": gens.b.to_numpy(float),
+        "c": gens.c.to_numpy(float),
+        "pmin": gens.pmin_kw.to_numpy(float) / KW_PER_MW,
+        "pmax": gens.pmax_kw.to_numpy(float) / KW_PER_MW,
+    }
 
 
 def fixed_injection_kw(load_kw: np.ndarray) -> np.ndarray:
