@@ -236,7 +236,7 @@ class _Stepper:
         ac = measured.day().steps.iloc[0]
         reason = verdict.reasons[0]
         row = {
-            "status": _status(status, bool(verdict.certified[0]), reason),
+            "status": verdict.status(0, status),
             "rounds": done,
             "power_flows": done * len(measured.generator_kw),
             "iterations": iterations,
@@ -263,15 +263,6 @@ class _Stepper:
         self.last_demand = float(current.demand[minute - 1])
         status = Status(int(out.status[0]))
         return engine, status, out.setpoints[0].copy(), int(out.iterations[0])
-
-
-def _status(status: Status, certified: bool, reason: str | None) -> str:
-    """A step's status word, as a day minute's (:class:`~popdispatch.online.DayResult`)."""
-    if status == Status.INFEASIBLE:
-        return "infeasible"
-    if certified:
-        return "converged"
-    return "stalled" if reason else "not_converged"
 
 
 def _plain(value):

@@ -126,15 +126,5 @@ class OnlineDispatcher:
         verdict = verdicts(engine, np.array([1]), out.setpoints, self.z[None],
                            np.array([status == Status.CONVERGED]),
                            np.array([status == Status.INFEASIBLE]))  # fmt: skip
-        return StepResult(self.applied * KW_PER_MW, _status(status, bool(verdict.certified[0]),
-                          verdict.reasons[0]), int(out.iterations[0]),
-                          self.offset * KW_PER_MW)  # fmt: skip
-
-
-def _status(status: Status, certified: bool, reason: str | None) -> str:
-    """A run's status word, as a day minute's."""
-    if status == Status.INFEASIBLE:
-        return "infeasible"
-    if certified:
-        return "converged"
-    return "stalled" if reason else "not_converged"
+        return StepResult(self.applied * KW_PER_MW, verdict.status(0, status),
+                          int(out.iterations[0]), self.offset * KW_PER_MW)  # fmt: skip

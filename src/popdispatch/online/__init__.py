@@ -191,6 +191,16 @@ class Verdict:
     bound_kw: np.ndarray | None
     accuracy_kw: np.ndarray | None
 
+    def status(self, index: int, engine_status: Status) -> str:
+        """The status word of the ``index``-th minute, the engine having ended it with
+        ``engine_status``: ``"infeasible"``, ``"converged"`` (proved), ``"stalled"`` (at rest
+        with a reason) or ``"not_converged"``."""
+        if engine_status == Status.INFEASIBLE:
+            return "infeasible"
+        if self.certified[index]:
+            return "converged"
+        return "stalled" if self.reasons[index] else "not_converged"
+
 
 def verdicts(
     engine: Engine,
