@@ -20,9 +20,11 @@ import click
 
 from popdispatch.cli.clock import Failure, stamp
 from popdispatch.cli.options import (
+    duplicate_option,
     feeder_options,
     json_option,
     limit_option,
+    loss_option,
     option,
     profiles_option,
     quiet_option,
@@ -41,12 +43,10 @@ from popdispatch.progress import Progress
         help="1-based minute of the day (566 = the peak); required.")  # fmt: skip
 @limit_option
 @run_options
-@option("--loss", type=click.FloatRange(0.0, 1.0, max_open=True), default=0.0,
-        show_default=True, help="Probability that a message is lost (0-1).")  # fmt: skip
+@loss_option
 @option("--delay-max", type=click.IntRange(0), default=0, show_default=True,
         help="Largest extra message delay, rounds (uniform in whole ticks).")  # fmt: skip
-@option("--duplicate", type=click.FloatRange(0.0, 1.0, max_open=True), default=0.0,
-        show_default=True, help="Probability that a message is delivered twice.")  # fmt: skip
+@duplicate_option
 @option("--noise-kw", type=click.FloatRange(0.0), default=0.0, show_default=True,
         help="Standard deviation of each line-flow measurement, kW.")  # fmt: skip
 @option("--seed", type=int, default=0, show_default=True, help="Seed of every random draw.")

@@ -20,9 +20,11 @@ from popdispatch.cli.options import (
     Series,
     build,
     check_out,
+    duplicate_option,
     feeder_options,
     json_option,
     limit_option,
+    loss_option,
     minute_option,
     option,
     out_option,
@@ -71,12 +73,10 @@ class CrashType(click.ParamType):
         show_default=True, help="Algorithms to run (comma-separated).")  # fmt: skip
 @minute_option
 @limit_option
-@option("--loss", type=click.FloatRange(0.0, 1.0, max_open=True), default=0.0,
-        show_default=True, help="Probability that a message is lost (0-1).")  # fmt: skip
+@loss_option
 @option("--delay-max", type=click.IntRange(0), default=0, show_default=True,
         help="Largest extra message delay, rounds.")  # fmt: skip
-@option("--duplicate", type=click.FloatRange(0.0, 1.0, max_open=True), default=0.0,
-        show_default=True, help="Probability that a message is delivered twice.")  # fmt: skip
+@duplicate_option
 @option(
     "--crash",
     type=CrashType(),

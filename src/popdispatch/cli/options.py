@@ -131,6 +131,15 @@ limit_option = option(
     help="Limit every line on the path between original buses A and B to KW kilowatts "
     "(repeatable), e.g. 505:666=28.",
 )
+#: The message faults every message-passing command simulates.
+loss_option = option(
+    "--loss", type=click.FloatRange(0.0, 1.0, max_open=True), default=0.0, show_default=True,
+    help="Probability that a message is lost (0-1).",
+)  # fmt: skip
+duplicate_option = option(
+    "--duplicate", type=click.FloatRange(0.0, 1.0, max_open=True), default=0.0,
+    show_default=True, help="Probability that a message is delivered twice.",
+)  # fmt: skip
 profiles_option = option(
     "--profiles",
     type=FOLDER,
