@@ -21,9 +21,11 @@ containers to open their sockets) and every process starts its container and wai
 
 Over MQTT (``transport="mqtt"``) each process is a mango MQTT container on a broker, its inbox
 the topic ``popdispatch/<run id>/<agent id>``; the launcher starts a local broker when none
-is given (:mod:`popdispatch.agents.transport`). On either transport every agent keeps the
-gate of :func:`popdispatch.agents.transport.guard`: messages with another run id or from a
-sender off the run's roster are dropped and counted (``rejected``).
+is given (:mod:`popdispatch.agents.transport`); with a given broker the launcher first tries
+the agents' login (user, password, TLS) once, and every agent process gets the password in
+its environment (never on its command line or in the run's files). On either transport every
+agent keeps the gate of :func:`popdispatch.agents.transport.guard`: messages with another run
+id or from a sender off the run's roster are dropped and counted (``rejected``).
 """
 
 from __future__ import annotations
@@ -46,7 +48,13 @@ from pathlib import Path
 import numpy as np
 
 from popdispatch.agents.schedule import TICKS_PER_ROUND
-from popdispatch.agents.transport import TRANSPORTS, Broker, check_reachable
+from popdispatch.agents.transport import (
+    PASSWORD_ENV,
+    TRANSPORTS,
+    Broker,
+    BrokerLogin,
+    check_broker,
+)
 from popdispatch.errors import PopdispatchError
 
 HOST = "127.0.0.1"
@@ -77,8 +85,9 @@ class LaunchConfig:
     by its sender (fault injection over TCP, each process with its own seeded draws);
     ``seed``: of those draws; ``transport``: ``tcp`` or ``mqtt``; ``broker``: ``[host,
     port]`` of the MQTT broker; ``run_id``: stamped on every message (the gate's);
-    ``tls_ca``: the CA certificate file the broker's TLS certificate is checked against
-    (None: no TLS)."""
+    ``login``: :meth:`popdispatch.agents.transport.BrokerLogin.public` of the agents'
+    login to the broker (user, TLS files; the password is in each process's environment,
+    :data:`popdispatch.agents.transport.PASSWORD_ENV`), None: anonymous, no TLS."""
 
     minute: int
     limits: list
@@ -96,7 +105,7 @@ class LaunchConfig:
     transport: str = "tcp"
     broker: list | None = None
     run_id: str = ""
-    tls_ca: str | None = None
+    login: dict | None = None
 
 
 def _codec():
@@ -172,16 +181,22 @@ def _roster(config: LaunchConfig) -> dict:
 
 def _container(aid: str, config: LaunchConfig):
     """The agent's mango container on the run's transport."""
-    from mango import create_mqtt_container, create_tcp_container
+    from mango import create_tcp_container
 
-    from popdispatch.agents.transport import topic
+    from popdispatch.agents.transport import mqtt_container, topic
 
     if config.transport == "mqtt":
-        tls = {"tls_kwargs": {"ca_certs": config.tls_ca}} if config.tls_ca else {}
-        return create_mqtt_container(tuple(config.broker), client_id=f"{config.run_id}-{aid}",
-                                     inbox_topic=topic(config.run_id, aid), codec=_codec(),
-                                     **tls)  # fmt: skip
+        return mqtt_container(tuple(config.broker), f"{config.run_id}-{aid}",
+                              topic(config.run_id, aid), _codec(), _login(config))  # fmt: skip
     return create_tcp_container((HOST, config.ports[aid]), codec=_codec())
+
+
+def _login(config: LaunchConfig) -> BrokerLogin | None:
+    """The run's login to its broker, the password from this process's environment."""
+    if config.login is None:
+        return None
+    password = os.environ.get(PASSWORD_ENV) if config.login["user"] is not None else None
+    return BrokerLogin(**config.login, password=password)
 
 
 async def _serve(aid: str, config: LaunchConfig) -> None:
@@ -247,7 +262,7 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
            step_s: float | None = None, base_port: int = 0, startup_s: float = 180.0,
            loss: float = 0.0, seed: int = 0, transport: str = "tcp",
            broker: tuple[str, int] | None = None, run_id: str | None = None,
-           tls_ca: str | None = None, on_start=None) -> LaunchResult:  # fmt: skip
+           login: BrokerLogin | None = None, on_start=None) -> LaunchResult:  # fmt: skip
     """Run the agents of one minute as separate processes over TCP (module docstring).
 
     ``base_port``: first TCP port (0: free ports the OS hands out); ``startup_s``: longest
@@ -257,12 +272,18 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
     that each message is dropped by its sender (``seed``: of the draws; decisions then go out
     in 3 copies, as in the simulation); ``transport``: ``tcp`` (localhost) or ``mqtt``
     (``broker``: ``(host, port)``; None: a mosquitto started for the run on 127.0.0.1);
-    ``run_id``: the run's id (default random); ``tls_ca``: with ``broker``, the CA
-    certificate (a file) of the broker's TLS certificate; ``on_start``: called with the
+    ``run_id``: the run's id (default random); ``login``: with ``broker``, how every agent
+    logs in (user name and password, TLS; None: anonymous, no TLS); ``on_start``: called with the
     :class:`LaunchConfig` once the start time is fixed (a test's hook).
     """
     from popdispatch.runs import FeederSource, load_run
 
+    if transport not in TRANSPORTS:
+        raise ValueError(f"unknown transport {transport!r} (known: {', '.join(TRANSPORTS)})")
+    if login is not None and (transport != "mqtt" or broker is None):
+        raise ValueError("a login (user, TLS) needs the MQTT transport and a broker given")
+    if transport == "mqtt" and broker is not None:
+        check_broker(broker, login)  # before any work: a refused login is one line at once
     problem, _ = load_run(FeederSource(), None, minute, [tuple(x) for x in limits])
     from popdispatch.agents.network import Faults
     from popdispatch.agents.population import build_agents
@@ -274,10 +295,6 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
 
         step_s = default_step(problem, settings, minute)
     ids = list(agent_ids(build_agents(problem, minute, settings, step_s, Faults())))
-    if transport not in TRANSPORTS:
-        raise ValueError(f"unknown transport {transport!r} (known: {', '.join(TRANSPORTS)})")
-    if tls_ca is not None and (transport != "mqtt" or broker is None):
-        raise ValueError("TLS (tls_ca) needs the MQTT transport and a broker given")
     ports = _ports(len(ids), base_port) if transport == "tcp" else [0] * len(ids)
     run_id = run_id or uuid.uuid4().hex[:12]
     start = time.perf_counter()
@@ -285,17 +302,16 @@ def launch(minute: int, limits, mode: str = "exact", dynamics: str = "smith",
         stack.enter_context(_sigterm_unwinds())  # the broker and the children are stopped
         if transport == "mqtt" and broker is None:
             broker = stack.enter_context(Broker()).address
-        elif transport == "mqtt":
-            check_reachable(broker)
         folder = stack.enter_context(tempfile.TemporaryDirectory(prefix="popdispatch-launch-"))
         config = LaunchConfig(minute, [list(x) for x in limits], mode, dynamics, graph,
                               dict(zip(ids, ports, strict=True)), folder, float(startup_s),
                               tick_s, rounds, step_s, float(loss), int(seed), transport,
                               None if broker is None else list(broker), run_id,
-                              None if tls_ca is None else str(tls_ca))  # fmt: skip
+                              None if login is None else login.public())  # fmt: skip
         warm_up(config)
+        env = _child_environment(login)
         outputs = {aid: json.loads(out.strip().splitlines()[-1])
-                   for aid, out in _run_children(ids, config, on_start).items()}  # fmt: skip
+                   for aid, out in _run_children(ids, config, on_start, env).items()}  # fmt: skip
     history = outputs["plant"]["setpoints_mw"]
     wall = time.perf_counter() - start
     counts = {key: sum(o[key] for o in outputs.values())
@@ -323,7 +339,19 @@ def _ports(n: int, base: int) -> list[int]:
             s.close()
 
 
-def _run_children(ids: list[str], config: LaunchConfig, on_start=None) -> dict[str, str]:
+def _child_environment(login: BrokerLogin | None) -> dict[str, str]:
+    """This process's environment, with the broker password (if any) in
+    :data:`PASSWORD_ENV` (an environment is readable by its user only, a command line by
+    every user)."""
+    env = dict(os.environ)
+    env.pop(PASSWORD_ENV, None)
+    if login is not None and login.user is not None and login.password is not None:
+        env[PASSWORD_ENV] = login.password
+    return env
+
+
+def _run_children(ids: list[str], config: LaunchConfig, on_start=None,
+                  env: dict[str, str] | None = None) -> dict[str, str]:  # fmt: skip
     """Start one process per agent in a new process group; when all are ready, write the
     start time; wait for all (each until the run's agreed end plus :data:`END_GRACE_S`); on
     Ctrl-C, SIGTERM or an error terminate the group and wait, so no child outlives the
@@ -340,7 +368,7 @@ def _run_children(ids: list[str], config: LaunchConfig, on_start=None) -> dict[s
             with open(folder / f"{aid}.out", "w") as out, open(folder / f"{aid}.err", "w") as err:
                 child = subprocess.Popen(
                     [sys.executable, "-m", "popdispatch.agents.launch", "--id", aid, str(path)],
-                    stdout=out, stderr=err, text=True, process_group=group or 0,
+                    stdout=out, stderr=err, text=True, process_group=group or 0, env=env,
                 )  # fmt: skip
             group = group or child.pid
             children[aid] = child

@@ -11,6 +11,12 @@ whose data holds ``content`` (one of :mod:`popdispatch.agents.messages`, itself
 Without ``--broker`` the launcher starts its own broker (:class:`Broker`, Debian's
 ``mosquitto``) on 127.0.0.1 at a free port and stops it at the end.
 
+**A remote broker** (:class:`BrokerLogin`): every agent logs in with a user name and a
+password (the password from the environment variable :data:`PASSWORD_ENV`, never from a
+command line, which every user of the machine sees in ``ps``) and talks TLS, the broker's
+certificate checked against a CA bundle, optionally with a client certificate. The launcher
+tries the login once before any agent starts (:func:`check_broker`), so a refusal is one line.
+
 **The gate** (:func:`guard`): a launched run has a random run id and a roster (every agent id
 and its address). An agent stamps ``run_id`` on everything it sends and drops, counting them
 as ``rejected``, messages whose run id is not the run's (a stale run) or whose sender is not
@@ -24,9 +30,12 @@ from __future__ import annotations
 import contextlib
 import shutil
 import socket
+import ssl
 import subprocess
 import tempfile
 import time
+import uuid
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +46,10 @@ TRANSPORTS = ("tcp", "mqtt")
 TOPIC_PREFIX = "popdispatch"
 #: Seconds to wait for a started broker to accept connections.
 BROKER_START_S = 10.0
+#: The environment variable holding the password of ``--broker-user``.
+PASSWORD_ENV = "POPDISPATCH_BROKER_PASSWORD"
+#: Seconds to wait for a broker's answer to a login (:func:`check_broker`).
+LOGIN_TIMEOUT_S = 5.0
 
 
 class BrokerError(PopdispatchError):
@@ -85,14 +98,134 @@ def _same_address(given: Any, expected: Any) -> bool:
     return given == expected
 
 
-def check_reachable(broker: tuple[str, int], timeout_s: float = 3.0) -> None:
-    """BrokerError naming ``broker`` unless a TCP connection to it opens within ``timeout_s``."""
+@dataclass(frozen=True)
+class BrokerLogin:
+    """How every agent connects to a broker: ``user`` and ``password`` (None: anonymous) and
+    TLS when ``tls_ca`` is given (a PEM file of the CA certificates the broker's certificate
+    is checked against), with the client certificate ``tls_cert`` (PEM; its key in
+    ``tls_key``, or in the same file). The password is left out of ``repr`` and of
+    :meth:`public`."""
+
+    user: str | None = None
+    password: str | None = field(default=None, repr=False)
+    tls_ca: str | None = None
+    tls_cert: str | None = None
+    tls_key: str | None = None
+
+    def public(self) -> dict:
+        """Everything but the password (what a launched run writes to its configuration)."""
+        return {"user": self.user, "tls_ca": self.tls_ca, "tls_cert": self.tls_cert,
+                "tls_key": self.tls_key}  # fmt: skip
+
+    def tls_kwargs(self) -> dict | None:
+        """paho's ``tls_set`` arguments (mango's ``tls_kwargs``); None without TLS."""
+        if self.tls_ca is None:
+            return None
+        return {"ca_certs": self.tls_ca, "certfile": self.tls_cert, "keyfile": self.tls_key}
+
+    def apply(self, client) -> None:
+        """Set the user name, password and TLS of a paho client (before it connects)."""
+        if self.user is not None:
+            client.username_pw_set(self.user, self.password)
+        if self.tls_ca is not None:
+            client.tls_set(**self.tls_kwargs())
+
+
+def check_broker(broker: tuple[str, int], login: BrokerLogin | None = None,
+                 timeout_s: float = LOGIN_TIMEOUT_S) -> None:  # fmt: skip
+    """Connect to ``broker`` once as the agents will (``login``) and disconnect; a
+    BrokerError naming the broker and the cause if it is not reachable, the TLS handshake
+    fails, it refuses the login or it does not answer within ``timeout_s``."""
+    import paho.mqtt.client as paho
+
+    where = f"MQTT broker {broker[0]}:{broker[1]}"
+    client = paho.Client(paho.CallbackAPIVersion.VERSION2,
+                         client_id=f"popdispatch-check-{uuid.uuid4().hex[:8]}")  # fmt: skip
+    (login or BrokerLogin()).apply(client)
+    answer: list = []
+    client.on_connect = lambda _c, _u, _flags, code, _p: answer.append(code)
     try:
-        with socket.create_connection(broker, timeout_s):
-            return
+        client.connect(broker[0], broker[1], keepalive=int(timeout_s) + 5)
+        deadline = time.monotonic() + timeout_s
+        while not answer and time.monotonic() < deadline:
+            if client.loop(timeout=0.1) not in (paho.MQTT_ERR_SUCCESS, paho.MQTT_ERR_AGAIN):
+                break  # the broker closed the connection
+    except ssl.SSLError as exc:
+        raise BrokerError(f"{where}: TLS handshake failed ({exc.reason or exc}): is --tls-ca "
+                          "the CA that signed the broker's certificate?") from None  # fmt: skip
     except OSError as exc:
-        raise BrokerError(f"MQTT broker {broker[0]}:{broker[1]} not reachable ({exc}): start "
-                          "one, or leave out --broker to let the launch start its own") from None
+        raise BrokerError(f"{where} not reachable ({exc}): start one, or leave out --broker "
+                          "to let the launch start its own") from None  # fmt: skip
+    finally:
+        client.disconnect()
+    if not answer:
+        raise BrokerError(f"{where} closed the connection or did not answer the login within "
+                          f"{timeout_s:g} s{_unanswered_hint(login or BrokerLogin())}")
+    if answer[0].is_failure:
+        raise BrokerError(f"{where} refused the login: {answer[0]} (user "
+                          f"{(login or BrokerLogin()).user or 'none: anonymous'}; "
+                          f"--broker-user, password in {PASSWORD_ENV})")  # fmt: skip
+
+
+def _unanswered_hint(login: BrokerLogin) -> str:
+    """What a login the broker leaves unanswered may lack."""
+    if login.tls_ca is None:
+        return " (a TLS listener? give --tls-ca)"
+    if login.tls_cert is None:
+        return " (does it require a client certificate? give --tls-cert)"
+    return ""
+
+
+def mqtt_container(broker: tuple[str, int], client_id: str, inbox_topic: str, codec,
+                   login: BrokerLogin | None = None):  # fmt: skip
+    """mango's MQTT container on ``broker`` with ``login``'s TLS (mango's ``tls_kwargs``) and
+    user name and password. mango builds its paho client when the container starts and takes
+    no credentials, so the container starts with the paho module it sees (only there) handing
+    out clients that log in (:func:`_paho_logging_in`)."""
+    from mango import create_mqtt_container
+
+    login = login or BrokerLogin()
+    tls = login.tls_kwargs()
+    container = create_mqtt_container(broker, client_id=client_id, inbox_topic=inbox_topic,
+                                      codec=codec,
+                                      **({"tls_kwargs": tls} if tls else {}))  # fmt: skip
+    if login.user is not None:
+        start = container.start
+
+        async def start_logged_in() -> None:
+            with _paho_logging_in(login.user, login.password):
+                await start()
+
+        container.start = start_logged_in
+    return container
+
+
+class _PahoLoggingIn:
+    """``paho.mqtt.client`` whose ``Client`` logs in as ``user`` (everything else is paho's)."""
+
+    def __init__(self, paho, user: str, password: str | None):
+        self._paho, self._user, self._password = paho, user, password
+
+    def __getattr__(self, name: str):
+        return getattr(self._paho, name)
+
+    def Client(self, *args, **kwargs):  # noqa: N802 (paho's name)
+        client = self._paho.Client(*args, **kwargs)
+        client.username_pw_set(self._user, self._password)
+        return client
+
+
+@contextlib.contextmanager
+def _paho_logging_in(user: str, password: str | None):
+    """Within the block mango's MQTT module builds paho clients that log in as ``user``."""
+    from mango.container import mqtt
+
+    paho = mqtt.paho
+    mqtt.paho = _PahoLoggingIn(paho, user, password)
+    try:
+        yield
+    finally:
+        mqtt.paho = paho
 
 
 def free_port(host: str = "127.0.0.1") -> int:

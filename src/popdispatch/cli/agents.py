@@ -343,6 +343,57 @@ def _broker(value: str | None) -> tuple[str, int] | None:
         raise click.BadParameter(str(exc), param_hint="'--broker'") from None
 
 
+def _login(broker, user, tls_ca, tls_cert, tls_key):
+    """The agents' :class:`~popdispatch.agents.transport.BrokerLogin` (None: anonymous, no
+    TLS); a usage error naming the option for a login without a broker of one's own, a
+    missing password, a client certificate without TLS or TLS files ssl cannot load."""
+    import os
+
+    from popdispatch.agents.transport import PASSWORD_ENV, BrokerLogin
+
+    given = {"--broker-user": user, "--tls-ca": tls_ca, "--tls-cert": tls_cert,
+             "--tls-key": tls_key}  # fmt: skip
+    given = {name: value for name, value in given.items() if value is not None}
+    if not given:
+        return None
+    first = next(iter(given))
+    if broker is None:
+        raise click.BadParameter(f"{first} needs --broker (the broker the launch starts "
+                                 "listens on 127.0.0.1, anonymous, without TLS)",
+                                 param_hint=f"'{first}'")  # fmt: skip
+    for option_, needs in (("--tls-key", "--tls-cert"), ("--tls-cert", "--tls-ca")):
+        if option_ in given and needs not in given:
+            raise click.BadParameter(f"{option_} needs {needs}", param_hint=f"'{option_}'")
+    if user is not None and PASSWORD_ENV not in os.environ:
+        raise click.BadParameter(f"--broker-user needs the password in the environment "
+                                 f"variable {PASSWORD_ENV} (never on the command line)",
+                                 param_hint="'--broker-user'")  # fmt: skip
+    if tls_ca is not None:
+        _check_tls_files(tls_ca, tls_cert, tls_key)
+    password = os.environ[PASSWORD_ENV] if user is not None else None
+    return BrokerLogin(user, password, tls_ca, tls_cert, tls_key)
+
+
+def _check_tls_files(tls_ca: str, tls_cert: str | None, tls_key: str | None) -> None:
+    """A usage error naming the option whose PEM file ssl cannot load."""
+    import ssl
+
+    context = ssl.create_default_context()
+    try:
+        context.load_verify_locations(cafile=tls_ca)
+    except ssl.SSLError as exc:
+        raise click.BadParameter(f"{tls_ca}: no CA certificate ssl can read ({exc.reason})",
+                                 param_hint="'--tls-ca'") from None  # fmt: skip
+    if tls_cert is None:
+        return
+    try:
+        context.load_cert_chain(tls_cert, tls_key)
+    except ssl.SSLError as exc:
+        files = tls_cert + (f" with {tls_key}" if tls_key else "")
+        raise click.BadParameter(f"{files}: no certificate and key ssl can read "
+                                 f"({exc.reason})", param_hint="'--tls-cert'") from None
+
+
 def _event_text(e: dict) -> str:
     """One fault event as a line."""
     extra = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
@@ -377,19 +428,30 @@ def _event_text(e: dict) -> str:
 @option("--broker", metavar="HOST:PORT", callback=lambda ctx, param, value: _broker(value),
         help="MQTT broker to use (default: a mosquitto started for the run on 127.0.0.1, "
         "stopped at the end).")  # fmt: skip
+@option("--broker-user", metavar="NAME",
+        help="With --broker: every agent logs in as NAME, with the password in the "
+        "environment variable POPDISPATCH_BROKER_PASSWORD (never an option: a command line "
+        "is visible to every user in ps).")  # fmt: skip
 @option("--tls-ca", type=click.Path(exists=True, dir_okay=False),
         help="With --broker: connect over TLS, checking the broker's certificate against "
-        "this CA certificate (PEM).")  # fmt: skip
+        "these CA certificates (PEM; a public CA's: the system bundle, e.g. "
+        "/etc/ssl/certs/ca-certificates.crt).")  # fmt: skip
+@option("--tls-cert", type=click.Path(exists=True, dir_okay=False),
+        help="With --tls-ca: the agents' client certificate (PEM), its key in --tls-key or "
+        "in the same file.")  # fmt: skip
+@option("--tls-key", type=click.Path(exists=True, dir_okay=False),
+        help="With --tls-cert: the client certificate's private key (PEM, unencrypted).")
 @option("--run-id", metavar="ID", help="The run's id, stamped on every message (default "
         "random); agents drop messages with another.")  # fmt: skip
 @json_option
 @quiet_option
 def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, transport, broker,
-           tls_ca, run_id, as_json, quiet) -> int:  # fmt: skip
+           broker_user, tls_ca, tls_cert, tls_key, run_id, as_json, quiet) -> int:  # fmt: skip
     """One OS process per agent (plant, node controllers, generators) on localhost, talking
     over TCP or MQTT (mango), on the built-in ieee-elv case; compared with the DC-OPF. Every
     agent drops messages from senders off the run's roster or with another run id (counted in
-    rejected). Ctrl-C stops every process and a broker the command started (exit 130)."""
+    rejected). Ctrl-C stops every process and a broker the command started (exit 130). A
+    broker of your own may ask for a login (--broker-user) and TLS (--tls-ca)."""
     import numpy as np
 
     from popdispatch.agents.launch import launch as run_launch
@@ -399,9 +461,7 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, transpo
     progress = Progress(quiet)
     if broker is not None and transport != "mqtt":
         raise click.BadParameter("--broker needs --transport mqtt", param_hint="'--broker'")
-    if tls_ca is not None and broker is None:
-        raise click.BadParameter("--tls-ca needs --broker (the broker the launch starts "
-                                 "listens on 127.0.0.1 without TLS)", param_hint="'--tls-ca'")
+    login = _login(broker, broker_user, tls_ca, tls_cert, tls_key)
     _faults(0.0, 0, 0.0, 0.0, 0)  # the agents extra is installed
     problem, _ = load_run(FeederSource(), None, minute, limits, progress)
     over = transport.upper()
@@ -409,7 +469,7 @@ def launch(minute, limits, mode, rounds, tick_ms, startup_s, loss, seed, transpo
         result = run_launch(minute, [list(x) for x in limits], mode=mode, rounds=rounds,
                             tick_s=tick_ms / 1000.0, startup_s=startup_s, loss=loss,
                             seed=seed, transport=transport, broker=broker,
-                            run_id=run_id, tls_ca=tls_ca)  # fmt: skip
+                            run_id=run_id, login=login)  # fmt: skip
     opf = solve_opf(problem, minute)
     final = result.trajectory_kw[-1]
     error = float(np.abs(final - opf.p_kw).max()) if opf.status == "optimal" else None
