@@ -27,7 +27,7 @@ if shutil.which("mosquitto") is None and not Path("/usr/sbin/mosquitto").exists(
     pytest.skip("no mosquitto broker (apt-get install mosquitto)", allow_module_level=True)
 for tool in ("openssl", "mosquitto_passwd"):
     if shutil.which(tool) is None:
-        pytest.skip(f"no {tool} (apt-get install openssl mosquitto-clients)",
+        pytest.skip(f"no {tool} (apt-get install openssl mosquitto)",
                     allow_module_level=True)  # fmt: skip
 
 from popdispatch.agents.transport import PASSWORD_ENV, Broker  # noqa: E402
@@ -65,12 +65,14 @@ def secured(tmp_path_factory):
     _ca(folder, "other-ca")  # a CA that signed nothing of this broker's
     _signed(folder, "server", "/CN=127.0.0.1", "subjectAltName=IP:127.0.0.1")
     _signed(folder, "client", f"/CN={USER}")
+    _openssl(folder, "pkey", "-in", "client.key", "-aes256", "-passout", "pass:key-pw", "-out",
+             "encrypted.key")  # fmt: skip
     passwords = folder / "passwords"
     passwords.touch()
     subprocess.run(["mosquitto_passwd", "-b", str(passwords), USER, PASSWORD], check=True,
                    capture_output=True)  # fmt: skip
     files = {name: str(folder / name) for name in ("ca.pem", "other-ca.pem", "client.pem",
-                                                   "client.key")}  # fmt: skip
+                                                   "client.key", "encrypted.key")}  # fmt: skip
     options = (f"allow_anonymous false\npassword_file {passwords}\ncafile {folder / 'ca.pem'}\n"
                f"certfile {folder / 'server.pem'}\nkeyfile {folder / 'server.key'}\n"
                "require_certificate true")  # fmt: skip
@@ -209,11 +211,14 @@ def test_refused_login_is_one_line(secured, tmp_path, case, says):
          "--tls-key needs --tls-cert"),
         (["--broker", "127.0.0.1:1", "--tls-ca", "CA", "--tls-cert", __file__],
          "no certificate and key ssl can read"),
+        (["--broker", "127.0.0.1:1", "--tls-ca", "CA", "--tls-cert", "CERT", "--tls-key",
+          "ENCRYPTED"], "encrypted.key: the key is encrypted"),
     ],
 )  # fmt: skip
 def test_bad_login_options_are_usage_errors(secured, args, says):
     _, files = secured
-    args = [files["ca.pem"] if a == "CA" else a for a in args]
+    named = {"CA": "ca.pem", "CERT": "client.pem", "ENCRYPTED": "encrypted.key"}
+    args = [files[named[a]] if a in named else a for a in args]
     env = {k: v for k, v in os.environ.items() if k != PASSWORD_ENV}
     done = subprocess.run(
         [sys.executable, "-m", "popdispatch.cli", "agents", "launch", "--minute", "566", "-q",

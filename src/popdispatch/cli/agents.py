@@ -386,8 +386,13 @@ def _check_tls_files(tls_ca: str, tls_cert: str | None, tls_key: str | None) -> 
                                  param_hint="'--tls-ca'") from None  # fmt: skip
     if tls_cert is None:
         return
+
+    def encrypted() -> str:  # ssl asks only for an encrypted key (else it would prompt)
+        raise click.BadParameter(f"{tls_key or tls_cert}: the key is encrypted (the agents "
+                                 "need it unencrypted)", param_hint="'--tls-key'")  # fmt: skip
+
     try:
-        context.load_cert_chain(tls_cert, tls_key)
+        context.load_cert_chain(tls_cert, tls_key, password=encrypted)
     except ssl.SSLError as exc:
         files = tls_cert + (f" with {tls_key}" if tls_key else "")
         raise click.BadParameter(f"{files}: no certificate and key ssl can read "
