@@ -226,3 +226,38 @@ def test_bad_login_options_are_usage_errors(secured, args, says):
     )  # fmt: skip
     assert done.returncode == 2
     assert len(done.stderr.strip().splitlines()) == 1 and says in done.stderr, done.stderr
+
+
+def test_login_is_the_starting_containers_own(secured):
+    """Two agents' containers start at once in one process, one with the login, one without
+    (both with TLS and the client certificate): the first is connected as the user, the
+    broker refuses the second; a container started afterwards without the login is refused
+    too (the login does not stay behind)."""
+    import asyncio
+
+    from popdispatch.agents.launch import _codec
+    from popdispatch.agents.transport import BrokerLogin, mqtt_container
+
+    broker, files = secured
+    tls = {"tls_ca": files["ca.pem"], "tls_cert": files["client.pem"],
+           "tls_key": files["client.key"]}  # fmt: skip
+
+    def container(name: str, login: BrokerLogin):
+        return mqtt_container(broker.address, name, f"test/{name}", _codec(), login)
+
+    async def start_both():
+        with_login = container("with", BrokerLogin(USER, PASSWORD, **tls))
+        without = container("without", BrokerLogin(**tls))
+        started = await asyncio.gather(with_login.start(), without.start(),
+                                       return_exceptions=True)  # fmt: skip
+        user = with_login.mqtt_client.username
+        connected = with_login.mqtt_client.is_connected()
+        await with_login.shutdown()
+        later = await asyncio.gather(container("later", BrokerLogin(**tls)).start(),
+                                     return_exceptions=True)  # fmt: skip
+        return started, user, connected, later[0]
+
+    started, user, connected, later = asyncio.run(start_both())
+    assert started[0] is None and connected and user == USER
+    for refused in (started[1], later):
+        assert isinstance(refused, ConnectionError) and "Not authorized" in str(refused)

@@ -28,6 +28,7 @@ broker on localhost (the default) or use a broker with TLS and credentials.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import shutil
 import socket
 import ssl
@@ -160,7 +161,7 @@ def check_broker(broker: tuple[str, int], login: BrokerLogin | None = None,
         client.disconnect()
     if not answer:
         raise BrokerError(f"{where} closed the connection or did not answer the login within "
-                          f"{timeout_s:g} s{_unanswered_hint(login or BrokerLogin())}")
+                          f"{timeout_s:g} s{_unanswered_hint(login or BrokerLogin())}")  # fmt: skip
     if answer[0].is_failure:
         raise BrokerError(f"{where} refused the login: {answer[0]} (user "
                           f"{(login or BrokerLogin()).user or 'none: anonymous'}; "
@@ -180,8 +181,8 @@ def mqtt_container(broker: tuple[str, int], client_id: str, inbox_topic: str, co
                    login: BrokerLogin | None = None):  # fmt: skip
     """mango's MQTT container on ``broker`` with ``login``'s TLS (mango's ``tls_kwargs``) and
     user name and password. mango builds its paho client when the container starts and takes
-    no credentials, so the container starts with the paho module it sees (only there) handing
-    out clients that log in (:func:`_paho_logging_in`)."""
+    no credentials, so the container starts with :data:`_LOGIN` set, which the paho module
+    mango's MQTT module sees (:class:`_PahoLoggingIn`) hands to the clients it builds."""
     from mango import create_mqtt_container
 
     login = login or BrokerLogin()
@@ -193,39 +194,49 @@ def mqtt_container(broker: tuple[str, int], client_id: str, inbox_topic: str, co
         start = container.start
 
         async def start_logged_in() -> None:
-            with _paho_logging_in(login.user, login.password):
+            _PahoLoggingIn.install()
+            token = _LOGIN.set((login.user, login.password))
+            try:
                 await start()
+            finally:
+                _LOGIN.reset(token)
 
         container.start = start_logged_in
     return container
 
 
-class _PahoLoggingIn:
-    """``paho.mqtt.client`` whose ``Client`` logs in as ``user`` (everything else is paho's)."""
+#: The user name and password of the MQTT container starting in this context (an asyncio
+#: task's own), None: anonymous.
+_LOGIN: contextvars.ContextVar[tuple[str, str | None] | None] = contextvars.ContextVar(
+    "popdispatch_mqtt_login", default=None
+)
 
-    def __init__(self, paho, user: str, password: str | None):
-        self._paho, self._user, self._password = paho, user, password
+
+class _PahoLoggingIn:
+    """``paho.mqtt.client`` as mango's MQTT module sees it: its ``Client`` logs in with
+    :data:`_LOGIN` when that is set (everything else, and every client without it, is
+    paho's own)."""
+
+    def __init__(self, paho):
+        self._paho = paho
 
     def __getattr__(self, name: str):
         return getattr(self._paho, name)
 
     def Client(self, *args, **kwargs):  # noqa: N802 (paho's name)
         client = self._paho.Client(*args, **kwargs)
-        client.username_pw_set(self._user, self._password)
+        login = _LOGIN.get()
+        if login is not None:
+            client.username_pw_set(*login)
         return client
 
+    @classmethod
+    def install(cls) -> None:
+        """Make mango's MQTT module see paho through this class (once per process)."""
+        from mango.container import mqtt
 
-@contextlib.contextmanager
-def _paho_logging_in(user: str, password: str | None):
-    """Within the block mango's MQTT module builds paho clients that log in as ``user``."""
-    from mango.container import mqtt
-
-    paho = mqtt.paho
-    mqtt.paho = _PahoLoggingIn(paho, user, password)
-    try:
-        yield
-    finally:
-        mqtt.paho = paho
+        if not isinstance(mqtt.paho, cls):
+            mqtt.paho = cls(mqtt.paho)
 
 
 def free_port(host: str = "127.0.0.1") -> int:
