@@ -356,7 +356,8 @@ def _run_children(ids: list[str], config: LaunchConfig, on_start=None,
     start time; wait for all (each until the run's agreed end plus :data:`END_GRACE_S`); on
     Ctrl-C, SIGTERM or an error terminate the group and wait, so no child outlives the
     launcher. The children write into files in the run's folder, not pipes (a pipe nobody reads
-    while the launcher waits would block a child that writes much)."""
+    while the launcher waits would block a child that writes much); ``env``: their
+    environment (None: this process's)."""
     folder = Path(config.folder)
     path = folder / "config.json"
     path.write_text(json.dumps(asdict(config)))
