@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
+from mesh_cases import congested, pandapower_case
 
 from popdispatch.errors import FeederError
 from popdispatch.feeder.dcnet import DcNetwork
@@ -42,40 +43,6 @@ def run_exact(problem):
     return run
 
 
-def congested(net: DcNetwork, lines: list[str], fraction: float) -> DcNetwork:
-    """``net`` with ``lines`` limited to ``fraction`` of their flow at the unconstrained
-    DC-OPF (kW)."""
-    free = build_mesh_problem(replace(net, lines=net.lines.assign(limit_kw=np.inf)))
-    p = solve_opf(free, 1).p_kw / 1e3
-    positions = net.lines.index.get_indexer(lines)
-    injection = -(net.buses.pd_mw + net.buses.gs_mw).to_numpy(float)
-    np.add.at(injection, net.buses.index.get_indexer(net.generators.bus), p)
-    flows = net.model.flows_mw(injection, positions)[:, 0]
-    limits = net.lines.limit_kw.copy()
-    limits.iloc[positions] = np.minimum(limits.iloc[positions], fraction * np.abs(flows) * 1e3)
-    return replace(net, lines=net.lines.assign(limit_kw=limits))
-
-
-def pandapower_case(case: str, limits_mw: dict[tuple[int, int], float]):
-    """pandapower's own copy of a MATPOWER case with the lines between the given MATPOWER
-    buses limited (MW), solved by ``rundcopp``: set points in MATPOWER's generator order
-    (ext_grid first, then gens; the slack is the cases' first generator) and the cost."""
-    net = getattr(pn, case)()
-    for (a, b), mw in limits_mw.items():
-        pair = ((net.line.from_bus == a - 1) & (net.line.to_bus == b - 1)) | (
-            (net.line.from_bus == b - 1) & (net.line.to_bus == a - 1)
-        )
-        assert pair.sum() == 1
-        k = net.line.index[pair][0]
-        rating = net.line.max_i_ka[k] * net.bus.vn_kv[net.line.from_bus[k]] * np.sqrt(3)
-        net.line.loc[k, "max_loading_percent"] = min(100.0, 100.0 * mw / rating)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        pp.rundcopp(net)
-    assert net.OPF_converged
-    return np.r_[net.res_ext_grid.p_mw.to_numpy(), net.res_gen.p_mw.to_numpy()], net.res_cost
-
-
 #: Per case, the lines limited below their unconstrained flows (MATPOWER bus numbers).
 CASES = {
     "case9": [(4, 5), (6, 7)],
@@ -97,8 +64,9 @@ def test_exact_mode_lands_on_the_dc_opf_of_matpower_cases(case):
     opf = solve_opf(problem, 1)
     assert opf.status == "optimal"
     assert (np.abs(opf.line_price) > 1e-3).any()  # a limit binds
-    limits = {pair: net.lines.limit_kw[name] / 1e3 for pair, name in zip(CASES[case], names,
-                                                                          strict=True)}
+    limits = {
+        pair: net.lines.limit_kw[name] / 1e3 for pair, name in zip(CASES[case], names, strict=True)
+    }
     reference, cost = pandapower_case(case, limits)
     tol = tolerance_kw(problem)
     assert opf.cost == pytest.approx(cost, rel=1e-6)  # PIPS stops at its own tolerance

@@ -16,6 +16,7 @@ import pandas as pd
 
 from popdispatch.cases.builtin import PEAK_MINUTE, elv_snapshot_566_kw, ieee_elv
 from popdispatch.errors import OptionError
+from popdispatch.feeder.dcnet import DcNetwork
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.profiles import LoadProfiles, single_minute_profiles
 from popdispatch.feeder.reduction import reduce_feeder
@@ -45,17 +46,35 @@ def peak_profiles() -> LoadProfiles:
 def elv_problem(
     profiles: LoadProfiles | None = None,
     limits: Sequence[tuple[int, int, float]] = (),
-    feeder: Feeder | None = None,
+    feeder: Feeder | DcNetwork | None = None,
     check: bool = True,
 ) -> DispatchProblem:
-    """The ieee-elv dispatch problem (or ``feeder``'s) with optional path limits.
+    """The ieee-elv dispatch problem (or ``feeder``'s: a radial feeder or a meshed
+    :class:`~popdispatch.feeder.dcnet.DcNetwork`, :func:`mesh_problem`) with optional path
+    limits (on a mesh: limits of the branches joining the two buses).
 
     Without ``profiles`` the loads are the official ones of minute 566 (pandapower snapshot).
     ``check``: as in :func:`popdispatch.game.problem.build_problem` (every minute's demand
     within the fleet's range); the CLI checks only the minutes it runs.
     """
     feeder = apply_path_limits(feeder or ieee_elv(), limits)
+    if isinstance(feeder, DcNetwork):
+        return mesh_problem(feeder, profiles, check)
     return build_problem(reduce_feeder(feeder), profiles or peak_profiles(), check)
+
+
+def mesh_problem(
+    net: DcNetwork, profiles: LoadProfiles | None = None, check: bool = True
+) -> DispatchProblem:
+    """The dispatch problem of a meshed network (:func:`popdispatch.game.mesh.
+    build_mesh_problem`) with the per-load kW of ``profiles`` at its load buses (default its
+    own demand, one step)."""
+    from popdispatch.game.mesh import build_mesh_problem
+
+    if profiles is None:
+        return build_mesh_problem(net, check=check)
+    demand = net.bus_demand_mw(profiles.for_loads(net.loads.index).kw.to_numpy(float))
+    return build_mesh_problem(net, demand, profiles.source, check)
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ from popdispatch.cases.sources import (  # noqa: F401  (re-exported: the runs' f
     FeederSource,
     check_fleet_ranges,
     load_feeder,
+    load_network,
     read_network,
     require_fleet,
 )
@@ -38,6 +39,7 @@ from popdispatch.compare import (
 )
 from popdispatch.errors import OptionError
 from popdispatch.events import Event, apply_events
+from popdispatch.feeder.dcnet import DcNetwork
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.profiles import LoadProfiles
 from popdispatch.game.problem import (
@@ -204,9 +206,10 @@ def check_step(minute: int | None, profiles: LoadProfiles) -> None:
         )
 
 
-def check_limits(limits: Sequence[Limit], feeder: Feeder) -> None:
+def check_limits(limits: Sequence[Limit], feeder: Feeder | DcNetwork) -> None:
     """:class:`OptionError` (``--limit``) for a limit naming a bus ``feeder`` lacks (buses as
-    the source format names them: numbers, or OpenDSS names)."""
+    the source format names them: numbers, or OpenDSS names), or, on a meshed network, two
+    buses no line joins."""
     from popdispatch.errors import FeederError
 
     buses = feeder.buses.index
@@ -225,6 +228,11 @@ def check_limits(limits: Sequence[Limit], feeder: Feeder) -> None:
                     f"unknown bus {bus} in {a}:{b}={kw:g} (feeder {feeder.name} has {known})",
                     "--limit",
                 ) from None
+        if isinstance(feeder, DcNetwork):
+            try:
+                feeder.path_lines(a, b)
+            except FeederError as exc:
+                raise OptionError(f"{a}:{b}={kw:g}: {exc}", "--limit") from None
 
 
 def load_problem(
@@ -268,7 +276,10 @@ def load_run(
         raise OptionError("give --loads or --profiles, not both", "--loads")
     if source.own_loads or loads is not None:
         with progress.step(f"loading {source.label}"):
-            feeder = require_fleet(load_feeder(source))
+            feeder, note = load_network(source)
+            feeder = require_fleet(feeder)
+        if note:
+            progress.note(note)
         series = series_for(source, feeder, profiles, loads, minute, progress, series_kind)
     else:  # ieee-elv: the profiles (and their note) first, as before
         if series_kind is not None:

@@ -88,7 +88,11 @@ class LineEnd:
     end's side; ``z_up``, ``z_down``: exact-mode prices, EUR/MW; ``partner``: the controller
     at the other end, ``other_receivers`` the generators on its side; ``partner_round``: round
     of its latest heartbeat; ``took_over``: this end sends the other side's value too (the
-    partner is silent).
+    partner is silent). ``weights``: on a meshed network, each receiver's distribution factor
+    to the line (``D_ki``, :mod:`popdispatch.game.mesh`; the grid operator's PTDF row of the
+    line): the parent end sends every receiver ``parent + D_ki (child - parent)``, its side's
+    value where ``D_ki`` is 0 and the other's where it is 1 (a radial feeder's rule), and the
+    child end sends only when it has taken over. ``None`` on a radial feeder.
     """
 
     line: int
@@ -103,6 +107,7 @@ class LineEnd:
     other_receivers: list[str] = field(default_factory=list)
     partner_round: int = -1
     took_over: bool = False
+    weights: dict[str, float] | None = None
 
     @property
     def states(self) -> tuple[float, ...]:
@@ -150,6 +155,9 @@ class ControllerAgent(RoundAgent):
             if end.flow_mw is None:
                 continue  # nothing measured yet: nothing to say
             own, other = self._price(end)
+            if end.weights is not None:
+                self._weighted(end, own, other, values)
+                continue
             for aid in end.receivers:
                 values.setdefault(aid, {})[str(end.line)] = own
             if end.took_over:  # the silent partner's side: the same map, its value
@@ -157,6 +165,16 @@ class ControllerAgent(RoundAgent):
                     values.setdefault(aid, {})[str(end.line)] = other
         for aid, by_line in values.items():
             self.send(Signals(rnd, by_line), aid)
+
+    @staticmethod
+    def _weighted(end: LineEnd, own: float, other: float, values: dict) -> None:
+        """A meshed network's line: each receiver's value weighed by its factor (``weights``),
+        sent by the parent end, or by the child end when it has taken the line over."""
+        if end.orientation < 0 and not end.took_over:
+            return
+        parent, child = (own, other) if end.orientation > 0 else (other, own)
+        for aid, factor in end.weights.items():
+            values.setdefault(aid, {})[str(end.line)] = parent + factor * (child - parent)
 
     def _watch(self, end: LineEnd, rnd: int) -> None:
         """Take the line over when the partner has been silent for more than

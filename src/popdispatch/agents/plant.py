@@ -2,11 +2,13 @@
 
 The plant is physics, not a decision maker: given the generators' set points (their
 inverters, :class:`Inverters`) and the loads of the minute, the flow on every limited line is
-the engine's own lossless radial DC flow (:func:`popdispatch.game.flows.limited_line_flows`,
-paper eq. 1d); the source bus takes up whatever supply and demand differ by, at once. At the
-first tick of each round the plant's sensors send each limited line's flow to the node
-controllers at both its ends (with optional Gaussian noise), and the plant records the set
-points it sees: the trajectory of the run.
+the engine's own lossless DC flow (on a radial feeder
+:func:`popdispatch.game.flows.limited_line_flows`, paper eq. 1d; on a meshed network
+:func:`~popdispatch.game.flows.mesh_line_flows`, by the distribution factors); the source bus
+takes up whatever supply and demand differ by, at once. At the first tick of each round the
+plant's sensors send each limited line's flow to the node controllers at both its ends (with
+optional Gaussian noise), and the plant records the set points it sees: the trajectory of
+the run.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from popdispatch.agents.base import RoundAgent
 from popdispatch.agents.messages import Measurement, Output
 from popdispatch.agents.schedule import Phase
 from popdispatch.constants import KW_PER_MW
-from popdispatch.game.flows import limited_line_flows
+from popdispatch.game.flows import limited_line_flows, mesh_line_flows
 from popdispatch.game.problem import DispatchProblem
 
 
@@ -67,8 +69,11 @@ class PlantAgent(RoundAgent):
         p = np.ascontiguousarray(self.inverters.p)
         self.history.append(p.copy())
         pr = self.problem
-        limited_line_flows(self.load_flow, p, pr.generator_line, pr.line_up, pr.line_preorder,
-                           self.flow)  # fmt: skip
+        if pr.meshed:  # the network's DC flows, by the distribution factors
+            mesh_line_flows(self.load_flow, p, pr.factor, self.flow)
+        else:
+            limited_line_flows(self.load_flow, p, pr.generator_line, pr.line_up,
+                               pr.line_preorder, self.flow)  # fmt: skip
         for k, ends in enumerate(self.line_ends):
             for aid in ends:
                 noise = self.rng.normal(0.0, self.noise_mw) if self.noise_mw else 0.0

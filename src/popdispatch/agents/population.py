@@ -419,8 +419,11 @@ def _controllers(problem, settings: RunSettings, fp, step_s: float, network):
         k = position[row.line]
         price = LinePrice(payoff, float(problem.limit[k]), float(fp.C), float(fp.price_rate),
                           n_states)  # fmt: skip
+        weights = None
+        if problem.meshed:  # each generator's factor to the line
+            weights = dict(zip(problem.generators, problem.factor[k].tolist(), strict=True))
         ends.setdefault(aid, []).append(
-            LineEnd(k, int(row.orientation), price, list(row.receivers))
+            LineEnd(k, int(row.orientation), price, list(row.receivers), weights=weights)
         )
         line_ends[k].append(aid)
     for aid, own in ends.items():  # each end knows its partner and the other side

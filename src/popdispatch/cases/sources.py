@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from popdispatch.errors import OptionError
+from popdispatch.errors import FeederError, MeshedError, OptionError
+from popdispatch.feeder.dcnet import DcNetwork
 from popdispatch.feeder.model import Feeder
 
 
@@ -132,6 +133,76 @@ def load_feeder(source: FeederSource | Path | None = None) -> Feeder:
     if fleet is None:
         check_fleet_ranges(feeder.generators)
     return feeder
+
+
+def load_network(source: FeederSource) -> tuple[Feeder | DcNetwork, str]:
+    """``(network, note)``: the radial feeder of ``source`` (:func:`load_feeder`), or, where a
+    MATPOWER, pandapower or OpenDSS network has a loop, the same network in MATPOWER's DC model
+    (:class:`~popdispatch.feeder.dcnet.DcNetwork`, :mod:`popdispatch.game.mesh`) with the
+    ``note`` saying so (empty for a radial feeder). ``--fleet``, ``--root`` (the slack bus) and
+    ``--no-ratings`` apply to either."""
+    try:
+        return load_feeder(source), ""
+    except FeederError as exc:  # a loop, or what a radial reader cannot take (no baseKV)
+        net = _read_mesh(source, exc)
+    if source.fleet is None:
+        check_fleet_ranges(net.generators)
+    return net, (f"note: {net.name} is meshed: it runs on MATPOWER's DC model, each generator "
+                 "weighing the line prices by its distribution factors (docs/meshed.md)")
+
+
+def _read_mesh(source: FeederSource, exc: FeederError) -> DcNetwork:
+    """The meshed network of ``source`` (a MATPOWER, pandapower or OpenDSS file, or a
+    ``matpower:`` case) as a :class:`~popdispatch.feeder.dcnet.DcNetwork`; ``exc``, the
+    radial reader's error, raised again for other formats and where the network has no loop
+    after all (or cannot be read as a mesh either, unless ``exc`` was the loop)."""
+    path = source.net
+    if path is None and (source.case or "").startswith("matpower:"):
+        from popdispatch.cases.builtin import MATPOWER_PREFIX, matpower_folder
+
+        path = matpower_folder() / f"{source.case.removeprefix(MATPOWER_PREFIX)}.m"
+    suffix = path.suffix.lower() if path is not None else ""
+    formats = (".m", ".json", ".dss") if isinstance(exc, MeshedError) else (".m", ".json")
+    if suffix not in formats:  # an OpenDSS circuit needs its radial reading but for a loop
+        raise exc
+    try:
+        net = _read_dc_network(path, source)
+    except FeederError:
+        if isinstance(exc, MeshedError):
+            raise
+        raise exc from None
+    if not isinstance(exc, MeshedError) and len(net.lines) < len(net.buses):
+        raise exc  # radial: the radial reader's error stands
+    return net
+
+
+def _read_dc_network(path: Path, source: FeederSource) -> DcNetwork:
+    """The network file ``path`` (``.m``, ``.json`` or ``.dss``) in the DC model, with
+    ``source``'s fleet, ratings and slack bus."""
+    from dataclasses import replace
+
+    from popdispatch.feeder.generators import read_fleet
+
+    fleet = read_fleet(source.fleet) if source.fleet is not None else None
+    if path.suffix.lower() == ".m":
+        from popdispatch.readers.matpower import read_matpower_network
+
+        net = read_matpower_network(path, fleet=fleet, ratings=source.ratings)
+    elif path.suffix.lower() == ".dss":
+        from popdispatch.readers.opendss_direct import read_opendss_network
+
+        return read_opendss_network(path, fleet=fleet, root=source.root, ratings=source.ratings)
+    else:
+        from popdispatch.readers.pandapower import read_pandapower_network
+
+        net = read_pandapower_network(path)
+        if fleet is not None:
+            net = replace(net, generators=fleet)
+        if not source.ratings:
+            net = replace(net, lines=net.lines.assign(limit_kw=float("inf")))
+    if source.root is not None:
+        net = replace(net, slack_bus=net.bus_id(source.root))
+    return net
 
 
 def _read_feeder(source: FeederSource, fleet: pd.DataFrame | None) -> Feeder:

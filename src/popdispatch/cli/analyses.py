@@ -49,7 +49,22 @@ class Analyses(NamedTuple):
         """The run's problem with its voltage rows (:func:`popdispatch.runs.with_voltage`)."""
         from popdispatch.runs import with_voltage
 
+        if problem.meshed:
+            self.refuse_mesh(problem)
         return with_voltage(problem, profiles, settings, self.vn_kv)
+
+    def refuse_mesh(self, problem) -> None:
+        """:class:`~popdispatch.errors.OptionError` naming the first analysis asked for that
+        needs a radial feeder (the AC check, its corrections, voltage limits, the map)."""
+        from popdispatch.errors import OptionError
+
+        asked = [("--vmin", self.vmin is not None), ("--vmax", self.vmax is not None),
+                 ("--ac-correct", self.ac_correct), ("--ac", self.ac),
+                 ("--html", self.html is not None)]  # fmt: skip
+        for option, on in asked:
+            if on:
+                raise OptionError(f"{option} needs a radial feeder; {problem.feeder.name} is "
+                                  "meshed (its DC dispatch runs without it)", option)  # fmt: skip
 
     def check(self) -> None:
         """Before any work (see :func:`check_analyses`)."""

@@ -92,13 +92,23 @@ def feeder(source, as_json: bool, quiet: bool) -> None:
     """What the feeder is: buses, the source, key nodes, loads (names, kW), fixed injections,
     lines (ratings, impedances), load shapes, generators. Any network, with or without a
     fleet (a dispatch needs one)."""
-    from popdispatch.cases.sources import load_feeder
+    from popdispatch.cases.sources import load_network
     from popdispatch.feeder import reduce_feeder
-    from popdispatch.report.describe import feeder_summary, feeder_text
+    from popdispatch.report.describe import (
+        feeder_summary,
+        feeder_text,
+        network_summary,
+        network_text,
+    )
 
-    with Progress(quiet).step(f"loading {source.label}"):
-        net = load_feeder(source)
-        summary = feeder_summary(net, reduce_feeder(net), source.ratings)
+    progress = Progress(quiet)
+    with progress.step(f"loading {source.label}"):
+        net, note = load_network(source)
+    if note:
+        progress.note(note)
+        summary = network_summary(net, source.ratings)
+        return emit(summary, as_json, network_text(summary))
+    summary = feeder_summary(net, reduce_feeder(net), source.ratings)
     emit(summary, as_json, feeder_text(summary))
 
 
@@ -302,6 +312,12 @@ def export(minute, fmt, out, limits, profiles, source, quiet) -> None:
     progress = Progress(quiet)
     check_out(out)
     problem, day_profiles = build(source, profiles, minute, limits, progress)
+    if problem.meshed:
+        from popdispatch.errors import OptionError
+
+        name = problem.feeder.name
+        raise OptionError(f"export writes a radial feeder's reduced case; {name} is meshed "
+                          "and its own file is the case to cross-check", "--net")  # fmt: skip
     loads = minute_loads(problem, day_profiles, minute)
     write_case(out, fmt, problem, minute, loads)
     progress.note(f"wrote {out} ({fmt}, minute {minute})")

@@ -129,7 +129,7 @@ limit_option = option(
     type=LimitType(),
     multiple=True,
     help="Limit every line on the path between original buses A and B to KW kilowatts "
-    "(repeatable), e.g. 505:666=28.",
+    "(repeatable), e.g. 505:666=28; on a meshed network, the lines joining A and B.",
 )
 #: The message faults every message-passing command simulates.
 loss_option = option(
@@ -359,8 +359,9 @@ def feeder_options(func):
         option(
             "--net",
             type=click.Path(exists=True, dir_okay=False, path_type=Path),
-            help="Any radial network: MATPOWER case (.m), pandapower JSON (.json) or OpenDSS "
-            "master (.dss); runs on its own loads, generators and costs.",
+            help="Any network: MATPOWER case (.m), pandapower JSON (.json) or OpenDSS master "
+            "(.dss); runs on its own loads, generators and costs. A MATPOWER or pandapower "
+            "network with loops runs on MATPOWER's DC model (docs/meshed.md).",
         ),
         option(
             "--case",

@@ -23,14 +23,16 @@ p`` as on the radial feeder, where ``D_ki`` is 1 below the line and 0 above it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
 import pandas as pd
 from scipy import sparse
 
+from popdispatch.constants import KW_PER_MW
 from popdispatch.errors import FeederError
+from popdispatch.feeder.model import bus_id, bus_labels, tighter_limits
 
 BUS_COLUMNS = ["pd_mw", "gs_mw"]
 LINE_COLUMNS = ["from_bus", "to_bus", "x_pu", "tap", "shift_deg", "limit_kw"]
@@ -45,7 +47,8 @@ class DcNetwork:
     name : case name.
     base_mva : the per-unit base, MVA.
     buses : index bus id (the source format's number); columns ``pd_mw`` (fixed demand, MW)
-        and ``gs_mw`` (shunt conductance, MW demanded at 1 p.u.).
+        and ``gs_mw`` (shunt conductance, MW demanded at 1 p.u.); optionally ``name``, the
+        source format's bus name (OpenDSS), which outputs and options then use.
     lines : index branch name; columns ``from_bus``, ``to_bus``, ``x_pu`` (series reactance,
         p.u. on ``base_mva``), ``tap`` (off-nominal ratio, 0 or 1 for a line), ``shift_deg``
         (phase shift, degrees) and ``limit_kw`` (flow limit in kW, ``inf`` for none).
@@ -74,6 +77,64 @@ class DcNetwork:
     def model(self) -> DcModel:
         """The DC model (susceptances, LU of the reduced ``B``)."""
         return DcModel.of(self)
+
+    # -- the radial feeder's interface, so that runs, reports and load tables take either ----
+
+    @property
+    def original(self) -> DcNetwork:
+        """The network itself: a meshed network is never reduced."""
+        return self
+
+    @cached_property
+    def line_map(self) -> pd.Series:
+        """Each line's position in :attr:`lines` (a meshed network's lines are its own)."""
+        return pd.Series(np.arange(len(self.lines)), index=self.lines.index)
+
+    @cached_property
+    def loads(self) -> pd.DataFrame:
+        """The buses with a fixed demand as loads: index ``load<bus>``, columns ``bus`` and
+        ``p_kw`` (kW, ``pd_mw``), so that a load table names them by load or by bus."""
+        rows = self.buses[self.buses.pd_mw != 0]
+        return pd.DataFrame(
+            {"bus": rows.index.to_numpy(), "p_kw": rows.pd_mw.to_numpy(float) * KW_PER_MW},
+            index=pd.Index([f"load{bus}" for bus in rows.index], name="load"),
+        )
+
+    def bus_demand_mw(self, load_kw: np.ndarray) -> np.ndarray:
+        """Per-bus demand (MW, (..., buses) in the order of :attr:`buses`) of per-load kW
+        ``load_kw`` (..., loads in the order of :attr:`loads`)."""
+        at = self.buses.index.get_indexer(self.loads.bus)
+        weights = np.zeros((len(at), len(self.buses)))
+        weights[np.arange(len(at)), at] = 1.0 / KW_PER_MW
+        return np.asarray(load_kw, float) @ weights
+
+    def bus_labels(self, buses) -> list[int | str]:
+        """The source format's names of ``buses`` (int ids): the ``name`` column where the
+        buses table has one (an OpenDSS circuit's), else the ids (MATPOWER's numbers)."""
+        return bus_labels(self, buses)
+
+    def bus_id(self, label: int | str) -> int:
+        """The id of the bus ``label`` names (a name where buses have names, case ignored; a
+        number); :class:`FeederError` naming it when the network has no such bus."""
+        return bus_id(self, label)
+
+    def path_lines(self, bus_a: int | str, bus_b: int | str) -> list[str]:
+        """Names of the lines joining buses ``bus_a`` and ``bus_b`` directly (every parallel
+        one); on a mesh a limit names a branch by its two ends. :class:`FeederError` when no
+        line joins them."""
+        a, b = self.bus_id(bus_a), self.bus_id(bus_b)
+        ends = self.lines[["from_bus", "to_bus"]].to_numpy()
+        joins = ((ends[:, 0] == a) & (ends[:, 1] == b)) | ((ends[:, 0] == b) & (ends[:, 1] == a))
+        if not joins.any():
+            raise FeederError(f"no line of network {self.name!r} joins buses {bus_a} and "
+                              f"{bus_b} (on a meshed network a limit names one branch's two "
+                              "ends)")  # fmt: skip
+        return self.lines.index[joins].tolist()
+
+    def with_line_limits(self, limits_kw: pd.Series) -> DcNetwork:
+        """The network with ``limit_kw`` of the lines named in ``limits_kw`` (kW) set, the
+        smaller kept where a line already has a limit."""
+        return replace(self, lines=tighter_limits(self.lines, limits_kw))
 
 
 def validate_network(net: DcNetwork) -> None:

@@ -74,13 +74,7 @@ class Feeder:
 
         Where a line already has a limit the smaller one is kept.
         """
-        unknown = limits_kw.index.difference(self.lines.index)
-        if len(unknown):
-            raise FeederError(f"line limit given for unknown line {unknown[0]!r}")
-        lines = self.lines.copy()
-        current = lines.loc[limits_kw.index, "limit_kw"].to_numpy()
-        lines.loc[limits_kw.index, "limit_kw"] = np.minimum(current, limits_kw.to_numpy(float))
-        return replace(self, lines=lines)
+        return replace(self, lines=tighter_limits(self.lines, limits_kw))
 
     @property
     def base_kv(self) -> float | None:
@@ -154,6 +148,19 @@ class Feeder:
                 ) from None
         a, b = self.buses.index.get_indexer(ends)
         return self.lines.index[tree_path_lines(self.bus_tree(), a, b)].tolist()
+
+
+def tighter_limits(lines: pd.DataFrame, limits_kw: pd.Series) -> pd.DataFrame:
+    """A copy of the lines table ``lines`` with ``limit_kw`` of the lines named in
+    ``limits_kw`` (kW) set, the smaller kept where a line already has a limit;
+    :class:`FeederError` naming a line the table lacks."""
+    unknown = limits_kw.index.difference(lines.index)
+    if len(unknown):
+        raise FeederError(f"line limit given for unknown line {unknown[0]!r}")
+    lines = lines.copy()
+    current = lines.loc[limits_kw.index, "limit_kw"].to_numpy(float)
+    lines.loc[limits_kw.index, "limit_kw"] = np.minimum(current, limits_kw.to_numpy(float))
+    return lines
 
 
 def bus_labels(feeder: Feeder, buses) -> list[int | str]:
@@ -243,9 +250,10 @@ def _check_radial(feeder: Feeder) -> None:
     low, high = np.minimum(ends_a, ends_b), np.maximum(ends_a, ends_b)
     parallel = pd.Series(low * n + high).duplicated().to_numpy()  # later copies of a bus pair
     if parallel.any():
-        raise FeederError(
+        raise MeshedError(
             f"line {lines.index[parallel.argmax()]!r} is parallel to another line: feeder is "
-            "meshed (popdispatch supports radial feeders only)"
+            "meshed (a radial reader; any network: docs/meshed.md)",
+            [str(lines.index[parallel.argmax()])],
         )
     # imported here: scipy.sparse.csgraph imports scipy.linalg (slow to import), which a run on
     # a cached problem (popdispatch.cases.cached) never needs
@@ -292,6 +300,6 @@ def _loop_error(feeder: Feeder, ends_a: np.ndarray, ends_b: np.ndarray, source: 
     names = [feeder.lines.index[closing], *feeder.lines.index[tree_lines[path]]]
     return MeshedError(
         f"line {feeder.lines.index[closing]!r} closes a loop through buses {shown}: "
-        "feeder is meshed (popdispatch supports radial feeders only)",
+        "feeder is meshed (a radial reader; any network: docs/meshed.md)",
         [str(n) for n in names],
     )

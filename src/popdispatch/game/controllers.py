@@ -67,6 +67,8 @@ class NodeControllers:
 
     @classmethod
     def from_problem(cls, problem: DispatchProblem) -> NodeControllers:
+        if problem.meshed:
+            return cls.of_mesh(problem)
         lines = problem.feeder.lines.loc[problem.lines]
         gens = np.asarray(problem.generators)
         rows = []
@@ -77,6 +79,20 @@ class NodeControllers:
                 ("child", row.to_node, row.to_bus, -1, below),
             ):
                 rows.append((node, bus, line, end, sign, row.limit_kw, list(gens[side])))
+        columns = ["node", "bus", "line", "end", "orientation", "limit_kw", "receivers"]
+        return cls(pd.DataFrame(rows, columns=columns))
+
+    @classmethod
+    def of_mesh(cls, problem: DispatchProblem) -> NodeControllers:
+        """The controllers of a meshed network: one at each end bus of every limited line
+        (``node`` is the bus), the from bus the parent end; every generator hears both ends,
+        weighing them by its distribution factor (:mod:`popdispatch.game.mesh`)."""
+        lines = problem.feeder.lines.iloc[np.asarray(problem.lines, dtype=int)]
+        gens = list(problem.generators)
+        rows = []
+        for line, row in zip(problem.lines, lines.itertuples(), strict=True):
+            for end, bus, sign in (("parent", row.from_bus, 1), ("child", row.to_bus, -1)):
+                rows.append((bus, bus, int(line), end, sign, row.limit_kw, gens))
         columns = ["node", "bus", "line", "end", "orientation", "limit_kw", "receivers"]
         return cls(pd.DataFrame(rows, columns=columns))
 

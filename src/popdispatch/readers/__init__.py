@@ -15,9 +15,12 @@ _HOMES = {
     "read_profiles": "profiles",
     "resolve_profiles": "profiles",
     "read_matpower": "matpower",
+    "read_matpower_network": "matpower",
     "read_opendss_feeder": "opendss",
     "read_opendss_master": "opendss_direct",
+    "read_opendss_network": "opendss_direct",
     "read_pandapower": "pandapower",
+    "read_pandapower_network": "pandapower",
     "read_load_table": "series",
 }
 

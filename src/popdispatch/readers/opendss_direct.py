@@ -90,7 +90,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from popdispatch.constants import KW_PER_MW
 from popdispatch.errors import FeederError, FleetError, MeshedError, OptionError
+from popdispatch.feeder.dcnet import DcNetwork
 from popdispatch.feeder.generators import FLEET_COLUMNS, as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.radial import join_feeders, merge_parallel
@@ -217,42 +219,10 @@ def fleet_candidates(circuit: Circuit) -> pd.DataFrame:
 def _feeder(circuit: Circuit, path: Path, fleet, root, name) -> Feeder:
     names = circuit.buses
     ids = bus_ids(names)
-    name_of = {v: k for k, v in ids.items()}
-    if not circuit.branches:
-        raise FeederError(f"{path}: the OpenDSS circuit {circuit.name!r} has no line")
-    lines = pd.DataFrame(
-        {
-            "from_bus": [ids[b.bus_a] for b in circuit.branches],
-            "to_bus": [ids[b.bus_b] for b in circuit.branches],
-            "length_km": [b.length_km for b in circuit.branches],
-            "r_ohm": [b.r_ohm for b in circuit.branches],
-            "x_ohm": [b.x_ohm for b in circuit.branches],
-            "limit_kw": [b.limit_kw for b in circuit.branches],
-            "kv_base": [b.kv_base for b in circuit.branches],
-            "kind": [b.kind for b in circuit.branches],
-        },
-        index=pd.Index([b.name for b in circuit.branches], name="line"),
-    ).astype({"from_bus": np.int64, "to_bus": np.int64})
-    self_loops = lines.from_bus == lines.to_bus
-    lines, circuit.merged = merge_parallel(lines[~self_loops])
-
-    candidates = fleet_candidates(circuit)
-    generators = _map_fleet(fleet, ids, candidates, path) if fleet is not None else _no_fleet()
-    dispatched = {str(e).lower() for e in _dispatched_elements(fleet, candidates)}
-    injections = [row for row in circuit.injections if row[0].lower() not in dispatched]
-    loads = _load_table(circuit.loads, injections, ids)
-
+    lines, circuit.merged = merge_parallel(_branch_table(circuit, ids, path))
+    generators, loads = _fleet_and_loads(circuit, ids, fleet, path)
     sources = _sources(circuit, root, ids, path)
-    components = _components(lines, names, ids)
-    occupied = set(loads.bus) | set(generators.bus.tolist())
-    keep, dropped = _feeder_buses(components, sources, occupied, root, name_of, path)
-    if dropped:
-        warnings.warn(
-            f"{path}: dropped {len(dropped)} bus(es) cut off from the source, with nothing "
-            f"connected: {dropped[:10]}",
-            UserWarning,
-            stacklevel=3,
-        )
+    keep = _kept_buses(lines, loads, generators, sources, root, names, ids, path)
     lines = lines[lines.from_bus.isin(keep) & lines.to_bus.isin(keep)]
     loads = loads[loads.bus.isin(keep)]
     kept = [b for b in names if ids[b] in keep]
@@ -271,6 +241,110 @@ def _feeder(circuit: Circuit, path: Path, fleet, root, name) -> Feeder:
     buses = buses[["x", "y", "name", "vn_kv"]]
     shapes = {k: LoadShape(s.mult, s.hours, s.use_actual) for k, s in circuit.shapes.items()}
     return Feeder(name or circuit.name, buses, lines, loads, source, generators, shapes)
+
+
+def _branch_table(circuit: Circuit, ids: dict[str, int], path: Path) -> pd.DataFrame:
+    """The circuit's series branches as a lines table (bus ids), self loops left out."""
+    if not circuit.branches:
+        raise FeederError(f"{path}: the OpenDSS circuit {circuit.name!r} has no line")
+    lines = pd.DataFrame(
+        {
+            "from_bus": [ids[b.bus_a] for b in circuit.branches],
+            "to_bus": [ids[b.bus_b] for b in circuit.branches],
+            "length_km": [b.length_km for b in circuit.branches],
+            "r_ohm": [b.r_ohm for b in circuit.branches],
+            "x_ohm": [b.x_ohm for b in circuit.branches],
+            "limit_kw": [b.limit_kw for b in circuit.branches],
+            "kv_base": [b.kv_base for b in circuit.branches],
+            "kind": [b.kind for b in circuit.branches],
+        },
+        index=pd.Index([b.name for b in circuit.branches], name="line"),
+    ).astype({"from_bus": np.int64, "to_bus": np.int64})
+    return lines[lines.from_bus != lines.to_bus]
+
+
+def _fleet_and_loads(
+    circuit: Circuit, ids: dict[str, int], fleet, path: Path
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """``(generators, loads)``: the fleet mapped onto the circuit, and the loads with the
+    injections the fleet does not dispatch (fixed injections, negative kW)."""
+    candidates = fleet_candidates(circuit)
+    generators = _map_fleet(fleet, ids, candidates, path) if fleet is not None else _no_fleet()
+    dispatched = {str(e).lower() for e in _dispatched_elements(fleet, candidates)}
+    injections = [row for row in circuit.injections if row[0].lower() not in dispatched]
+    return generators, _load_table(circuit.loads, injections, ids)
+
+
+def _kept_buses(lines, loads, generators, sources, root, names, ids, path) -> set[int]:
+    """The bus ids of the sources' networks (:func:`_feeder_buses`), warning about the empty
+    buses dropped."""
+    name_of = {v: k for k, v in ids.items()}
+    occupied = set(loads.bus) | set(generators.bus.tolist())
+    components = _components(lines, names, ids)
+    keep, dropped = _feeder_buses(components, sources, occupied, root, name_of, path)
+    if dropped:
+        warnings.warn(
+            f"{path}: dropped {len(dropped)} bus(es) cut off from the source, with nothing "
+            f"connected: {dropped[:10]}",
+            UserWarning,
+            stacklevel=4,
+        )
+    return keep
+
+
+def read_opendss_network(
+    master_path: str | Path,
+    *,
+    fleet: pd.DataFrame | str | Path | None = None,
+    root: str | int | None = None,
+    ratings: bool = True,
+    name: str | None = None,
+) -> DcNetwork:
+    """An OpenDSS circuit of any shape (tie switches closed: loops) as a
+    :class:`~popdispatch.feeder.dcnet.DcNetwork` for MATPOWER's lossless DC model.
+
+    The circuit is compiled and read as :func:`read_opendss_master` reads it (buses, branches
+    with their positive-sequence ohms and ratings, loads, fixed injections, the fleet), with
+    these differences: parallel branches stay separate rows; each branch's reactance is in per
+    unit on 1 MVA and its own line-to-line base, ``x_pu = x_ohm / kv_base^2`` (a transformer's
+    ohms are on its winding 1's side, so its per-unit reactance is its own; taps ignored, as
+    the radial reading ignores them); each bus's demand ``pd_mw`` is its loads' kW less its
+    fixed injections' (one step: load shapes are not run on a mesh); the slack is the
+    ``Vsource``'s bus or ``root``, and one source only. Buses keep their OpenDSS names (the
+    ``name`` column), which every output and option uses.
+    """
+    fleet = as_fleet(fleet)
+    path = Path(master_path)
+    with compiled_script(path) as script:
+        try:
+            circuit = read_circuit(script.ctx, ratings)
+        except FeederError as exc:
+            raise _located(exc, script) from None
+    names = circuit.buses
+    ids = bus_ids(names)
+    lines = _branch_table(circuit, ids, path)
+    generators, loads = _fleet_and_loads(circuit, ids, fleet, path)
+    sources = _sources(circuit, root, ids, path)
+    if len(sources) > 1:
+        raise FeederError(f"{path}: a meshed circuit runs with one source; it has "
+                          f"{', '.join(sources)}: pick one (--root BUS)")  # fmt: skip
+    keep = _kept_buses(lines, loads, generators, sources, root, names, ids, path)
+    lines = lines[lines.from_bus.isin(keep) & lines.to_bus.isin(keep)]
+    kept = [b for b in names if ids[b] in keep]
+    index = pd.Index([ids[b] for b in kept], name="bus", dtype=np.int64)
+    demand_kw = loads[loads.bus.isin(keep)].groupby("bus").p_kw.sum()
+    buses = pd.DataFrame(
+        {"pd_mw": demand_kw.reindex(index, fill_value=0.0).to_numpy() / KW_PER_MW,
+         "gs_mw": 0.0, "name": kept},
+        index=index,
+    )  # fmt: skip
+    table = pd.DataFrame(
+        {"from_bus": lines.from_bus, "to_bus": lines.to_bus,
+         "x_pu": lines.x_ohm / lines.kv_base**2, "tap": 0.0, "shift_deg": 0.0,
+         "limit_kw": lines.limit_kw},
+        index=lines.index,
+    )  # fmt: skip
+    return DcNetwork(name or circuit.name, 1.0, buses, table, generators, ids[sources[0]])
 
 
 def _no_fleet() -> pd.DataFrame:

@@ -72,7 +72,7 @@ from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components
 
 from popdispatch.constants import KW_PER_MW
-from popdispatch.errors import FeederError, FleetError, OptionError
+from popdispatch.errors import FeederError, FleetError, MeshedError, OptionError
 from popdispatch.feeder.dcnet import DcNetwork
 from popdispatch.feeder.generators import FLEET_COLUMNS, as_fleet, make_fleet
 from popdispatch.feeder.model import Feeder
@@ -180,9 +180,10 @@ def _read(net_or_path, fleet, root, ratings, name) -> Feeder:
     loops = a == b
     if loops.any():
         k = int(np.argmax(loops))
-        raise FeederError(
+        raise MeshedError(
             f"{branches.index[k]!r} joins buses merged by a closed bus-bus switch (bus "
-            f"{bus_ids[a[k]]}): feeder is meshed (popdispatch supports radial feeders only)"
+            f"{bus_ids[a[k]]}): feeder is meshed (a radial reader; any network: docs/meshed.md)",
+            [str(branches.index[k])],
         )
     vn = bus_table.vn_kv.to_numpy(float)
     lines = pd.DataFrame(
@@ -749,6 +750,11 @@ def _known(pmax: float, et: str, index) -> float:
 # -- any network, meshed or radial: the DC model's tables ------------------------------------
 
 
+#: The margin pandapower's conversion widens every generator's limits by (MW, its OPF option
+#: ``delta``); the fleet read back takes it off again.
+OPF_DELTA_MW = 1e-10
+
+
 def read_pandapower_network(net_or_path, name: str = "") -> DcNetwork:
     """A pandapower net of any shape (closed rings, meshes) as a
     :class:`~popdispatch.feeder.dcnet.DcNetwork`, from pandapower's own conversion to its
@@ -771,7 +777,7 @@ def read_pandapower_network(net_or_path, name: str = "") -> DcNetwork:
         row = pwl.iloc[0]
         raise FleetError(f"{row.et} {row.element} has a piecewise-linear cost (pwl_cost): "
                          "popdispatch takes polynomial costs (poly_cost) only")  # fmt: skip
-    _init_rundcopp_options(net, check_connectivity=True, switch_rx_ratio=2, delta=1e-10,
+    _init_rundcopp_options(net, check_connectivity=True, switch_rx_ratio=2, delta=OPF_DELTA_MW,
                            trafo3w_losses="hv")  # fmt: skip
     _add_auxiliary_elements(net)
     ppc, ppci = _pd2ppc(net)
@@ -827,7 +833,8 @@ def _network_fleet(lookups, ids, gen, cost) -> pd.DataFrame:
     for k in np.flatnonzero(gen[:, 7] > 0):
         ncost = int(cost[k, 3])
         c = np.concatenate([cost[k, 4 : 4 + ncost][::-1], np.zeros(3)])[:3]
-        rows.append((int(ids[int(gen[k, 0])]), c[0], c[1], c[2], gen[k, 9] * KW_PER_MW,
-                     gen[k, 8] * KW_PER_MW))  # fmt: skip
+        pmin, pmax = gen[k, 9] + OPF_DELTA_MW, gen[k, 8] - OPF_DELTA_MW  # pandapower's widening
+        rows.append((int(ids[int(gen[k, 0])]), c[0], c[1], c[2], pmin * KW_PER_MW,
+                     pmax * KW_PER_MW))  # fmt: skip
         names.append(element.get(int(k), f"G{k}"))
     return make_fleet(rows, names)

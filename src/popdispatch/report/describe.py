@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from popdispatch.constants import KW_PER_MW
+from popdispatch.feeder.dcnet import DcNetwork
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.radial import balance_lines
 from popdispatch.feeder.reduction import ReducedFeeder
@@ -36,6 +38,7 @@ def feeder_summary(feeder: Feeder, reduced: ReducedFeeder, ratings: bool = True)
     rated = np.isfinite(lines["limit_kw"].to_numpy(float)) & ~lines.index.isin(list(balance))
     return {
         "case": feeder.name,
+        "meshed": False,
         "buses": len(feeder.buses),
         "original_lines": len(lines),
         "source_bus": labels[feeder.source_bus],
@@ -149,13 +152,7 @@ def feeder_text(summary: dict) -> str:
     head.append(f"line ratings: {s['ratings']}; {s['rated_lines']} of "
                 f"{s['original_lines']} lines limited")  # fmt: skip
     head.append(_series_text(s["series"]))
-    if s["generators"]:
-        gens = ", ".join(
-            f"{g['name']} (bus {g['bus']}, {g['pmax_kw']:g} kW)" for g in s["generators"]
-        )
-        head += [f"generators: {gens}", f"total capacity: {s['capacity_kw']:g} kW"]
-    else:
-        head.append(f"generators: none ({s['fleet_note']})")
+    head.append(_generators_text(s))
     loads = [f"{'load':<24}{'bus':>16}{'kW':>12}  kind"]
     loads += [f"{r['name']:<24}{str(r['bus']):>16}{_num(r['p_kw']):>12}  {r['kind']}"
               for r in s["load_table"]]  # fmt: skip
@@ -168,6 +165,78 @@ def feeder_text(summary: dict) -> str:
     ]
     note = "impedances: each line's own ohms, on its own voltage base (kV)"
     return "\n".join(head + ["", "loads:"] + loads + ["", f"lines ({note}):"] + lines)
+
+
+def network_summary(net: DcNetwork, ratings: bool = True) -> dict:
+    """The ``popdispatch feeder`` JSON object of a meshed network (MATPOWER's DC model,
+    :class:`~popdispatch.feeder.dcnet.DcNetwork`): counts, the slack bus, loads (kW), shunts,
+    lines (per-unit reactance, tap, shift, limit in kW) and generators."""
+    loads, lines, gens = net.loads, net.lines, net.generators
+    limit = lines.limit_kw.to_numpy(float)
+    label = dict(zip(net.buses.index, net.bus_labels(net.buses.index), strict=True))
+    return {
+        "case": net.name,
+        "meshed": True,
+        "buses": len(net.buses),
+        "original_lines": len(lines),
+        "loops": len(lines) - len(net.buses) + 1,
+        "slack_bus": label[net.slack_bus],
+        "base_mva": net.base_mva,
+        "loads": len(loads),
+        "load_kw": float(loads.p_kw.sum()),
+        "shunt_kw": float(net.buses.gs_mw.sum() * KW_PER_MW),
+        "ratings": "the network's own" if ratings else "none (--no-ratings)",
+        "rated_lines": int(np.isfinite(limit).sum()),
+        "load_table": [{"name": str(name), "bus": label[bus], "p_kw": float(kw), "kind": "load"}
+                       for name, bus, kw in zip(loads.index, loads.bus, loads.p_kw, strict=True)],
+        "line_table": [
+            {"name": str(name), "from_bus": label[row.from_bus], "to_bus": label[row.to_bus],
+             "x_pu": float(row.x_pu), "tap": float(row.tap), "shift_deg": float(row.shift_deg),
+             "limit_kw": _number(row.limit_kw)}
+            for name, row in lines.iterrows()
+        ],
+        "generators": [
+            {"name": str(name), "bus": label[row.bus], "a_eur": float(row.a),
+             "b_eur_per_mwh": float(row.b), "c_eur_per_mw2h": float(row.c),
+             "pmin_kw": float(row.pmin_kw), "pmax_kw": float(row.pmax_kw)}
+            for name, row in gens.iterrows()
+        ],
+        "capacity_kw": float(gens.pmax_kw.sum()),
+        "fleet_note": None if len(gens) else NO_FLEET,
+    }  # fmt: skip
+
+
+def network_text(summary: dict) -> str:
+    """``popdispatch feeder`` on a meshed network: the summary, then every load and line."""
+    s = summary
+    head = [
+        f"network {s['case']}: {s['buses']} buses, {s['original_lines']} lines "
+        f"({s['loops']} independent loops), slack bus {s['slack_bus']}; MATPOWER's DC model "
+        f"on {s['base_mva']:g} MVA (docs/meshed.md)",
+        f"{s['loads']} loads, {_kw(s['load_kw'])}; shunt conductances {_kw(s['shunt_kw'])} at "
+        "1 p.u.",
+        f"line ratings: {s['ratings']}; {s['rated_lines']} of {s['original_lines']} lines "
+        "limited",
+        _generators_text(s),
+    ]
+    loads = [f"{'load':<24}{'bus':>16}{'kW':>12}"]
+    loads += [f"{r['name']:<24}{str(r['bus']):>16}{_num(r['p_kw']):>12}" for r in s["load_table"]]
+    lines = [f"{'line':<28}{'from':>16}{'to':>16}{'limit kW':>11}{'x p.u.':>11}{'tap':>8}"
+             f"{'shift deg':>10}"]  # fmt: skip
+    lines += [
+        f"{r['name']:<28}{str(r['from_bus']):>16}{str(r['to_bus']):>16}"
+        f"{_num(r['limit_kw'], 'none'):>11}"
+        f"{r['x_pu']:>11.4g}{r['tap']:>8.4g}{r['shift_deg']:>10.4g}"
+        for r in s["line_table"]
+    ]
+    return "\n".join(head + ["", "loads:"] + loads + ["", "lines:"] + lines)
+
+
+def _generators_text(s: dict) -> str:
+    if not s["generators"]:
+        return f"generators: none ({s['fleet_note']})"
+    gens = ", ".join(f"{g['name']} (bus {g['bus']}, {g['pmax_kw']:g} kW)" for g in s["generators"])
+    return f"generators: {gens}\ntotal capacity: {s['capacity_kw']:g} kW"
 
 
 def _kw(value: float | None) -> str:
@@ -190,4 +259,4 @@ def _series_text(series: dict) -> str:
     return "load shapes (--series): " + "; ".join(parts)
 
 
-__all__ = ["NO_FLEET", "feeder_summary", "feeder_text"]
+__all__ = ["NO_FLEET", "feeder_summary", "feeder_text", "network_summary", "network_text"]
