@@ -286,7 +286,7 @@ def agents_text(s: dict) -> str:
         f"network: loss {s['loss']:g}, delays up to {s['delay_max']} rounds, duplicates "
         f"{s['duplicate']:g}, noise {s['noise_kw']:g} kW, seed {s['seed']}"
         + (f"; rounds paced to {s['phase_ticks']} ticks per phase" if s["phase_ticks"] > 1 else ""),
-        limits_text(s["limits"]),
+        limits_text(s["limits"], s["limits_in_force"]),
         f"status: {s['dynamics_status']} after {s['rounds']} rounds of {s['step_s']:.4g} s "
         f"({s['step_source']} step)"
         + (
