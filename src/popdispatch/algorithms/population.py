@@ -1,6 +1,6 @@
 """Population dynamics by messages: Smith on the complete graph, distributed Smith on a sparse
 graph, in exact mode (the curvature-scaled capacity field and integrated line prices,
-docs/exact-mode.md), one explicit Euler step of ``h = step x`` :func:`stable_step` seconds
+docs/exact-mode.md), one explicit Euler step of ``h = step x`` :func:`~popdispatch.online.stiffness.round_step`
 per round.
 
 The numbers come from the plain-numpy reference (:mod:`popdispatch.reference`): the fitness
@@ -54,20 +54,21 @@ from popdispatch.dynamics.fields import field_tag, law_of
 from popdispatch.dynamics.pairwise import RELAY_MASS
 from popdispatch.game.fitness import generator_fitness
 from popdispatch.online import RunSettings
+from popdispatch.online.stiffness import round_step
 from popdispatch.reference import pair_flows
 
 
 @dataclass(frozen=True)
 class SmithParams:
-    """step: the Euler step of one round in units of :func:`stable_step` (dimensionless);
+    """step: the Euler step of one round in units of :func:`~popdispatch.online.stiffness.round_step` (dimensionless);
     price_rate: exact mode's price rate
     (dimensionless, :class:`~popdispatch.modes.exact.ExactConstants`; None: its default);
     graph: the communication graph (complete, or a sparse one of
     :data:`popdispatch.dynamics.GRAPHS`); silent_rounds: rounds without a report after which
     a partner counts as gone."""
 
-    step: float = 0.1
-    price_rate: float | None = 100.0
+    step: float = 0.3
+    price_rate: float | None = 1000.0
     graph: str = "complete"
     silent_rounds: int = 40
 
@@ -86,13 +87,15 @@ class PopulationDynamics(Algorithm):
 
         exact = ExactConstants() if params.price_rate is None else \
             ExactConstants(price_rate=params.price_rate)  # fmt: skip
-        settings = RunSettings(mode="exact", dynamics="smith", exact=exact)
+        sparse = params.graph != "complete"
+        settings = RunSettings(mode="exact", dynamics="distributed-smith" if sparse else "smith",
+                               graph=params.graph, exact=exact)  # fmt: skip
         self.fp = settings.game_constants(problem)
         self.field = settings.field
         tag = field_tag(self.field)
         self._law_weights = partial(law_of(tag).reference, tag)
         self.rate = settings.revision_rates(problem)
-        self.h = params.step * stable_step(minute, self.fp)
+        self.h = params.step * round_step(problem, settings, minute.minute)
         self.graph = communication_graph(params.graph, minute.names)
         self.neighbours = [np.flatnonzero(self.graph[i]) for i in range(n)]
         self.complete = bool((self.graph + np.eye(n) > 0).all())
@@ -332,16 +335,3 @@ class PopulationDynamics(Algorithm):
             if j != b and names[j] not in via:
                 self.net.send(names[i], names[j], "relay", [f, w, p], key=(b, via),
                               reveals="fitness")  # fmt: skip
-
-
-def stable_step(minute: Minute, fp) -> float:
-    """The engine's largest stable step over the fastest rate of exact mode's dynamics, s:
-    ``STABLE_STEP / (gain max(S, D max_i (2 c_i + C)))`` (``S`` the marginal-cost spread,
-    ``D`` the demand, ``C`` the price weight; the agents' round step, docs/agents.md)."""
-    from popdispatch.integrate import STABLE_STEP
-    from popdispatch.modes.exact import scales
-
-    problem = minute.problem
-    priced = np.where(problem.generator_line >= 0, fp.C, 0.0)
-    own = float(np.max(minute.demand * (2.0 * problem.c + priced)))
-    return STABLE_STEP / (float(fp.gain) * max(scales(problem)[0], own))

@@ -21,7 +21,8 @@ class Entry:
 
 ALGORITHMS: dict[str, Entry] = {
     "smith": Entry(PopulationDynamics, SmithParams),
-    "distributed-smith": Entry(PopulationDynamics, partial(SmithParams, graph="ring")),
+    "distributed-smith": Entry(PopulationDynamics, partial(SmithParams, step=1.0,
+                                                            graph="ring")),
     "dual-decomposition": Entry(DualDecomposition, DualParams),
     "admm": Entry(Admm, AdmmParams),
 }
