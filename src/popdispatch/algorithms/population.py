@@ -1,7 +1,8 @@
 """Population dynamics by messages: Smith on the complete graph, distributed Smith on a sparse
 graph, in exact mode (the curvature-scaled capacity field and integrated line prices,
-docs/exact-mode.md), one explicit Euler step of ``h = step x`` :func:`~popdispatch.online.stiffness.round_step`
-per round.
+docs/exact-mode.md), one explicit Euler step of ``h = step x round_step`` per round
+(:func:`popdispatch.online.stiffness.round_step`: the agents' round step, the largest stable
+explicit step of exact mode's dynamics on the minute).
 
 The numbers come from the plain-numpy reference (:mod:`popdispatch.reference`): the fitness
 is the engine's kernel (``generator_fitness``, as ``reference.fitness`` calls it), the
@@ -43,7 +44,7 @@ relayed hop by hop along the route (one message and one round per hop).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
+from functools import cache, partial
 
 import numpy as np
 
@@ -60,9 +61,10 @@ from popdispatch.reference import pair_flows
 
 @dataclass(frozen=True)
 class SmithParams:
-    """step: the Euler step of one round in units of :func:`~popdispatch.online.stiffness.round_step` (dimensionless);
-    price_rate: exact mode's price rate
-    (dimensionless, :class:`~popdispatch.modes.exact.ExactConstants`; None: its default);
+    """step: the Euler step of one round in units of
+    :func:`~popdispatch.online.stiffness.round_step` (dimensionless); price_rate: exact mode's
+    price rate (dimensionless, :class:`~popdispatch.modes.exact.ExactConstants`; None: its
+    default);
     graph: the communication graph (complete, or a sparse one of
     :data:`popdispatch.dynamics.GRAPHS`); silent_rounds: rounds without a report after which
     a partner counts as gone."""
@@ -101,6 +103,9 @@ class PopulationDynamics(Algorithm):
         self.complete = bool((self.graph + np.eye(n) > 0).all())
         self.p = balanced_start(minute)
         self.below = problem.down > 0.5  # (lines, generators)
+        # each DG's share of each line price
+        self.split = np.ascontiguousarray(np.where(self.below.T, 0.5, -0.5))
+        self._boxes: dict[tuple, tuple] = {}  # a view's (lo, hi, active, rate)
         self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
         self.z = np.zeros((len(problem.limit), 2))
         # each DG's view: the last report of each partner (f, w, p) and its round
@@ -224,7 +229,7 @@ class PopulationDynamics(Algorithm):
         view = [i] + partners
         seen = self.report[i, partners]  # (partners, 4): their last reports
         p_view = np.concatenate(([self.p[i]], seen[:, 2]))
-        signal = np.where(self.below[:, i], 0.5, -0.5) @ self.nu[i]
+        signal = self.split[i] @ self.nu[i]
         f_i = self._fitness(i, signal)
         f_view = np.concatenate(([f_i], seen[:, 0]))
         w, v, room, mass = self._weights(view, p_view, f_view)
@@ -259,9 +264,12 @@ class PopulationDynamics(Algorithm):
         """Receiver and sender weights, rooms and movable masses of the DGs ``view`` at set
         points ``p`` (MW) and fitness ``f``: the field's plain-numpy law
         (:func:`popdispatch.reference.weights`), in shares of the demand."""
-        m = self.m
-        lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
-        return self._law_weights(p / m.demand, f, lo, hi, hi > lo, self.rate[view])
+        box = self._boxes.get(tuple(view))
+        if box is None:
+            m = self.m
+            lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
+            box = self._boxes[tuple(view)] = (lo, hi, hi > lo, self.rate[view])
+        return self._law_weights(p / self.m.demand, f, *box)
 
     def _limited_outflows(self, view, f, w, p, hops, known=None) -> np.ndarray:
         """The MW ``view[0]`` sends each other member of its view this round: ``h D w_j v_i
@@ -275,8 +283,7 @@ class PopulationDynamics(Algorithm):
         mass)`` of the view at ``p`` and ``f`` when already computed."""
         m, h = self.m, self.h
         v, room, mass = known if known is not None else self._weights(view, p, f)[1:]
-        everyone = np.ones((len(view), len(view))) - np.eye(len(view))
-        inflow, _ = pair_flows(f, w, v, everyone, mass, room)
+        inflow, _ = pair_flows(f, w, v, _everyone(len(view)), mass, room)
         beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
         out = h * beta[1:] * w[1:] * v[0] * np.maximum(f[1:] - f[0], 0.0) * m.demand
         waves = 4 * (1 + self.net.faults.delay_max) * hops * max(1, len(self.m.names) - 1)
@@ -335,3 +342,9 @@ class PopulationDynamics(Algorithm):
             if j != b and names[j] not in via:
                 self.net.send(names[i], names[j], "relay", [f, w, p], key=(b, via),
                               reveals="fitness")  # fmt: skip
+
+
+@cache
+def _everyone(n: int) -> np.ndarray:
+    """The complete graph on ``n`` members (a DG's view as it knows it)."""
+    return np.ones((n, n)) - np.eye(n)
