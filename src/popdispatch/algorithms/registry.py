@@ -21,8 +21,7 @@ class Entry:
 
 ALGORITHMS: dict[str, Entry] = {
     "smith": Entry(PopulationDynamics, SmithParams),
-    "distributed-smith": Entry(PopulationDynamics, partial(SmithParams, step=1.0,
-                                                            graph="ring")),
+    "distributed-smith": Entry(PopulationDynamics, partial(SmithParams, step=1.0, graph="ring")),
     "dual-decomposition": Entry(DualDecomposition, DualParams),
     "admm": Entry(Admm, AdmmParams),
 }
