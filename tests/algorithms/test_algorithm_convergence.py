@@ -180,4 +180,5 @@ def test_population_dynamics_step_is_the_agents_round_step():
             algorithm = PopulationDynamics(Minute.of(problem, minute), Network(), params)
             assert algorithm.field == settings.field == Field.CAPACITY_NEWTON
             assert algorithm.h == pytest.approx(
-                params.step * default_step(problem, settings, minute), rel=1e-12)
+                params.step * default_step(problem, settings, minute), rel=1e-12
+            )
