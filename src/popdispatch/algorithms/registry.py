@@ -23,5 +23,8 @@ ALGORITHMS: dict[str, Entry] = {
     "smith": Entry(PopulationDynamics, SmithParams),
     "distributed-smith": Entry(PopulationDynamics, partial(SmithParams, step=1.0, graph="ring")),
     "dual-decomposition": Entry(DualDecomposition, DualParams),
+    "fast-dual-decomposition": Entry(
+        DualDecomposition, partial(DualParams, balance_step=0.5, accelerated=True)
+    ),
     "admm": Entry(Admm, AdmmParams),
 }

@@ -35,7 +35,8 @@ from popdispatch.cli.render import emit
 from popdispatch.progress import Progress
 
 #: The registry's names (checked against :data:`popdispatch.algorithms.ALGORITHMS` by a test).
-ALGORITHM_NAMES = ("smith", "distributed-smith", "dual-decomposition", "admm")
+ALGORITHM_NAMES = ("smith", "distributed-smith", "dual-decomposition",
+                   "fast-dual-decomposition", "admm")  # fmt: skip
 
 
 class AlgorithmsType(click.ParamType):
