@@ -152,13 +152,15 @@ def _text(payload: dict, summary) -> str:
              "1e-6 x demand) of the DC-OPF for 10 rounds"]  # fmt: skip
     head = ("algorithm", "converged", "rounds", "messages", "bytes", "msg/agent/round",
             "partners", "distance kW", "|imbalance| kW")  # fmt: skip
-    lines.append("  ".join(f"{h:>18}" if i == 0 else f"{h:>15}" for i, h in enumerate(head)))
+    width = max(18, *(len(name) for name in summary.algorithm))
+    lines.append("  ".join(f"{h:>{width}}" if i == 0 else f"{h:>15}" for i, h in enumerate(head)))
     for row in summary.itertuples(index=False):
         cells = (row.algorithm, row.converged, _num(row.rounds), _num(row.messages),
                  _num(row.bytes_total), f"{row.messages_per_agent_round:.3g}",
                  str(row.partners_max), f"{row.final_distance_kw:.3g}",
                  f"{row.max_abs_imbalance_kw:.3g}")  # fmt: skip
-        lines.append("  ".join(f"{c:>18}" if i == 0 else f"{c:>15}" for i, c in enumerate(cells)))
+        lines.append("  ".join(f"{c:>{width}}" if i == 0 else f"{c:>15}"
+                               for i, c in enumerate(cells)))  # fmt: skip
     lines.append("reveals:")
     for name, roles in payload["reveals"].items():
         lines.append(f"  {name}: " + "; ".join(f"{r}: {', '.join(w)}" for r, w in roles.items()))
