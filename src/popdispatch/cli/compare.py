@@ -96,11 +96,11 @@ class CrashType(click.ParamType):
 @quiet_option
 def compare(algorithms, minute, limits, loss, delay_max, duplicate, crash, seeds, seed,
             max_rounds, profiles, source, out, as_json, quiet) -> int:  # fmt: skip
-    """Population dynamics (Smith, distributed Smith on a ring), dual decomposition and ADMM
-    on one minute, by messages through one simulated network with the same faults and
-    counter, each measured every round against the DC-OPF. A run is converged only when its
-    applied set points are within max(1e-3 kW, 1e-6 x demand) of the DC-OPF, balanced and
-    within the line limits for 10 rounds in a row."""
+    """Population dynamics (Smith, distributed Smith on a ring), dual decomposition (plain and
+    fast) and ADMM on one minute, by messages through one simulated network with the same
+    faults and counter, each measured every round against the DC-OPF. A run is converged only
+    when its applied set points are within max(1e-3 kW, 1e-6 x demand) of the DC-OPF,
+    balanced and within the line limits for 10 rounds in a row."""
     check_out(out)
     progress = Progress(quiet)
     problem, _ = build(source, Series(profiles), minute, limits, progress)
