@@ -39,13 +39,18 @@ from popdispatch.algorithms.comparison import (  # noqa: E402
     summary_table,
 )
 
-NAMES = ("smith", "distributed-smith", "dual-decomposition", "admm")
+NAMES = ("smith", "distributed-smith", "dual-decomposition", "fast-dual-decomposition", "admm")
+#: Population dynamics' grid: the round step in units of the agents' round step (1: theirs,
+#: popdispatch.online.stiffness.round_step) and exact mode's price rate down from its default
+#: (3000, popdispatch.modes.exact.NEWTON_PRICE_RATE).
+STEPS, PRICE_RATES = (0.1, 0.3, 1.0), (300.0, 1000.0, 3000.0)
 GRIDS = {
-    "smith": [SmithParams(step=s, price_rate=r) for s in (0.01, 0.03, 0.1)
-              for r in (1.0, 10.0, 100.0)],
+    "smith": [SmithParams(step=s, price_rate=r) for s in STEPS for r in PRICE_RATES],
     "distributed-smith": [SmithParams(step=s, price_rate=r, graph="ring")
-                          for s in (0.01, 0.03, 0.1) for r in (1.0, 10.0, 100.0)],
+                          for s in STEPS for r in PRICE_RATES],
     "dual-decomposition": [DualParams(a, b) for a in (0.5, 1.0, 1.9) for b in (0.1, 1.0, 10.0)],
+    "fast-dual-decomposition": [DualParams(a, b, accelerated=True) for a in (0.5, 1.0, 1.9)
+                                for b in (0.1, 1.0, 10.0)],
     "admm": [AdmmParams(rho_scale=r) for r in (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0,
                                                100.0)],
 }  # fmt: skip

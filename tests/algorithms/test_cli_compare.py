@@ -54,3 +54,13 @@ def test_a_run_writes_its_files_and_agrees_with_the_library(tmp_path):
     assert row.messages_total == lib.messages[-1]
     assert row.final_distance_kw == pytest.approx(lib.distance_kw[-1], rel=1e-9)
     assert row.status == "not_converged"  # 60 rounds: far from the DC-OPF, and it says so
+
+
+def test_the_table_stays_aligned_with_the_longest_algorithm_name():
+    result = run("compare", "--minute", "566", "--limit", "505:666=28", "--algorithms",
+                 "fast-dual-decomposition,admm", "--max-rounds", "20", "--quiet")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    header, *rows = result.stdout.splitlines()[1:4]
+    assert rows[0].split()[0] == "fast-dual-decomposition"
+    assert len({len(header), *(len(row) for row in rows)}) == 1
+    assert header.index("converged") + len("converged") == rows[0].index("0/1") + len("0/1")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -54,8 +55,7 @@ class Faults:
         return ", ".join(parts) or "perfect network"
 
 
-@dataclass(frozen=True)
-class Message:
+class Message(NamedTuple):
     """One message: ``values`` are its scalars (floats on the wire); ``sent`` its round."""
 
     sender: str
@@ -100,19 +100,20 @@ class Network:
         """Send ``values`` (scalars) from ``sender`` to ``receiver`` (relayed by the agents
         ``via``, one message and one round per hop, each hop lost on its own); ``reveals``
         names what the sender discloses by it (a cost curve, a set point, a price ...)."""
-        if self.crashed(sender):
+        f = self.faults
+        if f.crash is not None and self.crashed(sender):
             return
-        values = tuple(float(v) for v in np.atleast_1d(values))
-        hops = (sender, *via, receiver)
+        values = _scalars(values)
         c = self.counters
         if reveals:
             c.reveals[sender].add(reveals)
-        f = self.faults
+        size = HEADER_BYTES + SCALAR_BYTES * len(values)
         delay = 0
-        for a, b in zip(hops[:-1], hops[1:], strict=True):
+        a = sender
+        for b in (*via, receiver):
             c.messages += 1
             c.scalars += len(values)
-            c.bytes += HEADER_BYTES + SCALAR_BYTES * len(values)
+            c.bytes += size
             c.sent_by[a] += 1
             c.partners[a].add(b)
             c.partners[b].add(a)
@@ -120,6 +121,7 @@ class Network:
                 c.lost += 1
                 return
             delay += 1 + (int(self._rng.integers(0, f.delay_max + 1)) if f.delay_max else 0)
+            a = b
         message = Message(sender, receiver, kind, values, self.round, key, tuple(via))
         self._queue[self.round + delay].append(message)
         if f.duplicate and self._rng.random() < f.duplicate:
@@ -130,7 +132,18 @@ class Network:
         """Start round ``round_``: the messages due, by receiver (none to a crashed agent)."""
         self.round = round_
         inbox: dict[str, list[Message]] = defaultdict(list)
+        crash = self.faults.crash
         for message in self._queue.pop(round_, []):
-            if not self.crashed(message.receiver):
+            if crash is None or not self.crashed(message.receiver):
                 inbox[message.receiver].append(message)
         return inbox
+
+
+def _scalars(values) -> tuple[float, ...]:
+    """A message's payload as a tuple of Python floats (from a sequence, an array or a
+    number)."""
+    if isinstance(values, np.ndarray):
+        return tuple(values.ravel().tolist())
+    if isinstance(values, (list, tuple)):
+        return tuple(float(v) for v in values)
+    return (float(values),)

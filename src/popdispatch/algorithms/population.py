@@ -1,7 +1,8 @@
 """Population dynamics by messages: Smith on the complete graph, distributed Smith on a sparse
 graph, in exact mode (the curvature-scaled capacity field and integrated line prices,
-docs/exact-mode.md), one explicit Euler step of ``h = step x`` :func:`stable_step` seconds
-per round.
+docs/exact-mode.md), one explicit Euler step of ``h = step x round_step`` per round
+(:func:`popdispatch.online.stiffness.round_step`: the agents' round step, the largest stable
+explicit step of exact mode's dynamics on the minute).
 
 The numbers come from the plain-numpy reference (:mod:`popdispatch.reference`): the fitness
 is the engine's kernel (``generator_fitness``, as ``reference.fitness`` calls it), the
@@ -43,29 +44,33 @@ relayed hop by hop along the route (one message and one round per hop).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache, partial
 
 import numpy as np
 
 from popdispatch.algorithms.base import Algorithm, Minute, balanced_start, controller_name
 from popdispatch.algorithms.network import Message, Network
 from popdispatch.dynamics import communication_graph
+from popdispatch.dynamics.fields import field_tag, law_of
 from popdispatch.dynamics.pairwise import RELAY_MASS
 from popdispatch.game.fitness import generator_fitness
 from popdispatch.online import RunSettings
-from popdispatch.reference import pair_flows, weights
+from popdispatch.online.stiffness import round_step
+from popdispatch.reference import pair_flows
 
 
 @dataclass(frozen=True)
 class SmithParams:
-    """step: the Euler step of one round in units of :func:`stable_step` (dimensionless);
-    price_rate: exact mode's price rate
-    (dimensionless, :class:`~popdispatch.modes.exact.ExactConstants`; None: its default);
+    """step: the Euler step of one round in units of
+    :func:`~popdispatch.online.stiffness.round_step` (dimensionless); price_rate: exact mode's
+    price rate (dimensionless, :class:`~popdispatch.modes.exact.ExactConstants`; None: its
+    default);
     graph: the communication graph (complete, or a sparse one of
     :data:`popdispatch.dynamics.GRAPHS`); silent_rounds: rounds without a report after which
     a partner counts as gone."""
 
-    step: float = 0.1
-    price_rate: float | None = 100.0
+    step: float = 0.3
+    price_rate: float | None = 1000.0
     graph: str = "complete"
     silent_rounds: int = 40
 
@@ -84,16 +89,23 @@ class PopulationDynamics(Algorithm):
 
         exact = ExactConstants() if params.price_rate is None else \
             ExactConstants(price_rate=params.price_rate)  # fmt: skip
-        settings = RunSettings(mode="exact", dynamics="smith", exact=exact)
+        sparse = params.graph != "complete"
+        settings = RunSettings(mode="exact", dynamics="distributed-smith" if sparse else "smith",
+                               graph=params.graph, exact=exact)  # fmt: skip
         self.fp = settings.game_constants(problem)
         self.field = settings.field
+        tag = field_tag(self.field)
+        self._law_weights = partial(law_of(tag).reference, tag)
         self.rate = settings.revision_rates(problem)
-        self.h = params.step * stable_step(minute, self.fp)
+        self.h = params.step * round_step(problem, settings, minute.minute)
         self.graph = communication_graph(params.graph, minute.names)
         self.neighbours = [np.flatnonzero(self.graph[i]) for i in range(n)]
         self.complete = bool((self.graph + np.eye(n) > 0).all())
         self.p = balanced_start(minute)
         self.below = problem.down > 0.5  # (lines, generators)
+        # each DG's share of each line price
+        self.split = np.ascontiguousarray(np.where(self.below.T, 0.5, -0.5))
+        self._boxes: dict[tuple, tuple] = {}  # a view's (lo, hi, active, rate)
         self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
         self.z = np.zeros((len(problem.limit), 2))
         # each DG's view: the last report of each partner (f, w, p) and its round
@@ -134,12 +146,15 @@ class PopulationDynamics(Algorithm):
             self._forget_silent(i, round_)
 
     def exchange(self, round_: int) -> None:
-        for i, name in enumerate(self.m.names):
+        names = self.m.names
+        for i, name in enumerate(names):
             if self.net.crashed(name):
                 continue
-            self._transfers(i, round_)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                self._transfers(i, round_)
+            report = self.own[i].tolist()
             for j in self._partners(i):
-                self.net.send(name, self.m.names[j], "report", self.own[i], reveals="fitness")
+                self.net.send(name, names[j], "report", report, reveals="fitness")
             if self.own[i, 3] and not self.complete:
                 self._announce(i, round_)
 
@@ -159,7 +174,8 @@ class PopulationDynamics(Algorithm):
 
     # -- generators ----------------------------------------------------------------------
     def _partners(self, i: int) -> list[int]:
-        return [j for j in self.neighbours[i] if not self.gone[i, j]]
+        neighbours = self.neighbours[i]
+        return neighbours[~self.gone[i, neighbours]].tolist()
 
     def _receive(self, i: int, message: Message, round_: int) -> None:
         names = self.m.names
@@ -209,15 +225,14 @@ class PopulationDynamics(Algorithm):
     def _transfers(self, i: int, round_: int) -> None:
         """Compute the own report and send this round's transfers to better partners."""
         m = self.m
-        view = [i] + self._partners(i)
-        p_view = np.array([self.p[i]] + [self.report[i, j, 2] for j in view[1:]])
-        signal = np.where(self.below[:, i], 0.5, -0.5) @ self.nu[i]
+        partners = self._partners(i)
+        view = [i] + partners
+        seen = self.report[i, partners]  # (partners, 4): their last reports
+        p_view = np.concatenate(([self.p[i]], seen[:, 2]))
+        signal = self.split[i] @ self.nu[i]
         f_i = self._fitness(i, signal)
-        x = p_view / m.demand
-        f_view = np.array([f_i] + [self.report[i, j, 0] for j in view[1:]])
-        lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
-        with np.errstate(divide="ignore", invalid="ignore"):
-            w, v, room, mass = weights(self.field, x, f_view, lo, hi, hi > lo, self.rate[view])
+        f_view = np.concatenate(([f_i], seen[:, 0]))
+        w, v, room, mass = self._weights(view, p_view, f_view)
         blocked = not (w[0] > 0 and mass[0] > RELAY_MASS and room[0] > RELAY_MASS)
         refunds = sum(e[1] for e in self.outstanding[i].values())
         self.own[i] = (f_i, w[0], self.p[i] + refunds, float(blocked))  # p: at most, once
@@ -225,15 +240,17 @@ class PopulationDynamics(Algorithm):
         targets, routes = self._relay_targets(i, view, round_)
         if len(view) == 1 and not targets:
             return
-        f_view = np.array([f_i] + [self.report[i, j, 0] for j in view[1:]]
-                          + [t[1] for t in targets])  # fmt: skip
-        w_view = np.array([w[0]] + [self.report[i, j, 1] for j in view[1:]]
-                          + [t[2] for t in targets])  # fmt: skip
-        p_all = np.concatenate([p_view, [t[3] for t in targets]])
-        view = view + [t[0] for t in targets]
+        w_view = np.concatenate(([w[0]], seen[:, 1]))
+        known = (v, room, mass)  # the view's weights, unless relay targets extend it
+        if targets:
+            f_view = np.concatenate((f_view, [t[1] for t in targets]))
+            w_view = np.concatenate((w_view, [t[2] for t in targets]))
+            p_view = np.concatenate((p_view, [t[3] for t in targets]))
+            view = view + [t[0] for t in targets]
+            known = None
         routes = [()] * (len(view) - 1 - len(targets)) + routes
         hops = np.array([1 + len(r) for r in routes])
-        out = self._limited_outflows(view, f_view, w_view, p_all, hops)
+        out = self._limited_outflows(view, f_view, w_view, p_view, hops, known)
         pending = sum(a for _, a in self.debits[i])
         movable = max(self.p[i] - m.lo[i] - pending, 0.0)
         total = out.sum()
@@ -243,7 +260,18 @@ class PopulationDynamics(Algorithm):
             if amount > 1e-12 * m.demand:
                 self._send_transfer(i, j, amount, round_, via)
 
-    def _limited_outflows(self, view, f, w, p, hops) -> np.ndarray:
+    def _weights(self, view: list[int], p: np.ndarray, f: np.ndarray) -> tuple:
+        """Receiver and sender weights, rooms and movable masses of the DGs ``view`` at set
+        points ``p`` (MW) and fitness ``f``: the field's plain-numpy law
+        (:func:`popdispatch.reference.weights`), in shares of the demand."""
+        box = self._boxes.get(tuple(view))
+        if box is None:
+            m = self.m
+            lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
+            box = self._boxes[tuple(view)] = (lo, hi, hi > lo, self.rate[view])
+        return self._law_weights(p / self.m.demand, f, *box)
+
+    def _limited_outflows(self, view, f, w, p, hops, known=None) -> np.ndarray:
         """The MW ``view[0]`` sends each other member of its view this round: ``h D w_j v_i
         [f_j - f_i]_+``, each receiver's share cut by the reference's receiver limiter
         (``room_j / (h inflow_j)``, the inflow from every member of the view as this DG
@@ -251,16 +279,12 @@ class PopulationDynamics(Algorithm):
         reported room over ``4 (1 + delay) hops (N - 1)``: the senders of the rounds of transfers
         its report does not yet show (two on a perfect network, each wave at most a quarter
         of a room that shrinks by at most that much a round) cannot overfill it, so no
-        transfer is turned back and supply = demand every round."""
+        transfer is turned back and supply = demand every round. ``known``: ``(v, room,
+        mass)`` of the view at ``p`` and ``f`` when already computed."""
         m, h = self.m, self.h
-        x = p / m.demand
-        lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
-        with np.errstate(divide="ignore", invalid="ignore"):
-            _, v, room, mass = weights(self.field, x, f, lo, hi, hi > lo, self.rate[view])
-        everyone = np.ones((len(view), len(view))) - np.eye(len(view))
-        inflow, _ = pair_flows(f, w, v, everyone, mass, room)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
+        v, room, mass = known if known is not None else self._weights(view, p, f)[1:]
+        inflow, _ = pair_flows(f, w, v, _everyone(len(view)), mass, room)
+        beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
         out = h * beta[1:] * w[1:] * v[0] * np.maximum(f[1:] - f[0], 0.0) * m.demand
         waves = 4 * (1 + self.net.faults.delay_max) * hops * max(1, len(self.m.names) - 1)
         return np.minimum(out, np.maximum(m.hi[view[1:]] - p[1:], 0.0) / waves)
@@ -320,14 +344,7 @@ class PopulationDynamics(Algorithm):
                               reveals="fitness")  # fmt: skip
 
 
-def stable_step(minute: Minute, fp) -> float:
-    """The engine's largest stable step over the fastest rate of exact mode's dynamics, s:
-    ``STABLE_STEP / (gain max(S, D max_i (2 c_i + C)))`` (``S`` the marginal-cost spread,
-    ``D`` the demand, ``C`` the price weight; the agents' round step, docs/agents.md)."""
-    from popdispatch.integrate import STABLE_STEP
-    from popdispatch.modes.exact import scales
-
-    problem = minute.problem
-    priced = np.where(problem.generator_line >= 0, fp.C, 0.0)
-    own = float(np.max(minute.demand * (2.0 * problem.c + priced)))
-    return STABLE_STEP / (float(fp.gain) * max(scales(problem)[0], own))
+@cache
+def _everyone(n: int) -> np.ndarray:
+    """The complete graph on ``n`` members (a DG's view as it knows it)."""
+    return np.ones((n, n)) - np.eye(n)

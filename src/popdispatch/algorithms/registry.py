@@ -21,7 +21,10 @@ class Entry:
 
 ALGORITHMS: dict[str, Entry] = {
     "smith": Entry(PopulationDynamics, SmithParams),
-    "distributed-smith": Entry(PopulationDynamics, partial(SmithParams, graph="ring")),
+    "distributed-smith": Entry(PopulationDynamics, partial(SmithParams, step=1.0, graph="ring")),
     "dual-decomposition": Entry(DualDecomposition, DualParams),
+    "fast-dual-decomposition": Entry(
+        DualDecomposition, partial(DualParams, balance_step=0.5, accelerated=True)
+    ),
     "admm": Entry(Admm, AdmmParams),
 }

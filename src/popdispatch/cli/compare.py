@@ -35,7 +35,8 @@ from popdispatch.cli.render import emit
 from popdispatch.progress import Progress
 
 #: The registry's names (checked against :data:`popdispatch.algorithms.ALGORITHMS` by a test).
-ALGORITHM_NAMES = ("smith", "distributed-smith", "dual-decomposition", "admm")
+ALGORITHM_NAMES = ("smith", "distributed-smith", "dual-decomposition",
+                   "fast-dual-decomposition", "admm")  # fmt: skip
 
 
 class AlgorithmsType(click.ParamType):
@@ -95,11 +96,11 @@ class CrashType(click.ParamType):
 @quiet_option
 def compare(algorithms, minute, limits, loss, delay_max, duplicate, crash, seeds, seed,
             max_rounds, profiles, source, out, as_json, quiet) -> int:  # fmt: skip
-    """Population dynamics (Smith, distributed Smith on a ring), dual decomposition and ADMM
-    on one minute, by messages through one simulated network with the same faults and
-    counter, each measured every round against the DC-OPF. A run is converged only when its
-    applied set points are within max(1e-3 kW, 1e-6 x demand) of the DC-OPF, balanced and
-    within the line limits for 10 rounds in a row."""
+    """Population dynamics (Smith, distributed Smith on a ring), dual decomposition (plain and
+    fast) and ADMM on one minute, by messages through one simulated network with the same
+    faults and counter, each measured every round against the DC-OPF. A run is converged only
+    when its applied set points are within max(1e-3 kW, 1e-6 x demand) of the DC-OPF,
+    balanced and within the line limits for 10 rounds in a row."""
     check_out(out)
     progress = Progress(quiet)
     problem, _ = build(source, Series(profiles), minute, limits, progress)
@@ -151,13 +152,15 @@ def _text(payload: dict, summary) -> str:
              "1e-6 x demand) of the DC-OPF for 10 rounds"]  # fmt: skip
     head = ("algorithm", "converged", "rounds", "messages", "bytes", "msg/agent/round",
             "partners", "distance kW", "|imbalance| kW")  # fmt: skip
-    lines.append("  ".join(f"{h:>18}" if i == 0 else f"{h:>15}" for i, h in enumerate(head)))
+    width = max(18, *(len(name) for name in summary.algorithm))
+    lines.append("  ".join(f"{h:>{width}}" if i == 0 else f"{h:>15}" for i, h in enumerate(head)))
     for row in summary.itertuples(index=False):
         cells = (row.algorithm, row.converged, _num(row.rounds), _num(row.messages),
                  _num(row.bytes_total), f"{row.messages_per_agent_round:.3g}",
                  str(row.partners_max), f"{row.final_distance_kw:.3g}",
                  f"{row.max_abs_imbalance_kw:.3g}")  # fmt: skip
-        lines.append("  ".join(f"{c:>18}" if i == 0 else f"{c:>15}" for i, c in enumerate(cells)))
+        lines.append("  ".join(f"{c:>{width}}" if i == 0 else f"{c:>15}"
+                               for i, c in enumerate(cells)))  # fmt: skip
     lines.append("reveals:")
     for name, roles in payload["reveals"].items():
         lines.append(f"  {name}: " + "; ".join(f"{r}: {', '.join(w)}" for r, w in roles.items()))

@@ -1,0 +1,71 @@
+"""The fastest rate of exact mode's dynamics on one minute and the explicit round step it
+allows (docs/agents.md, "The round step"): the step of the rounds of population dynamics run
+by messages (:mod:`popdispatch.algorithms.population`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.game.problem import DispatchProblem
+from popdispatch.integrate import STABLE_STEP
+from popdispatch.modes.exact import price_weights, scales
+from popdispatch.online.settings import RunSettings
+
+
+def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+    """An estimate of the fastest rate of exact mode's dynamics at ``minute``, 1/s.
+
+    Curvature-scaled field (dynamics/newton.py), the largest of
+
+    - ``kappa D g max_i r_i (2 c_i + C_i)``: a generator's own relaxation rate (``kappa`` the
+      revision gain per EUR/MW, ``D`` the minute's demand, MW, ``r_i`` its revision rate,
+      ``C_i`` the price weight of the nearest limited line above it,
+      :func:`popdispatch.modes.exact.price_weights`, 0 below none), at least ``kappa D g S /
+      P``, the rate at which every interior marginal cost relaxes; ``g`` the most receivers a
+      sender's weights can sum over: 1 on the complete graph, the largest degree plus one on
+      a sparse graph;
+    - ``2 STABLE_STEP alpha / C`` where a line is limited: a line's price and the set points
+      below it, in their proportional and integral regime, move as ``s^2 + a s + b = 0``
+      with ``b / a = alpha / C``; Euler's factor ``1 + h s`` of a complex pair has ``|1 + h
+      s|^2 = 1 - h a + h^2 b``, below 1 for ``h < C / alpha`` and smallest at ``h = C / (2
+      alpha)``, the step this gives.
+
+    Capacity-constrained Smith (``ExactConstants(revision="capacity")``): ``kappa max(S, D
+    max_i (2 c_i + C_i))``. Dimensionless constants, so the same on a feeder scaled by 100."""
+    fp = settings.game_constants(problem)
+    row = np.array([minute - 1])
+    weight = np.broadcast_to(price_weights(problem, settings.exact.price_law, fp.C, row),
+                             (1, len(problem.limit)))[0]  # fmt: skip
+    below = np.zeros(problem.n_generators)
+    limited = problem.generator_line >= 0
+    below[limited] = weight[problem.generator_line[limited]]
+    demand = float(problem.demand[minute - 1])
+    spread, reference = scales(problem)
+    rates = settings.revision_rates(problem)
+    if not len(rates):
+        own = float(np.max(demand * (2.0 * problem.c + below)))
+        return float(fp.gain) * max(spread, own)
+    fan = _fan(problem, settings)
+    own = float(np.max(rates * (2.0 * problem.c + below)))
+    field = float(fp.gain) * demand * fan * max(own, spread / reference)
+    price = 2.0 * STABLE_STEP * float(fp.price_rate) / float(fp.C) if len(problem.limit) else 0.0
+    return max(field, price)
+
+
+def round_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+    """The largest explicit round step of exact mode at ``minute``, s: ``STABLE_STEP /``
+    :func:`stiffness_rate` (:data:`popdispatch.integrate.STABLE_STEP`, the largest ``h *
+    rate`` the engine's Heun steps take)."""
+    return STABLE_STEP / stiffness_rate(problem, settings, minute)
+
+
+def _fan(problem: DispatchProblem, settings: RunSettings) -> int:
+    """The most receivers a sender's weights sum over: 1 on the complete graph, else the
+    communication graph's largest degree plus one."""
+    kind = settings.graph if get_dynamics(settings.dynamics).uses_graph else "complete"
+    adjacency = communication_graph(kind, [str(g) for g in problem.generators])
+    n = len(adjacency)
+    if (adjacency + np.eye(n) > 0).all():
+        return 1
+    return int(adjacency.sum(axis=1).max()) + 1
