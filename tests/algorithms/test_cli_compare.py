@@ -64,3 +64,17 @@ def test_the_table_stays_aligned_with_the_longest_algorithm_name():
     assert rows[0].split()[0] == "fast-dual-decomposition"
     assert len({len(header), *(len(row) for row in rows)}) == 1
     assert header.index("converged") + len("converged") == rows[0].index("0/1") + len("0/1")
+
+
+def test_dual_decomposition_refuses_a_linear_cost_in_one_line(tmp_path):
+    """A DG with c = 0 has no unique best response: dual decomposition cannot run on the fleet
+    and says which DG, before any work (the others still run without it)."""
+    fleet = tmp_path / "fleet.csv"
+    fleet.write_text("bus,name,a,b,c,pmin_kw,pmax_kw\n1,G1,0,60,0.5,0,100\n"
+                     "114,G114,0,20,0,0,30\n578,G578,0,25,2,0,30\n")  # fmt: skip
+    result = run("compare", "--minute", "566", "--fleet", str(fleet), "--algorithms",
+                 "smith,dual-decomposition")  # fmt: skip
+    assert_one_line_error(result, 2, "--algorithms", "'G114'", "linear cost")
+    alone = run("compare", "--minute", "566", "--fleet", str(fleet), "--algorithms", "smith",
+                "--json", "-q")  # fmt: skip
+    assert alone.returncode == 0, alone.stderr

@@ -90,6 +90,17 @@ class Admm(Algorithm):
                      "devices")  # fmt: skip
     rounds_per_iteration = 2
 
+    @classmethod
+    def check(cls, problem) -> None:
+        """The nets follow the radial tree of limited lines (:class:`Zones`): a meshed network
+        with limited lines is refused."""
+        if problem.meshed and len(problem.limit):
+            from popdispatch.errors import OptionError
+
+            raise OptionError(f"admm's nets follow a radial feeder's limited lines; "
+                              f"{problem.feeder.name} is meshed (the other algorithms run on "
+                              "it)", "--algorithms")  # fmt: skip
+
     def __init__(self, minute: Minute, network: Network, params: AdmmParams):
         super().__init__(minute, network, params)
         problem = minute.problem

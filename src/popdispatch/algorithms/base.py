@@ -81,6 +81,11 @@ class Algorithm:
     def __init__(self, minute: Minute, network: Network, params):
         self.m, self.net, self.params = minute, network, params
 
+    @classmethod
+    def check(cls, problem: DispatchProblem) -> None:
+        """:class:`~popdispatch.errors.OptionError` (``--algorithms``) where the algorithm
+        cannot run ``problem``, before any work; every problem by default."""
+
     def local_update(self, inbox: dict[str, list[Message]], round_: int) -> None:
         raise NotImplementedError
 

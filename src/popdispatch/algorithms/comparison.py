@@ -11,8 +11,20 @@ import numpy as np
 import pandas as pd
 
 from popdispatch.algorithms.network import Faults
+from popdispatch.algorithms.registry import ALGORITHMS
 from popdispatch.algorithms.runner import AlgorithmRun, RunOptions, run_algorithm
+from popdispatch.errors import OptionError
 from popdispatch.game.problem import DispatchProblem
+
+
+def check_algorithms(problem: DispatchProblem, names: Sequence[str]) -> None:
+    """:class:`~popdispatch.errors.OptionError` (``--algorithms``) naming the first algorithm
+    of ``names`` that cannot run ``problem`` (ADMM on a meshed network), before any work."""
+    for name in names:
+        try:
+            ALGORITHMS[name].cls.check(problem)
+        except OptionError as exc:
+            raise OptionError(f"{exc} (leave {name} out of --algorithms)", exc.option) from None
 
 
 def compare_algorithms(problem: DispatchProblem, minute: int, names: Sequence[str],
@@ -22,6 +34,7 @@ def compare_algorithms(problem: DispatchProblem, minute: int, names: Sequence[st
     algorithm name, else its defaults). Without random faults (no loss, delay or duplicate)
     every seed gives the same run: it is run once and stands for each seed."""
     params = params or {}
+    check_algorithms(problem, names)
     draws = seeds if not faults.perfect else 1
     runs = {name: [run_algorithm(name, problem, minute, replace(faults, seed=faults.seed + s),
                                  params.get(name), options) for s in range(draws)]

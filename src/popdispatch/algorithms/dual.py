@@ -20,8 +20,13 @@ with a range), from the cost curves each DG sends the coordinator and the contro
 it once (configuration, round 0); the balance price starts at the DGs' mean marginal cost at
 the uniform start (the start of the population dynamics), the line prices at 0. The applied
 set points are the current best responses: they balance supply and demand only at the
-optimum. Loss handling: a DG keeps the last prices it received (stale); prices are measured,
-not messaged, into the price holders.
+optimum. On a meshed network (docs/meshed.md) each line price is weighed by the DG's
+distribution factor ``D_ki``: ``pi_i = lambda + sum_k D_ki nu_k``, ``beta_k = line_step /
+sum_i D_ki^2 / (2 c_i)``, controller ``k`` sends ``nu_k`` to every DG with ``D_ki != 0`` (on a
+radial feeder ``D_ki`` is 1 below the line and 0 above it: the rules above). A DG with a
+linear cost has no unique best response: such fleets are refused (:meth:`check`). Loss
+handling: a DG keeps the last prices it received (stale); prices are measured, not
+messaged, into the price holders.
 
 Accelerated (``DualParams.accelerated``, the registry's ``fast-dual-decomposition``):
 Nesterov's fast gradient on the dual (Giselsson, Doan, Keviczky and Rantzer, "Accelerated
@@ -65,15 +70,31 @@ class DualParams:
 class DualDecomposition(Algorithm):
     loss_handling = "stale prices at the DGs; imbalance and flows measured by the price holders"
 
+    @classmethod
+    def check(cls, problem) -> None:
+        """A DG with a range and a linear cost (``c = 0``) has no unique best response to a
+        price (all or nothing): dual decomposition needs strictly convex costs, so such a
+        fleet is refused, naming the DG."""
+        linear = np.flatnonzero((problem.c <= 0.0) & (problem.pmax > problem.pmin))
+        if len(linear):
+            from popdispatch.errors import OptionError
+
+            name = problem.generators[linear[0]]
+            raise OptionError(f"dual decomposition needs strictly convex costs: generator "
+                              f"{name!r} has a linear cost (c = 0), whose best response to a "
+                              "price is not unique", "--algorithms")  # fmt: skip
+
     def __init__(self, minute: Minute, network: Network, params: DualParams):
         super().__init__(minute, network, params)
         problem, n = minute.problem, len(minute.names)
-        self.below = problem.down > 0.5
+        # each DG's weight on each line price: 1 below the line, 0 above it on a radial
+        # feeder; its distribution factor D_ki on a meshed network
+        self.factor = problem.down
         tradable = minute.hi > minute.lo
         response = np.where(tradable, 1.0 / (2.0 * problem.c), 0.0)  # MW per EUR/MW
         self.alpha = params.balance_step / response.sum()
-        below_response = self.below.astype(float) @ response
-        self.beta = params.line_step / np.where(below_response > 0, below_response, np.inf)
+        line_response = (self.factor**2) @ response  # the dual's curvature along each price
+        self.beta = params.line_step / np.where(line_response > 0, line_response, np.inf)
         self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
         start = balanced_start(minute)  # the balance price starts at the DGs' mean
         self.lam = float(np.mean((problem.b + 2.0 * problem.c * start)[tradable]))  # marginal cost
@@ -90,7 +111,7 @@ class DualDecomposition(Algorithm):
         self.p = self._best_response(np.arange(n))
         self.send_cost_curves(
             lambda i: (
-                [COORDINATOR] + [self.controllers[k] for k in np.flatnonzero(self.below[:, i])]
+                [COORDINATOR] + [self.controllers[k] for k in np.flatnonzero(self.factor[:, i])]
             )
         )
 
@@ -102,7 +123,7 @@ class DualDecomposition(Algorithm):
 
     def _best_response(self, who) -> np.ndarray:
         problem = self.m.problem
-        price = self.lam_seen[who] + (self.nu_seen[who] * self.below[:, who].T).sum(axis=1)
+        price = self.lam_seen[who] + (self.nu_seen[who] * self.factor[:, who].T).sum(axis=1)
         p = (price - problem.b[who]) / (2.0 * problem.c[who])
         return np.clip(p, self.m.lo[who], self.m.hi[who])
 
@@ -191,5 +212,5 @@ class DualDecomposition(Algorithm):
                           reveals="balance price")  # fmt: skip
         for k, name in enumerate(self.controllers):
             nu = self.mu[k, 0] - self.mu[k, 1]
-            for i in np.flatnonzero(self.below[k]):
+            for i in np.flatnonzero(self.factor[k]):
                 self.net.send(name, self.m.names[i], "line price", [nu], reveals="line price")

@@ -102,9 +102,9 @@ class PopulationDynamics(Algorithm):
         self.neighbours = [np.flatnonzero(self.graph[i]) for i in range(n)]
         self.complete = bool((self.graph + np.eye(n) > 0).all())
         self.p = balanced_start(minute)
-        self.below = problem.down > 0.5  # (lines, generators)
-        # each DG's share of each line price
-        self.split = np.ascontiguousarray(np.where(self.below.T, 0.5, -0.5))
+        # each DG's share of each line price: D_ki - 1/2 (+1/2 below the line and -1/2 above
+        # it on a radial feeder; its distribution factor on a meshed network)
+        self.split = np.ascontiguousarray(problem.down.T - 0.5)
         self._boxes: dict[tuple, tuple] = {}  # a view's (lo, hi, active, rate)
         self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
         self.z = np.zeros((len(problem.limit), 2))

@@ -109,9 +109,15 @@ def compare(algorithms, minute, limits, loss, delay_max, duplicate, crash, seeds
                                  f"{', '.join(map(str, problem.generators))})",
                                  param_hint="'--crash'")  # fmt: skip
     from popdispatch.algorithms import Faults, RunOptions
-    from popdispatch.algorithms.comparison import compare_algorithms, runs_table, summary_table
+    from popdispatch.algorithms.comparison import (
+        check_algorithms,
+        compare_algorithms,
+        runs_table,
+        summary_table,
+    )
     from popdispatch.opf import solve_opf
 
+    check_algorithms(problem, algorithms)
     if solve_opf(problem, minute).status != "optimal":
         raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given limits")
     faults = Faults(loss, delay_max, duplicate, seed, crash)

@@ -20,6 +20,11 @@ from popdispatch.errors import FleetError
 from popdispatch.feeder.dcnet import DcNetwork
 from popdispatch.game.problem import DispatchProblem, check_capacity, fleet_columns
 
+#: Distribution factors below this (MW per MW) are round-off of the sparse solves (a generator
+#: on a line's far side from the slack reads 1e-17, not 0): they are set to 0, so that a DG
+#: with no influence on a line hears no price from it.
+FACTOR_FLOOR = 1e-12
+
 
 def build_mesh_problem(
     net: DcNetwork, bus_demand_mw: np.ndarray | None = None, source: str = "", check: bool = True
@@ -40,6 +45,7 @@ def build_mesh_problem(
     model = net.model
     gen_bus = net.buses.index.get_indexer(gens.bus)
     factor = -model.ptdf(limited, gen_bus) if len(limited) else np.zeros((0, len(gens)))
+    factor[np.abs(factor) < FACTOR_FLOOR] = 0.0  # round-off of the LU, not a sensitivity
     load_flow = model.flows_mw(-demand.T, limited).T if len(limited) else np.zeros((len(demand), 0))
     n_lines = len(limited)
     problem = DispatchProblem(
