@@ -307,6 +307,68 @@ def test_exact_mode_on_random_meshes_lands_on_the_exact_dc_opf(seed, n_buses, ch
     assert run.distance_bound_kw >= distance_kw - 1e-9
 
 
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(3, 7), st.integers(1, 4), st.integers(2, 5),
+       st.integers(0, 3))  # fmt: skip
+def test_the_angle_formulation_lands_on_the_exact_dc_opf(seed, n_buses, chords, gens, limits):
+    """Clarabel's DC-OPF in bus angles (the default on a mesh) against the optimum found by
+    enumerating active sets (tests/qp_exact.py), at three minutes whose bus loads are scaled
+    apart (the angle rows spread the demand in the network's own shares; the optimum must not
+    depend on it), on random meshes with taps, phase shifters, shunts and parallel branches;
+    and against the dense-factor formulation, prices included."""
+    from qp_exact import exact_dc_opf
+
+    from popdispatch.opf import OpfSolver
+
+    net = random_mesh(seed, n_buses, chords, gens, limits)
+    rng = np.random.default_rng(seed)
+    scale = rng.uniform(0.6, 1.2, (3, len(net.buses)))
+    problem = build_mesh_problem(net, net.buses.pd_mw.to_numpy() * scale, check=False)
+    angles, factors = OpfSolver(problem), OpfSolver(problem, "factors")
+    assert angles.formulation == "angles"
+    for minute in (1, 2, 3):
+        optimum = exact_dc_opf(problem, minute)
+        opf = angles.solve(minute)
+        if optimum is None:
+            continue
+        tol = max(1e-3, 1e-6 * float(problem.demand[minute - 1]) * 1e3)
+        assert opf.status == "optimal"
+        assert np.abs(opf.p_kw - optimum * 1e3).max() <= tol
+        other = factors.solve(minute)
+        assert opf.cost == pytest.approx(other.cost, rel=1e-9)
+        # prices (duals) within 1e-5 of the price scale: two interior-point runs stopped at
+        # Clarabel's 1e-10 gap agree in the set points to watts, in the duals less closely
+        scale = max(1.0, abs(other.marginal_price), np.abs(other.line_price).max(initial=0.0))
+        assert abs(opf.marginal_price - other.marginal_price) <= 1e-5 * scale
+        assert np.abs(opf.line_price - other.line_price).max(initial=0.0) <= 1e-5 * scale
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_the_angle_formulation_equals_the_factors_one_on_matpower_cases(case):
+    """The two formulations of Clarabel's DC-OPF on the congested MATPOWER cases (rundcopp
+    checks the default one, above), with one more line rated far beyond any flow it can
+    carry: its row is left out of the angle formulation and its price is 0 in both."""
+    from popdispatch.opf import OpfSolver
+    from popdispatch.readers.matpower import read_matpower_network
+
+    net = congested(read_matpower_network(os.path.join(DATA, f"{case}.m")),
+                    [f"L{a}-{b}" for a, b in CASES[case]], 0.8)  # fmt: skip
+    free = np.flatnonzero(~np.isfinite(net.lines.limit_kw.to_numpy()))
+    limits = net.lines.limit_kw.to_numpy().copy()
+    limits[free[0] if len(free) else 0] = 99_999e3  # kW, as PGLib rates its unlimited lines
+    problem = build_mesh_problem(replace(net, lines=net.lines.assign(limit_kw=limits)))
+    angles, factors = OpfSolver(problem).solve(1), OpfSolver(problem, "factors").solve(1)
+    tol = tolerance_kw(problem)
+    assert np.abs(angles.p_kw - factors.p_kw).max() <= tol
+    assert angles.cost == pytest.approx(factors.cost, rel=1e-9)
+    scale = max(1.0, abs(factors.marginal_price), np.abs(factors.line_price).max())
+    assert abs(angles.marginal_price - factors.marginal_price) <= 1e-5 * scale
+    assert np.abs(angles.line_price - factors.line_price).max() <= 1e-5 * scale
+    assert (np.abs(angles.line_price) > 1e-3).any()
+    huge = np.flatnonzero(problem.limit * 1e3 >= 99_999e3)
+    assert len(huge) == 1 and angles.line_price[huge[0]] == 0.0
+
+
 def test_a_day_on_a_mesh_lands_on_each_minutes_dc_opf():
     """Thirty minutes of case30 (its two lines congested) with the loads scaled by 0.8 to 1.1:
     every minute continues from the last, is certified and within its accuracy of Clarabel's
