@@ -316,9 +316,9 @@ def test_the_angle_formulation_lands_on_the_exact_dc_opf(seed, n_buses, chords, 
     apart (the angle rows spread the demand in the network's own shares; the optimum must not
     depend on it), on random meshes with taps, phase shifters, shunts and parallel branches;
     and against the dense-factor formulation, prices included."""
-    from qp_exact import exact_dc_opf
-
     from popdispatch.opf import OpfSolver
+
+    from qp_exact import exact_dc_opf
 
     net = random_mesh(seed, n_buses, chords, gens, limits)
     rng = np.random.default_rng(seed)

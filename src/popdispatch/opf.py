@@ -110,8 +110,9 @@ def angle_rows(problem: DispatchProblem) -> AngleRows:
     injected = np.flatnonzero(at >= 0)  # a generator at the slack injects into no bus row
     Cg = sparse.csr_matrix((np.ones(len(injected)), (at[injected], injected)),
                            shape=(len(keep), n))  # fmt: skip
-    reach = np.abs(problem.line_load_flow).max(axis=0, initial=0.0) + np.abs(problem.factor) @ (
-        np.maximum(np.abs(problem.pmin), np.abs(problem.pmax)))
+    largest = np.maximum(np.abs(problem.pmin), np.abs(problem.pmax))  # MW
+    loads = np.abs(problem.line_load_flow).max(axis=0, initial=0.0)
+    reach = loads + np.abs(problem.factor) @ largest
     kept = np.flatnonzero(reach >= problem.limit * (1.0 - 1e-9))
     lines_kept = problem.lines[kept]
     load = (net.buses.pd_mw + net.buses.gs_mw).to_numpy(float)
