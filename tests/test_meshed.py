@@ -369,6 +369,69 @@ def test_the_angle_formulation_equals_the_factors_one_on_matpower_cases(case):
     assert len(huge) == 1 and angles.line_price[huge[0]] == 0.0
 
 
+def linear_mesh(seed: int, n_buses: int, chords: int, gens: int, limits: int):
+    """:func:`random_mesh` with every cost linear (a linear program, as PGLib's IEEE cases):
+    its optimum, from the active-set enumeration, or None (infeasible, or not unique)."""
+    from qp_exact import exact_dc_opf
+
+    net = random_mesh(seed, n_buses, chords, gens, limits)
+    net = replace(net, generators=net.generators.assign(c=0.0))
+    problem = build_mesh_problem(net, check=False)
+    return problem, exact_dc_opf(problem)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(3, 7), st.integers(1, 4), st.integers(2, 6),
+       st.integers(1, 3), st.floats(1e-9, 0.3))  # fmt: skip
+def test_on_a_linear_program_the_bound_is_never_below_the_true_distance(
+    seed, n_buses, chords, gens, limits, scale
+):
+    """Linear costs on random meshes (several marginal generators sharing the balance and the
+    priced lines): from an end state the optimum moved by random balanced transfers, with the
+    optimum's own line prices or random ones, the certificate's bound is at least the true
+    distance."""
+    from popdispatch.online.certificate import Batch, certify_minutes
+
+    problem, optimum = linear_mesh(seed, n_buses, chords, gens, limits)
+    assume(optimum is not None)
+    rng = np.random.default_rng(seed)
+    batch = Batch.of(problem, np.array([1]))
+    lo, hi = batch.lo[0], batch.hi[0]
+    p = optimum.copy()
+    for _ in range(3):
+        i, j = rng.choice(len(p), 2, replace=False)
+        move = min(scale * float(rng.random()) * hi.max(), p[j] - lo[j], hi[i] - p[i])
+        p[i], p[j] = p[i] + move, p[j] - move
+    opf = solve_opf(problem, 1)
+    own = np.r_[np.maximum(opf.line_price, 0.0), np.maximum(-opf.line_price, 0.0)]
+    for mu in (own, rng.exponential(10.0, len(own)) * (rng.random(len(own)) < 0.5)):
+        certificate = certify_minutes(problem, np.array([1]), p[None], mu[None],
+                                      np.array([1e-6 * problem.demand[0]]))[0]  # fmt: skip
+        distance = np.abs(p - optimum)
+        assert (certificate.bound_mw >= distance - 1e-9 * max(1.0, hi.max())).all()
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(3, 7), st.integers(1, 4), st.integers(2, 6),
+       st.integers(1, 3))  # fmt: skip
+def test_a_linear_programs_optimum_proves_itself(seed, n_buses, chords, gens, limits):
+    """At a linear program's unique optimum with its line prices, the certificate proves every
+    generator to round-off, however many generators are at the margin (interval propagation
+    alone leaves them wide when a priced line carries several of them: the rows are solved
+    for them)."""
+    from popdispatch.online.certificate import certify_minutes
+
+    problem, optimum = linear_mesh(seed, n_buses, chords, gens, limits)
+    assume(optimum is not None)
+    opf = solve_opf(problem, 1)
+    mu = np.r_[np.maximum(opf.line_price, 0.0), np.maximum(-opf.line_price, 0.0)]
+    demand = float(problem.demand[0])
+    certificate = certify_minutes(problem, np.array([1]), optimum[None], mu[None],
+                                  np.array([1e-9 * demand]))[0]  # fmt: skip
+    assert certificate.reason is None
+    assert certificate.distance_mw <= 1e-7 * demand
+
+
 def test_a_day_on_a_mesh_lands_on_each_minutes_dc_opf():
     """Thirty minutes of case30 (its two lines congested) with the loads scaled by 0.8 to 1.1:
     every minute continues from the last, is certified and within its accuracy of Clarabel's
