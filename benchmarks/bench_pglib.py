@@ -100,7 +100,9 @@ def row(name: str, path: Path, repeats: int, factors: bool) -> str:
         f"| {(cost - opf.cost) / opf.cost:.1e} | {ada_text} |"
     )
     notes = [f"{name}: {run.iterations} iterations, rest at {run.rest_at}"
-             + (f"; {run.stall_reason}" if run.stall_reason else "")]  # fmt: skip
+             + (f"; {run.stall_reason}" if run.stall_reason else "")
+             + f"; Clarabel's formulation: {OpfSolver(problem).formulation}, cost {opf.cost:.2f}"
+             f" EUR/h"]  # fmt: skip
     if factors:
         dense, seconds = timed(lambda: OpfSolver(problem, "factors").solve(1), 1)
         notes.append(
