@@ -240,6 +240,89 @@ def test_a_piecewise_linear_cost_is_refused_in_one_line(tmp_path):
     assert "\n" not in message and "generator 1 (bus 1)" in message and "piecewise" in message
 
 
+PGLIB_STYLE = """%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%
+%%%%          A four-bus ring written as PGLib-OPF writes its cases        %%%%%
+%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%
+function mpc = pglib_opf_case4_ring
+mpc.version = '2';
+mpc.baseMVA = 100.0;
+
+%% bus data
+%\tbus_i\ttype\tPd\tQd\tGs\tBs\tarea\tVm\tVa\tbaseKV\tzone\tVmax\tVmin
+mpc.bus = [
+\t1\t 3\t 0.0\t 0.0\t 0.0\t 0.0\t 1\t    1.00000\t    0.00000\t 1.0\t 1\t    1.06000\t    0.94000;
+\t2\t 2\t 60.0\t 10.0\t 0.0\t 0.0\t 1\t    1.00000\t    0.00000\t 1.0\t 1\t    1.06000\t    0.94000;
+\t3\t 1\t 90.0\t 20.0\t 2.5\t 0.0\t 1\t    1.00000\t    0.00000\t 1.0\t 1\t    1.06000\t    0.94000;
+\t4\t 2\t 50.0\t 5.0\t 0.0\t 19.0\t 1\t    1.00000\t    0.00000\t 1.0\t 1\t    1.06000\t    0.94000;
+];
+
+%% generator data
+%\tbus\tPg\tQg\tQmax\tQmin\tVg\tmBase\tstatus\tPmax\tPmin
+mpc.gen = [
+\t1\t 100.0\t 0.0\t 50.0\t -50.0\t 1.0\t 100.0\t 1\t 150\t 0.0; % NG
+\t2\t 50.0\t 0.0\t 30.0\t -30.0\t 1.0\t 100.0\t 1\t 120\t 10.0; % NG
+\t4\t 0.0\t 5.0\t 20.0\t -20.0\t 1.0\t 100.0\t 1\t 0\t 0.0; % SYNC
+\t4\t 40.0\t 0.0\t 30.0\t -30.0\t 1.0\t 100.0\t 1\t 80\t 0.0; % NG
+];
+
+%% generator cost data
+%\t2\tstartup\tshutdown\tn\tc(n-1)\t...\tc0
+mpc.gencost = [
+\t2\t 0.0\t 0.0\t 3\t   0.000000\t  10.000000\t   0.000000; % NG
+\t2\t 0.0\t 0.0\t 3\t   0.000000\t  25.000000\t   0.000000; % NG
+\t2\t 0.0\t 0.0\t 3\t   0.000000\t   0.000000\t   0.000000; % SYNC
+\t2\t 0.0\t 0.0\t 3\t   0.020000\t  18.000000\t 100.000000; % NG
+];
+
+%% branch data
+%\tfbus\ttbus\tr\tx\tb\trateA\trateB\trateC\tratio\tangle\tstatus\tangmin\tangmax
+mpc.branch = [
+\t1\t 2\t 0.01\t 0.10\t 0.02\t 99999.0\t 99999.0\t 99999.0\t 0.0\t 0.0\t 1\t -30.0\t 30.0;
+\t2\t 3\t 0.01\t 0.20\t 0.02\t 45.0\t 45.0\t 45.0\t 0.0\t 0.0\t 1\t -30.0\t 30.0;
+\t3\t 4\t 0.01\t 0.10\t 0.02\t 80.0\t 80.0\t 80.0\t 0.98\t 0.0\t 1\t -30.0\t 30.0;
+\t4\t 1\t 0.01\t 0.25\t 0.02\t 50.0\t 50.0\t 50.0\t 0.0\t 0.0\t 1\t -30.0\t 30.0;
+];
+
+% INFO    : === Translation Options ===
+"""
+
+
+def test_a_pglib_style_case_reads_and_solves(tmp_path):
+    """A case written as PGLib-OPF writes them (its header, rows ending in ``% NG`` comments,
+    three cost coefficients with zero quadratic terms, a synchronous condenser with Pmax 0, a
+    rating on every branch, one of 99,999 MVA, angle-difference columns): the tables hold the
+    file's numbers, and the DC-OPF (Clarabel, in bus angles) and exact mode land on the
+    optimum found by enumerating active sets (tests/qp_exact.py)."""
+    from popdispatch.readers.matpower import read_matpower_network
+
+    from qp_exact import exact_dc_opf
+
+    path = tmp_path / "pglib_opf_case4_ring.m"
+    path.write_text(PGLIB_STYLE)
+    net = read_matpower_network(path)
+    assert net.slack_bus == 1 and net.base_mva == 100.0
+    np.testing.assert_array_equal(net.buses.pd_mw, [0.0, 60.0, 90.0, 50.0])
+    np.testing.assert_array_equal(net.buses.gs_mw, [0.0, 0.0, 2.5, 0.0])
+    np.testing.assert_array_equal(net.lines.limit_kw, [99_999e3, 45e3, 80e3, 50e3])
+    np.testing.assert_array_equal(net.lines.tap, [0.0, 0.0, 0.98, 0.0])
+    gens = net.generators
+    assert list(gens.index) == ["G1", "G2", "G4", "G4_2"]
+    np.testing.assert_array_equal(gens.b, [10.0, 25.0, 0.0, 18.0])
+    np.testing.assert_array_equal(gens.c, [0.0, 0.0, 0.0, 0.02])
+    np.testing.assert_array_equal(gens.a, [0.0, 0.0, 0.0, 100.0])
+    np.testing.assert_array_equal(gens.pmax_kw, [150e3, 120e3, 0.0, 80e3])
+    np.testing.assert_array_equal(gens.pmin_kw, [0.0, 10e3, 0.0, 0.0])
+    problem = build_mesh_problem(net)
+    optimum = exact_dc_opf(problem)
+    assert optimum is not None
+    opf = solve_opf(problem, 1)
+    tol = tolerance_kw(problem)
+    assert (np.abs(opf.line_price) > 1e-3).any()  # a rating binds
+    assert np.abs(opf.p_kw - optimum * 1e3).max() <= tol
+    run = run_exact(problem)
+    assert np.abs(run.setpoints_kw - optimum * 1e3).max() <= tol
+
+
 def test_paper_mode_runs_on_a_mesh():
     """Paper mode on the congested case30: it runs to rest with its own rule's residual
     overflow (eq. 8 is proportional to the present overflow), weighted by the factors."""
