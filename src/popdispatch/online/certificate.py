@@ -49,6 +49,8 @@ PROPAGATION_PASSES = 8
 KKT_ROUND_OFF = 1e-9
 #: Relative round-off of the powers (of the demand) within which a row counts as on its bound.
 FEASIBLE_ROUND_OFF = 1e-12
+#: A row's coefficient at most this fraction of its largest narrows nothing (round-off).
+FAINT_COEFFICIENT = 1e-9
 #: A generator is solved for (:func:`_narrow_by_solve`) when its interval after propagation is
 #: wider than this fraction of the widest.
 SOLVE_WIDTH = 1e-3
@@ -297,9 +299,13 @@ def _narrow_row(coef, idx, left, right, low, high) -> None:
     slack = 4.0 * np.finfo(float).eps * (np.abs(least).sum() + np.abs(most).sum())
     floor = left - (most.sum() - most) - slack  # coef y >= floor
     ceiling = right - (least.sum() - least) + slack  # coef y <= ceiling
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):
         new_low = np.where(coef > 0, floor / coef, ceiling / coef)
         new_high = np.where(coef > 0, ceiling / coef, floor / coef)
+    # a coefficient at round-off of the row's largest (a distribution factor's 1e-17) would
+    # turn the row's round-off into a bound of any size: such a member is not narrowed
+    faint = np.abs(coef) <= FAINT_COEFFICIENT * np.abs(coef).max()
+    new_low, new_high = np.where(faint, -np.inf, new_low), np.where(faint, np.inf, new_high)
     low[idx] = np.maximum(low[idx], np.nan_to_num(new_low, nan=-np.inf))
     high[idx] = np.minimum(high[idx], np.nan_to_num(new_high, nan=np.inf))
 
