@@ -208,6 +208,89 @@ def test_a_piecewise_linear_cost_is_refused_in_one_line(tmp_path):
     assert "\n" not in message and "generator 1 (bus 1)" in message and "piecewise" in message
 
 
+PGLIB_STYLE = """%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%
+%%%%          A four-bus ring written as PGLib-OPF writes its cases        %%%%%
+%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%%
+function mpc = pglib_opf_case4_ring
+mpc.version = '2';
+mpc.baseMVA = 100.0;
+
+%% bus data
+%\tbus_i\ttype\tPd\tQd\tGs\tBs\tarea\tVm\tVa\tbaseKV\tzone\tVmax\tVmin
+mpc.bus = [
+\t1\t 3\t 0.0\t 0.0\t 0.0\t 0.0\t 1\t    1.00000\t    0.00000\t 1.0\t 1\t    1.06000\t    0.94000;
+\t2\t 2\t 60.0\t 10.0\t 0.0\t 0.0\t 1\t    1.00000\t    0.00000\t 1.0\t 1\t    1.06000\t    0.94000;
+\t3\t 1\t 90.0\t 20.0\t 2.5\t 0.0\t 1\t    1.00000\t    0.00000\t 1.0\t 1\t    1.06000\t    0.94000;
+\t4\t 2\t 50.0\t 5.0\t 0.0\t 19.0\t 1\t    1.00000\t    0.00000\t 1.0\t 1\t    1.06000\t    0.94000;
+];
+
+%% generator data
+%\tbus\tPg\tQg\tQmax\tQmin\tVg\tmBase\tstatus\tPmax\tPmin
+mpc.gen = [
+\t1\t 100.0\t 0.0\t 50.0\t -50.0\t 1.0\t 100.0\t 1\t 150\t 0.0; % NG
+\t2\t 50.0\t 0.0\t 30.0\t -30.0\t 1.0\t 100.0\t 1\t 120\t 10.0; % NG
+\t4\t 0.0\t 5.0\t 20.0\t -20.0\t 1.0\t 100.0\t 1\t 0\t 0.0; % SYNC
+\t4\t 40.0\t 0.0\t 30.0\t -30.0\t 1.0\t 100.0\t 1\t 80\t 0.0; % NG
+];
+
+%% generator cost data
+%\t2\tstartup\tshutdown\tn\tc(n-1)\t...\tc0
+mpc.gencost = [
+\t2\t 0.0\t 0.0\t 3\t   0.000000\t  10.000000\t   0.000000; % NG
+\t2\t 0.0\t 0.0\t 3\t   0.000000\t  25.000000\t   0.000000; % NG
+\t2\t 0.0\t 0.0\t 3\t   0.000000\t   0.000000\t   0.000000; % SYNC
+\t2\t 0.0\t 0.0\t 3\t   0.020000\t  18.000000\t 100.000000; % NG
+];
+
+%% branch data
+%\tfbus\ttbus\tr\tx\tb\trateA\trateB\trateC\tratio\tangle\tstatus\tangmin\tangmax
+mpc.branch = [
+\t1\t 2\t 0.01\t 0.10\t 0.02\t 99999.0\t 99999.0\t 99999.0\t 0.0\t 0.0\t 1\t -30.0\t 30.0;
+\t2\t 3\t 0.01\t 0.20\t 0.02\t 45.0\t 45.0\t 45.0\t 0.0\t 0.0\t 1\t -30.0\t 30.0;
+\t3\t 4\t 0.01\t 0.10\t 0.02\t 80.0\t 80.0\t 80.0\t 0.98\t 0.0\t 1\t -30.0\t 30.0;
+\t4\t 1\t 0.01\t 0.25\t 0.02\t 50.0\t 50.0\t 50.0\t 0.0\t 0.0\t 1\t -30.0\t 30.0;
+];
+
+% INFO    : === Translation Options ===
+"""
+
+
+def test_a_pglib_style_case_reads_and_solves(tmp_path):
+    """A case written as PGLib-OPF writes them (its header, rows ending in ``% NG`` comments,
+    three cost coefficients with zero quadratic terms, a synchronous condenser with Pmax 0, a
+    rating on every branch, one of 99,999 MVA, angle-difference columns): the tables hold the
+    file's numbers, and the DC-OPF (Clarabel, in bus angles) and exact mode land on the
+    optimum found by enumerating active sets (tests/qp_exact.py)."""
+    from popdispatch.readers.matpower import read_matpower_network
+
+    from qp_exact import exact_dc_opf
+
+    path = tmp_path / "pglib_opf_case4_ring.m"
+    path.write_text(PGLIB_STYLE)
+    net = read_matpower_network(path)
+    assert net.slack_bus == 1 and net.base_mva == 100.0
+    np.testing.assert_array_equal(net.buses.pd_mw, [0.0, 60.0, 90.0, 50.0])
+    np.testing.assert_array_equal(net.buses.gs_mw, [0.0, 0.0, 2.5, 0.0])
+    np.testing.assert_array_equal(net.lines.limit_kw, [99_999e3, 45e3, 80e3, 50e3])
+    np.testing.assert_array_equal(net.lines.tap, [0.0, 0.0, 0.98, 0.0])
+    gens = net.generators
+    assert list(gens.index) == ["G1", "G2", "G4", "G4_2"]
+    np.testing.assert_array_equal(gens.b, [10.0, 25.0, 0.0, 18.0])
+    np.testing.assert_array_equal(gens.c, [0.0, 0.0, 0.0, 0.02])
+    np.testing.assert_array_equal(gens.a, [0.0, 0.0, 0.0, 100.0])
+    np.testing.assert_array_equal(gens.pmax_kw, [150e3, 120e3, 0.0, 80e3])
+    np.testing.assert_array_equal(gens.pmin_kw, [0.0, 10e3, 0.0, 0.0])
+    problem = build_mesh_problem(net)
+    optimum = exact_dc_opf(problem)
+    assert optimum is not None
+    opf = solve_opf(problem, 1)
+    tol = tolerance_kw(problem)
+    assert (np.abs(opf.line_price) > 1e-3).any()  # a rating binds
+    assert np.abs(opf.p_kw - optimum * 1e3).max() <= tol
+    run = run_exact(problem)
+    assert np.abs(run.setpoints_kw - optimum * 1e3).max() <= tol
+
+
 def test_paper_mode_runs_on_a_mesh():
     """Paper mode on the congested case30: it runs to rest with its own rule's residual
     overflow (eq. 8 is proportional to the present overflow), weighted by the factors."""
@@ -273,6 +356,138 @@ def test_exact_mode_on_random_meshes_lands_on_the_exact_dc_opf(seed, n_buses, ch
     distance_kw = np.abs(run.setpoints_kw - optimum * 1e3).max()
     assert distance_kw <= run.accuracy_kw
     assert run.distance_bound_kw >= distance_kw - 1e-9
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(3, 7), st.integers(1, 4), st.integers(2, 4),
+       st.integers(0, 3))  # fmt: skip
+def test_the_angle_formulation_lands_on_the_exact_dc_opf(seed, n_buses, chords, gens, limits):
+    """Clarabel's DC-OPF in bus angles (the default on a mesh) against the optimum found by
+    enumerating active sets (tests/qp_exact.py), at three minutes whose bus loads are scaled
+    apart (the angle rows spread the demand in the network's own shares; the optimum must not
+    depend on it), on random meshes with taps, phase shifters, shunts and parallel branches;
+    and against the dense-factor formulation, prices included."""
+    from popdispatch.opf import OpfSolver, generation_cost
+
+    from qp_exact import exact_dc_opf
+
+    net = random_mesh(seed, n_buses, chords, gens, limits)
+    rng = np.random.default_rng(seed)
+    scale = rng.uniform(0.6, 1.2, (3, len(net.buses)))
+    problem = build_mesh_problem(net, net.buses.pd_mw.to_numpy() * scale, check=False)
+    angles, factors = OpfSolver(problem), OpfSolver(problem, "factors")
+    assert angles.formulation == "angles"
+    for minute in (1, 2, 3):
+        optimum = exact_dc_opf(problem, minute)
+        opf = angles.solve(minute)
+        if optimum is None:
+            continue
+        # Clarabel stops at a 1e-10 duality gap: the cost to 1e-9 of the optimum's, the set
+        # points (a flat direction amplifies the gap) to 1e-5 of the demand, in either formulation
+        assert opf.status == "optimal"
+        best = float(generation_cost(problem, optimum))
+        assert opf.cost == pytest.approx(best, rel=1e-9)
+        tol = 1e-5 * float(problem.demand[minute - 1]) * 1e3
+        assert np.abs(opf.p_kw - optimum * 1e3).max() <= tol
+        other = factors.solve(minute)
+        assert opf.cost == pytest.approx(other.cost, rel=1e-9)
+        assert np.abs(opf.p_kw - other.p_kw).max() <= tol
+        # prices (duals) within 1e-5 of the price scale: two interior-point runs stopped at
+        # Clarabel's 1e-10 gap agree less closely in the duals
+        scale = max(1.0, abs(other.marginal_price), np.abs(other.line_price).max(initial=0.0))
+        assert abs(opf.marginal_price - other.marginal_price) <= 1e-5 * scale
+        assert np.abs(opf.line_price - other.line_price).max(initial=0.0) <= 1e-5 * scale
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_the_angle_formulation_equals_the_factors_one_on_matpower_cases(case):
+    """The two formulations of Clarabel's DC-OPF on the congested MATPOWER cases (rundcopp
+    checks the default one, above), with one more line rated far beyond any flow it can
+    carry: its row is left out of the angle formulation and its price is 0 in both."""
+    from popdispatch.opf import OpfSolver
+    from popdispatch.readers.matpower import read_matpower_network
+
+    net = congested(read_matpower_network(os.path.join(DATA, f"{case}.m")),
+                    [f"L{a}-{b}" for a, b in CASES[case]], 0.8)  # fmt: skip
+    free = np.flatnonzero(~np.isfinite(net.lines.limit_kw.to_numpy()))
+    limits = net.lines.limit_kw.to_numpy().copy()
+    limits[free[0] if len(free) else 0] = 99_999e3  # kW, as PGLib rates its unlimited lines
+    problem = build_mesh_problem(replace(net, lines=net.lines.assign(limit_kw=limits)))
+    angles, factors = OpfSolver(problem).solve(1), OpfSolver(problem, "factors").solve(1)
+    tol = tolerance_kw(problem)
+    assert np.abs(angles.p_kw - factors.p_kw).max() <= tol
+    assert angles.cost == pytest.approx(factors.cost, rel=1e-9)
+    scale = max(1.0, abs(factors.marginal_price), np.abs(factors.line_price).max())
+    assert abs(angles.marginal_price - factors.marginal_price) <= 1e-5 * scale
+    assert np.abs(angles.line_price - factors.line_price).max() <= 1e-5 * scale
+    assert (np.abs(angles.line_price) > 1e-3).any()
+    huge = np.flatnonzero(problem.limit * 1e3 >= 99_999e3)
+    assert len(huge) == 1 and angles.line_price[huge[0]] == 0.0
+
+
+def linear_mesh(seed: int, n_buses: int, chords: int, gens: int, limits: int):
+    """:func:`random_mesh` with every cost linear (a linear program, as PGLib's IEEE cases):
+    its optimum, from the active-set enumeration, or None (infeasible, or not unique)."""
+    from qp_exact import exact_dc_opf
+
+    net = random_mesh(seed, n_buses, chords, gens, limits)
+    net = replace(net, generators=net.generators.assign(c=0.0))
+    problem = build_mesh_problem(net, check=False)
+    return problem, exact_dc_opf(problem)
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(3, 7), st.integers(1, 4), st.integers(2, 6),
+       st.integers(1, 3), st.floats(1e-9, 0.3))  # fmt: skip
+def test_on_a_linear_program_the_bound_is_never_below_the_true_distance(
+    seed, n_buses, chords, gens, limits, scale
+):
+    """Linear costs on random meshes (several marginal generators sharing the balance and the
+    priced lines): from an end state the optimum moved by random balanced transfers, with the
+    optimum's own line prices or random ones, the certificate's bound is at least the true
+    distance."""
+    from popdispatch.online.certificate import Batch, certify_minutes
+
+    problem, optimum = linear_mesh(seed, n_buses, chords, gens, limits)
+    assume(optimum is not None)
+    rng = np.random.default_rng(seed)
+    batch = Batch.of(problem, np.array([1]))
+    lo, hi = batch.lo[0], batch.hi[0]
+    p = optimum.copy()
+    for _ in range(3):
+        i, j = rng.choice(len(p), 2, replace=False)
+        move = min(scale * float(rng.random()) * hi.max(), p[j] - lo[j], hi[i] - p[i])
+        p[i], p[j] = p[i] + move, p[j] - move
+    opf = solve_opf(problem, 1)
+    own = np.r_[np.maximum(opf.line_price, 0.0), np.maximum(-opf.line_price, 0.0)]
+    for mu in (own, rng.exponential(10.0, len(own)) * (rng.random(len(own)) < 0.5)):
+        certificate = certify_minutes(problem, np.array([1]), p[None], mu[None],
+                                      np.array([1e-6 * problem.demand[0]]))[0]  # fmt: skip
+        distance = np.abs(p - optimum)
+        assert (certificate.bound_mw >= distance - 1e-9 * max(1.0, hi.max())).all()
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**32 - 1), st.integers(3, 7), st.integers(1, 4), st.integers(2, 6),
+       st.integers(1, 3))  # fmt: skip
+def test_a_linear_programs_optimum_proves_itself(seed, n_buses, chords, gens, limits):
+    """At a linear program's unique optimum with its line prices, the certificate proves every
+    generator to round-off, however many generators are at the margin (interval propagation
+    alone leaves them wide when a priced line carries several of them: the rows are solved
+    for them)."""
+    from popdispatch.online.certificate import certify_minutes
+
+    problem, optimum = linear_mesh(seed, n_buses, chords, gens, limits)
+    assume(optimum is not None)
+    opf = solve_opf(problem, 1)
+    # the optimum's prices: Clarabel's duals, those at its round-off (a slack line's 1e-8) as 0
+    price = np.where(np.abs(opf.line_price) > 1e-6 * abs(opf.marginal_price), opf.line_price, 0.0)
+    mu = np.r_[np.maximum(price, 0.0), np.maximum(-price, 0.0)]
+    demand = float(problem.demand[0])
+    certificate = certify_minutes(problem, np.array([1]), optimum[None], mu[None],
+                                  np.array([1e-9 * demand]))[0]  # fmt: skip
+    assert certificate.reason is None
+    assert certificate.distance_mw <= 1e-7 * demand
 
 
 def test_a_day_on_a_mesh_lands_on_each_minutes_dc_opf():

@@ -3,7 +3,8 @@
     min  sum_i a_i + b_i p_i + c_i p_i^2
     s.t. Pmin_i <= p_i <= Pmax_i,  sum_i p_i = P_d,  |flow_k| <= U_k on limited lines,
 
-with the lossless radial DC flows ``flow = load_flow - D p``; a problem with voltage limits
+with the lossless DC flows ``flow = load_flow - D p`` (on a meshed network written with bus
+angles, as sparse as the network: :func:`angle_rows`); a problem with voltage limits
 adds the LinDistFlow rows ``vmin^2 <= v0_j^2 + sum_i S_ji p_i <= vmax^2`` of its monitored
 buses (the LinDistFlow OPF, docs/voltage.md), scaled like the voltage mode's controllers
 (divided by ``s_j``, in MW equivalents) so that their duals are the prices the controllers
@@ -61,33 +62,124 @@ def generation_cost(problem: DispatchProblem, p_mw: np.ndarray, online: np.ndarr
     return np.sum(np.where(online, terms, 0.0), axis=-1)
 
 
+#: The ways :class:`OpfSolver` can write the limited lines' rows: ``"factors"`` (dense rows of
+#: the coefficients ``D``, any problem) and ``"angles"`` (a meshed network's bus angles and its
+#: sparse ``B``, :func:`angle_rows`).
+FORMULATIONS = ("factors", "angles")
+
+
+@dataclass(frozen=True)
+class AngleRows:
+    """A meshed network's DC-OPF rows in bus angles (:func:`angle_rows`), on the variables
+    ``[p (kW, generators), theta (mrad, buses but the slack)]`` (milliradians scale the rows
+    well: a p.u. susceptance times ``S``, the base MVA, in kW per mrad). ``theta`` are the angles
+    of the generators' injections balanced by the demand spread over the buses in the shares
+    ``w`` (the network's own ``pd + gs``): close to the true angles, so no large flows cancel
+    (angles of the generators withdrawn at the slack would carry the whole demand's flow).
+
+    ``bus_rows``: ``S B_r theta - C_g p = -w_r P_d`` (kW) per bus but the slack; ``line_rows``:
+    ``S Bf_L theta``, with ``flow = load_flow + S Bf_L theta + P_d line_share`` (kW) on the
+    limited lines ``L`` that can reach their limits, as ``sum p = P_d`` makes ``-D p = S Bf_L
+    theta + P_d PTDF_L w``. ``bus_share``: ``w_r``; ``line_share``: ``PTDF_L w`` (MW per MW of
+    demand); ``kept``: the positions of ``L`` among the problem's limited lines, those whose
+    flow can reach the limit at some minute (``max |load_flow| + sum_i |D_ki| max(|Pmin_i|,
+    |Pmax_i|) >= U``: a line rated far above any flow it can carry, as a case's 99,999 MVA, is
+    a row that never binds and only spoils the scaling)."""
+
+    bus_rows: sparse.csr_matrix
+    line_rows: sparse.csr_matrix
+    bus_share: np.ndarray
+    line_share: np.ndarray
+    kept: np.ndarray
+
+
+def angle_rows(problem: DispatchProblem) -> AngleRows:
+    """The :class:`AngleRows` of a meshed problem (its ``feeder`` a
+    :class:`~popdispatch.feeder.dcnet.DcNetwork` whose fleet is the problem's)."""
+    net = problem.feeder
+    model = net.model
+    n = problem.n_generators
+    if len(net.generators) != n:
+        raise ValueError("the problem's fleet is not its network's")
+    keep = model.keep
+    incidence = sparse.diags(1.0 / model.branch_b) @ model.Bf
+    Bbus = model.base_mva * sparse.csr_matrix(incidence.T @ model.Bf)[keep][:, keep]
+    position = np.full(len(net.buses), -1)
+    position[keep] = np.arange(len(keep))
+    at = position[net.buses.index.get_indexer(net.generators.bus)]
+    injected = np.flatnonzero(at >= 0)  # a generator at the slack injects into no bus row
+    Cg = sparse.csr_matrix((np.ones(len(injected)), (at[injected], injected)),
+                           shape=(len(keep), n))  # fmt: skip
+    largest = np.maximum(np.abs(problem.pmin), np.abs(problem.pmax))  # MW
+    loads = np.abs(problem.line_load_flow).max(axis=0, initial=0.0)
+    reach = loads + np.abs(problem.factor) @ largest
+    kept = np.flatnonzero(reach >= problem.limit * (1.0 - 1e-9))
+    lines_kept = problem.lines[kept]
+    load = (net.buses.pd_mw + net.buses.gs_mw).to_numpy(float)
+    share = load / load.sum() if load.sum() > 0 else np.full(len(load), 1.0 / len(load))
+    flows = model.flows_mw(np.c_[share, np.zeros(len(share))], lines_kept)
+    line_share = flows[:, 0] - flows[:, 1]  # without the phase shifters' own flows
+    lines = model.base_mva * sparse.csr_matrix(model.Bf)[lines_kept][:, keep]
+    return AngleRows(
+        sparse.hstack([-Cg, Bbus]).tocsr(),
+        sparse.hstack([sparse.csr_matrix((len(kept), n)), lines]).tocsr(),
+        share[keep], line_share, kept,
+    )  # fmt: skip
+
+
 class OpfSolver:
     """The DC-OPF of one problem, built once; each minute changes only the constraint bounds.
 
     Clarabel's data update keeps the factorisation structure, so a day of 1440 solves costs
-    little more than 1440 interior-point runs on a 6-variable QP.
+    little more than 1440 interior-point runs on a 6-variable QP. ``formulation``
+    (:data:`FORMULATIONS`): on a meshed network the default is ``"angles"``, whose rows are as
+    sparse as the network (a dense row of factors per limited line makes a large meshed case's
+    QP dense); elsewhere ``"factors"``. Both give the same optimum and duals.
     """
 
-    def __init__(self, problem: DispatchProblem):
+    def __init__(self, problem: DispatchProblem, formulation: str | None = None):
         self.problem = problem
+        if formulation is None:
+            formulation = "angles" if problem.meshed and not problem.n_voltage else "factors"
+        if formulation not in FORMULATIONS:
+            raise ValueError(f"formulation {formulation!r}: one of {', '.join(FORMULATIONS)}")
+        if formulation == "angles" and not (problem.meshed and not problem.n_voltage):
+            raise ValueError("the angle formulation needs a meshed network without voltage rows")
+        self.formulation = formulation
+        self._angles: AngleRows | None = None
+        self._rows = np.arange(len(problem.limit))  # the limited lines with rows
         n = problem.n_generators
         # Objective scaled by 1000: b p_MW + c p_MW^2 = (b p_kW + c p_kW^2 / 1000) / 1000.
-        P = sparse.csc_matrix(sparse.diags(2.0 * problem.c / KW_PER_MW))
+        P = sparse.diags(2.0 * problem.c / KW_PER_MW)
         q = problem.b.astype(float)
         eye = sparse.eye(n)
-        down = sparse.csr_matrix(problem.down)
-        sens = sparse.csr_matrix(problem.voltage_sens.reshape(problem.n_voltage, n))
-        A = sparse.vstack(
-            [sparse.csr_matrix(np.ones((1, n))), -eye, eye, -down, down, -sens, sens]
-        ).tocsc()
-        rows = 2 * n + 2 * len(problem.limit) + 2 * problem.n_voltage
-        cones = [clarabel.ZeroConeT(1), clarabel.NonnegativeConeT(rows)]
+        balance = sparse.csr_matrix(np.ones((1, n)))
+        if formulation == "angles":
+            self._angles = angle_rows(problem)
+            buses, lines = self._angles.bus_rows, self._angles.line_rows
+            self._rows = self._angles.kept
+            n_angles = buses.shape[1] - n
+            P = sparse.block_diag([P, sparse.csc_matrix((n_angles, n_angles))])
+            q = np.r_[q, np.zeros(n_angles)]
+            pad = sparse.csr_matrix((n, n_angles))
+            balance = sparse.hstack([balance, sparse.csr_matrix((1, n_angles))])
+            zero_rows = sparse.vstack([balance, buses])
+            rows_ = [sparse.hstack([-eye, pad]), sparse.hstack([eye, pad]), lines, -lines]
+        else:
+            down = sparse.csr_matrix(problem.down)
+            sens = sparse.csr_matrix(problem.voltage_sens.reshape(problem.n_voltage, n))
+            zero_rows = balance
+            rows_ = [-eye, eye, -down, down, -sens, sens]
+        A = sparse.vstack([zero_rows, *rows_]).tocsc()
+        self._zeros = zero_rows.shape[0]
+        rows = 2 * n + 2 * len(self._rows) + 2 * problem.n_voltage
+        cones = [clarabel.ZeroConeT(self._zeros), clarabel.NonnegativeConeT(rows)]
         settings = clarabel.DefaultSettings()
         settings.verbose = False
         settings.presolve_enable = False  # keeps the data updatable
         settings.tol_gap_abs = settings.tol_gap_rel = 1e-10
         settings.tol_feas = 1e-10
-        self._data = (P, q, A, cones, settings)
+        self._data = (sparse.csc_matrix(P), q, A, cones, settings)
         self._solver = None  # built by the first solve, with that minute's bounds
 
     def _rhs(self, minute: int) -> np.ndarray:
@@ -97,14 +189,17 @@ class OpfSolver:
         pmax = np.where(online, problem.pmax, 0.0) * KW_PER_MW
         n_lines, n_v = len(problem.limit), problem.n_voltage
         loads = problem.load_flow[minute - 1] * KW_PER_MW
-        load_flow = loads[:n_lines]
-        limit = problem.limit * KW_PER_MW
+        load_flow = loads[:n_lines][self._rows]
+        limit = problem.limit[self._rows] * KW_PER_MW
         demand = problem.demand[minute - 1] * KW_PER_MW
+        bus_rows = np.zeros(0)
+        if self._angles is not None:  # the demand's share of each bus and of each line's flow
+            bus_rows = -self._angles.bus_share * demand
+            load_flow = load_flow + self._angles.line_share * demand
         # voltage rows: e0_lo - sens p <= 0 and e0_hi + sens p <= 0 (kW equivalents)
         v_lo, v_hi = -loads[n_lines : n_lines + n_v], -loads[n_lines + n_v :]
-        return np.concatenate(
-            [[demand], -pmin, pmax, limit - load_flow, limit + load_flow, v_lo, v_hi]
-        )
+        return np.concatenate([[demand], bus_rows, -pmin, pmax,
+                               limit - load_flow, limit + load_flow, v_lo, v_hi])  # fmt: skip
 
     def solve(self, minute: int) -> OpfResult:
         """Solve the DC-OPF of one 1-based minute (offline generators held at 0)."""
@@ -128,16 +223,20 @@ class OpfSolver:
             )  # fmt: skip
         if status not in ("Solved", "AlmostSolved"):
             raise RuntimeError(f"DC-OPF at minute {minute}: Clarabel returned {status}")
-        p_kw = np.clip(np.asarray(solution.x), -rhs[1 : 1 + n], rhs[1 + n : 1 + 2 * n])
-        dual = np.asarray(solution.z)
-        line_dual = dual[1 + 2 * n : 1 + 2 * n + 2 * n_limits]
-        line_price = line_dual[:n_limits] - line_dual[n_limits:]
-        v_dual = dual[1 + 2 * n + 2 * n_limits :]
+        bounds = rhs[self._zeros :]
+        p_kw = np.clip(np.asarray(solution.x)[:n], -bounds[:n], bounds[n : 2 * n])
+        balance_dual = float(solution.z[0])
+        dual = np.asarray(solution.z)[self._zeros :]  # the inequalities' duals
+        n_rows = len(self._rows)
+        line_dual = dual[2 * n : 2 * n + 2 * n_rows]
+        line_price = np.zeros(n_limits)
+        line_price[self._rows] = line_dual[:n_rows] - line_dual[n_rows:]
+        v_dual = dual[2 * n + 2 * n_rows :]
         n_v = problem.n_voltage
         online = problem.online[minute - 1]
         cost = float(generation_cost(problem, p_kw / KW_PER_MW, online))
         v_pu = np.sqrt(np.maximum(problem.voltage_sq(p_kw / KW_PER_MW, minute), 0.0))
-        return OpfResult("optimal", minute, demand, p_kw, cost, line_price, float(-dual[0]),
+        return OpfResult("optimal", minute, demand, p_kw, cost, line_price, -balance_dual,
                          v_dual[:n_v] - v_dual[n_v:], v_pu)  # fmt: skip
 
 

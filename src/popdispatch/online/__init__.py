@@ -106,9 +106,9 @@ def run_snapshot(
     """Run the dynamics for one minute from ``settings.x0`` until converged or the horizon.
 
     In a mode that claims the DC-OPF, a run that comes to rest without the distance
-    certificate's proof continues (to the horizon) as long as each rest proves at least twice
-    as much as the one before: the stopping rule's window can end a run whose last watts still
-    move."""
+    certificate's proof continues (to the horizon) as long as each rest's proved bound is at
+    least 1 % below the one before (:data:`RUN_ON_FACTOR`): the stopping rule's window can end
+    a run whose last watts still move."""
     settings = settings or RunSettings()
     engine = Engine(problem, settings)
     x = initial_shares(problem, settings.x0, minute)
@@ -148,9 +148,15 @@ def run_snapshot(
     )
 
 
+#: A snapshot at rest without the proof runs on while each rest's proved bound is at least 1 % below
+#: the last one's (the bound still falling, not at a floor).
+RUN_ON_FACTOR = 0.99
+
+
 def _run_until_proved(engine: Engine, x: np.ndarray, minute: int) -> tuple[MinuteRun, float]:
     """:meth:`Engine.run_minute`, continued from each rest that the certificate does not prove
-    within the accuracy while the proved bound keeps halving and the horizon allows (see
+    within the accuracy while the proved bound keeps falling (:data:`RUN_ON_FACTOR`) and the
+    horizon allows (see
     :func:`run_snapshot`); the rest iteration counts from the start. Also the seconds spent in
     the engine (the certificates' checks not counted: they are the audit, not the dispatch)."""
     began = time.perf_counter()
@@ -165,7 +171,7 @@ def _run_until_proved(engine: Engine, x: np.ndarray, minute: int) -> tuple[Minut
     while run.status == Status.CONVERGED and done < horizon:
         p = run.x * engine.problem.demand[minute - 1]
         bound = engine.certificates(np.array([minute]), p[None], engine.z[None])[0].distance_mw
-        if bound <= accuracy or not bound < 0.5 * last_bound:
+        if bound <= accuracy or not bound < RUN_ON_FACTOR * last_bound:
             break
         last_bound = bound
         began = time.perf_counter()

@@ -49,6 +49,11 @@ PROPAGATION_PASSES = 8
 KKT_ROUND_OFF = 1e-9
 #: Relative round-off of the powers (of the demand) within which a row counts as on its bound.
 FEASIBLE_ROUND_OFF = 1e-12
+#: A row's coefficient at most this fraction of its largest narrows nothing (round-off).
+FAINT_COEFFICIENT = 1e-9
+#: A generator is solved for (:func:`_narrow_by_solve`) when its interval after propagation is
+#: wider than this fraction of the widest.
+SOLVE_WIDTH = 1e-3
 #: Bisection steps on the balance price (the bracket reaches round-off well before).
 BISECTIONS = 80
 
@@ -246,7 +251,43 @@ def propagate(low, high, demand, balance_slack, A, e0, mu, gap) -> tuple[np.ndar
                 _narrow_row(matrix[r, idx], idx, left[r], right[r], low, high)
         if np.array_equal(before[0], low) and np.array_equal(before[1], high):
             break
+    priced = np.r_[0, 1 + np.flatnonzero(mu > 0.0)]  # the balance and the priced rows
+    _narrow_by_solve(matrix[priced], left[priced], right[priced], low, high)
     return low, high
+
+
+def _narrow_by_solve(matrix, left, right, low, high) -> None:
+    """The generators whose intervals are still wide, narrowed in place by solving the rows
+    ``left <= matrix y <= right`` for them when those rows determine them (full column rank):
+    the case propagation cannot settle, several linear generators at the margin of a linear
+    program sharing the balance and the priced rows, each row with more than one of them.
+    With ``M`` the wide generators' columns and ``L`` a left inverse of it (the pseudo-inverse
+    of its rows weighted by their windows' inverse widths, so that a loose row counts little),
+    ``y_W = L (M y_W) - E y_W`` (``E = L M - I``, round-off), and ``M y_W`` lies in the rows'
+    windows less the other generators' intervals: interval arithmetic bounds ``y_W``."""
+    width = high - low
+    wide = np.flatnonzero(width > SOLVE_WIDTH * max(width.max(initial=0.0), 0.0))
+    if not len(wide) or len(wide) > len(matrix) or not np.isfinite(width[wide]).all():
+        return
+    narrow = np.setdiff1d(np.arange(len(low)), wide)
+    M, rest = matrix[:, wide], matrix[:, narrow]
+    least = np.maximum(rest, 0.0) @ low[narrow] + np.minimum(rest, 0.0) @ high[narrow]
+    most = np.maximum(rest, 0.0) @ high[narrow] + np.minimum(rest, 0.0) @ low[narrow]
+    a, b = left - most, right - least  # the window of M y_W
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        return
+    if np.linalg.matrix_rank(M) < len(wide):
+        return
+    half = 0.5 * (b - a)
+    weight = 1.0 / np.maximum(half, 1e-12 * max(1.0, np.abs(a).max(), np.abs(b).max()))
+    inverse = np.linalg.pinv(weight[:, None] * M) * weight  # a left inverse of M
+    size = np.maximum(np.abs(low[wide]), np.abs(high[wide]))
+    error = np.abs(inverse @ M - np.eye(len(wide))) @ size
+    scale = np.abs(inverse) @ np.maximum(np.abs(a), np.abs(b))
+    radius = np.abs(inverse) @ half + error + 16.0 * np.finfo(float).eps * scale
+    center = inverse @ (0.5 * (a + b))
+    low[wide] = np.maximum(low[wide], center - radius)
+    high[wide] = np.minimum(high[wide], center + radius)
 
 
 def _narrow_row(coef, idx, left, right, low, high) -> None:
@@ -258,9 +299,13 @@ def _narrow_row(coef, idx, left, right, low, high) -> None:
     slack = 4.0 * np.finfo(float).eps * (np.abs(least).sum() + np.abs(most).sum())
     floor = left - (most.sum() - most) - slack  # coef y >= floor
     ceiling = right - (least.sum() - least) + slack  # coef y <= ceiling
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):
         new_low = np.where(coef > 0, floor / coef, ceiling / coef)
         new_high = np.where(coef > 0, ceiling / coef, floor / coef)
+    # a coefficient at round-off of the row's largest (a distribution factor's 1e-17) would
+    # turn the row's round-off into a bound of any size: such a member is not narrowed
+    faint = np.abs(coef) <= FAINT_COEFFICIENT * np.abs(coef).max()
+    new_low, new_high = np.where(faint, -np.inf, new_low), np.where(faint, np.inf, new_high)
     low[idx] = np.maximum(low[idx], np.nan_to_num(new_low, nan=-np.inf))
     high[idx] = np.minimum(high[idx], np.nan_to_num(new_high, nan=np.inf))
 
