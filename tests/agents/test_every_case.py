@@ -75,12 +75,13 @@ def engine_euler_mw(problem, settings: RunSettings, h: float, rounds: int) -> np
 @pytest.mark.parametrize("graph", list(GRAPHS))
 @pytest.mark.parametrize(("name", "limits", "build"), CASES, ids=IDS)
 def test_agents_follow_the_engine_euler_steps(name, limits, build, graph, mode):
-    """Perfect network, the default round step: the agents' set points after every round
-    are the engine's Euler steps (summation orders apart)."""
+    """Perfect network, the default round step of the plain Euler rounds (no local step): the
+    agents' set points after every round are the engine's Euler steps (summation orders
+    apart)."""
     problem, _ = case(name, limits)
     settings = settings_for(mode, graph)
     h = default_step(problem, settings, 1)
-    opts = AgentSettings(max_rounds=ROUNDS, tol_kw=0.0, engine_limiter=True)
+    opts = AgentSettings(max_rounds=ROUNDS, tol_kw=0.0, engine_limiter=True, local_step=False)
     run = run_agents(problem, 1, settings, Faults(), opts)
     assert run.step_s == h
     engine = engine_euler_mw(problem, settings, h, ROUNDS)
