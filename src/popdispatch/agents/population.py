@@ -512,12 +512,15 @@ def _judged(run: AgentRun, engine, minute: int, tripped: list[str], tol_kw: floa
                    distance_bound_kw=bound, accuracy_kw=accuracy)  # fmt: skip
 
 
-def proved_distance_mw(engine, minute: int):
+def proved_distance_mw(engine, minute: int, tol_mw: float = np.inf):
     """``prove(system)``: the distance bound (MW) the certificate gives the agents' state now
     (the inverters' set points and the live controllers' prices), with ``engine`` (see
-    :func:`_auditor`)."""
+    :func:`_auditor`); none (infinite) while the source bus carries more than ``tol_mw`` (MW)
+    after a trip, which :func:`_judged` never calls converged."""
 
     def prove(system: AgentSystem) -> float:
+        if system.source is not None and abs(system.source.position_mw) > tol_mw:
+            return np.inf
         p_mw = system.inverters.p[None]
         z = line_states(controller_prices(system), len(engine.problem.limit))[None]
         return engine.certificates(np.array([minute]), p_mw, z)[0].distance_mw
@@ -573,7 +576,7 @@ def prepared(problem, minute, settings, faults, opts: AgentSettings, step_s: flo
     for agent in system.agents:
         agent.phase_ticks = ticks
     if engine is not None and engine.mode.claims_dc_opf:
-        system.prove = proved_distance_mw(engine, minute)
+        system.prove = proved_distance_mw(engine, minute, opts.tol_kw / KW_PER_MW)
         system.accuracy_mw = float(settings.accuracy_mw(problem.demand[minute - 1]))
     system.extrapolate = bool(settings.stepping.extrapolate)
     return system
