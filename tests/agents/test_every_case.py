@@ -164,7 +164,9 @@ def test_the_synthetic_feeder_on_a_ring_says_honestly_how_far_it_is():
     settings = settings_for("exact", "ring")
     run = run_agents(problem, 1, settings, Faults(), AgentSettings(max_rounds=300))
     distance = np.abs(run.setpoints_kw - opf.p_kw).max()
-    assert run.distance_bound_kw is not None and run.distance_bound_kw >= distance - 1e-9
+    yardstick_kw = 1e-8 * float(problem.demand[0]) * KW_PER_MW  # Clarabel's own tolerance
+    assert run.distance_bound_kw is not None
+    assert run.distance_bound_kw >= distance - yardstick_kw
     if run.status == "converged":
         assert run.distance_bound_kw <= accuracy_kw(settings, problem)
     else:

@@ -157,7 +157,8 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
                     bound = system.prove(system)
                     if bound > system.accuracy_mw and bound < 0.5 * last_bound:
                         rest_round, last_bound, check_after = None, bound, rnd + window
-                elif proved(system, rnd, window, rnd > check_after and unrest is None):
+                elif proved(system, rnd, window,
+                            rnd > check_after and unrest is None and opts.tol_kw > 0.0):
                     rest_round = len(system.history) - 1
                 quiet = rest_round is not None or unrest is not None
                 if quiet:
@@ -183,7 +184,8 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
 
 def proved(system: WorldSystem, rnd: int, window: int, due: bool) -> bool:
     """Whether the state proves itself within the accuracy before it is at rest: every
-    ``window`` rounds, once ``due`` (after the last fault, the run still going), the distance
+    ``window`` rounds, once ``due`` (after the last fault, the run still going, a rest
+    tolerance above 0: with 0 the run goes to its horizon), the distance
     certificate (``system.prove``) of the set points and prices now. Such a run has reached
     what ``converged`` claims, and further rounds would only move it within the accuracy."""
     if not due or system.prove is None or rnd % window:
