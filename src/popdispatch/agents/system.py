@@ -38,7 +38,8 @@ class AgentSettings:
     window : rounds over which the set points must move less than ``tol_kw`` to be at rest
         (and every controller's residual, modes/exact.py, be within ``tol_kw``: a price may
         still be decaying on a slack line while the set points wait at their limits).
-    tol_kw : rest tolerance, kW (None: :meth:`tol_for`, the engine's).
+    tol_kw : rest tolerance, kW (None: :meth:`tol_for`, the engine's; 0: neither a rest nor
+        a proof ends the run, it runs to its horizon).
     drain_rounds : most rounds after rest to decide and acknowledge every transaction.
     timeout : rounds an offer stays open (None: ``2 * delay_max + 1`` of the faults, so that
         an offer and its acceptance can both arrive as late as the network delays them).
