@@ -188,13 +188,13 @@ def test_case69_with_a_binding_limit_reaches_the_dc_opf(tmp_path, limit_kw):
 @pytest.mark.parametrize(
     ("args", "words"),
     [(["--max-rounds", "40"], "give more rounds"),
-     (["--step-s", "0.0077", "--max-rounds", "100"], "oscillate")],
+     (["--step-s", "0.002", "--max-rounds", "100"], "oscillate")],
     ids=["horizon", "step-too-large"],
 )  # fmt: skip
 def test_a_run_away_from_the_optimum_exits_1_and_says_why(tmp_path, args, words):
-    """Too few rounds, or the step of before (7.7e-3 s: the set points flipped between 0 and
-    300 kW): exit 1 after the complete JSON, its status ``not_converged`` with the reason,
-    and one line on stderr."""
+    """Too few rounds, or a step past the line prices' stability limit (2e-3 s, 2.4 times
+    ``C / alpha``: the set points flip between 0 and 300 kW): exit 1 after the complete JSON,
+    its status ``not_converged`` with the reason, and one line on stderr."""
     result = popdispatch_agents(tmp_path, "--limit", "26:27=100", *args)
     assert result.returncode == 1, result.stderr
     s = json.loads(result.stdout)

@@ -40,7 +40,8 @@ def engine_euler_mw(problem, settings: RunSettings, h: float, rounds: int) -> np
 @pytest.mark.parametrize(("mode", "dynamics", "graph", "h", "rounds"), CASES)
 def test_agents_follow_engine_euler(congestion_problem, mode, dynamics, graph, h, rounds):
     settings = RunSettings(dynamics=dynamics, mode=mode, graph=graph)
-    opts = AgentSettings(step_s=h, max_rounds=rounds, tol_kw=0.0, engine_limiter=True)
+    opts = AgentSettings(step_s=h, max_rounds=rounds, tol_kw=0.0, engine_limiter=True,
+                         local_step=False)  # the plain Euler rounds: the engine's steps
     run = run_agents(congestion_problem, PEAK_MINUTE, settings, Faults(), opts)
     engine = engine_euler_mw(congestion_problem, settings, h, rounds)
     agents = run.trajectory_kw / KW_PER_MW

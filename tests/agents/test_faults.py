@@ -84,14 +84,20 @@ def test_a_silent_controller_is_detected_and_taken_over(congestion_problem):
 
 @pytest.mark.parametrize("noise_kw", [0.001, 0.01])
 def test_noisy_flow_measurements_jitter_around_the_dc_opf(congestion_problem, noise_kw):
-    """Gaussian sensor noise: the line prices integrate it, so the set points never rest but
-    stay within a few sigma of the DC-OPF; every committed state still balances."""
+    """Gaussian sensor noise: the line prices integrate it, so the set points stay within a
+    few sigma of the DC-OPF over the last 50 rounds, unless the certificate proves a state
+    within the accuracy first (sigma 1e-3 kW with the local step: at round 50), which then
+    is within it of the DC-OPF; every committed state still balances."""
     faults = Faults(noise_kw=noise_kw, seed=1)
     run = run_agents(congestion_problem, PEAK_MINUTE, EXACT, faults,
                      AgentSettings(max_rounds=400, drain_rounds=50))  # fmt: skip
     opf = solve_opf(congestion_problem, PEAK_MINUTE).p_kw
-    late = np.abs(run.trajectory_kw[-50:] - opf).max()
-    assert late < 10 * noise_kw + AgentSettings().tol_for(congestion_problem, EXACT, PEAK_MINUTE)
+    if run.status == "converged":
+        assert np.abs(run.setpoints_kw - opf).max() <= run.accuracy_kw
+    else:
+        late = np.abs(run.trajectory_kw[-50:] - opf).max()
+        tol_kw = AgentSettings().tol_for(congestion_problem, EXACT, PEAK_MINUTE)
+        assert late < 10 * noise_kw + tol_kw
     assert abs(run.max_imbalance_w) < BALANCE_W
 
 

@@ -14,7 +14,7 @@ pytest.importorskip(
 
 from popdispatch.agents.messages import Decision, Relayed, Signals, Status, scalars  # noqa: E402
 from popdispatch.agents.network import Faults  # noqa: E402
-from popdispatch.agents.system import run_agents  # noqa: E402
+from popdispatch.agents.system import AgentSettings, run_agents  # noqa: E402
 from popdispatch.feeder.generators import make_fleet  # noqa: E402
 from popdispatch.feeder.model import Feeder  # noqa: E402
 from popdispatch.feeder.profiles import single_minute_profiles  # noqa: E402
@@ -47,22 +47,27 @@ def test_scalars_count_the_real_numbers_of_a_message():
     assert scalars(Signals(3, {"0": 2.0, "4": -1.0})) == 2
     assert scalars(Decision("a/3/b", True, 0.5, 4)) == 1
     assert scalars(Relayed("a", Status(3, 1.0, 0.5, 0.25), ("r",))) == 5
+    assert scalars(Status(3, 1.0, 0.5, 0.25, 0.1, 0.2, 7, 0.9)) == 6  # with the step factor
 
 
 def test_two_generators_exchange_one_status_each_per_round():
     """Complete graph of two, no limited line (no plant measurements, no controllers): each
-    round each generator sends its status (f, w, v, mass, room: 5 scalars) to the other."""
+    round each generator sends its status (f, w, v, mass, room and, with the local step, its
+    step factor: 6 scalars) to the other."""
     problem = twins(2)
     run = run_agents(problem, 1, RunSettings(mode="exact"), Faults())
     assert run.status == "converged" and run.rounds > 0
     assert run.messages == 2 * run.rounds
-    assert run.scalars_sent == 2 * 5 * run.rounds
+    assert run.scalars_sent == 2 * 6 * run.rounds
+    plain = run_agents(problem, 1, RunSettings(mode="exact"), Faults(),
+                       AgentSettings(local_step=False))  # fmt: skip
+    assert plain.scalars_sent == 2 * 5 * plain.rounds  # no step factor to send
 
 
 def test_a_path_of_three_also_sends_standings():
     """A path graph of three (distributed Smith): each round the middle generator sends its
-    standing (rate, room, mass: 3 scalars) and its status (5) to both ends, each end to the
-    middle: 4 standings and 4 statuses, 32 scalars. The standings go out at a round's first
+    standing (rate, room, mass: 3 scalars) and its status (6) to both ends, each end to the
+    middle: 4 standings and 4 statuses, 36 scalars. The standings go out at a round's first
     tick, the plant's measurement, which also opens the round after the last one counted (the
     run stops at its measurement, when it is judged at rest): 4 more, 12 scalars."""
     problem = twins(3)
@@ -70,4 +75,4 @@ def test_a_path_of_three_also_sends_standings():
     run = run_agents(problem, 1, settings, Faults())
     assert run.status == "converged" and run.rounds > 0
     assert run.messages == 8 * run.rounds + 4
-    assert run.scalars_sent == (4 * 3 + 4 * 5) * run.rounds + 4 * 3
+    assert run.scalars_sent == (4 * 3 + 4 * 6) * run.rounds + 4 * 3

@@ -87,6 +87,11 @@ def receives(status: Status) -> bool:
     return status.w > 0.0 and status.room > RELAY_MASS
 
 
+def _theta(status: Status) -> float:
+    """A neighbour's step factor from its status (1 where it sends none)."""
+    return 1.0 if status.theta is None else float(status.theta)
+
+
 def star(n: int) -> tuple[np.ndarray, np.ndarray]:
     """CSR adjacency (``indptr``, ``indices``) of the star of node 0 and ``n - 1`` leaves: one
     generator's own edges."""
@@ -112,6 +117,7 @@ class Own(NamedTuple):
     v: float
     room: float
     mass: float
+    theta: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -122,7 +128,13 @@ class GeneratorRule:
     (:class:`~popdispatch.dynamics.fields.Field`), the demand ``demand_mw`` (MW), the Euler
     step ``step_s`` (s) and its revision ``rate`` (dimensionless, from its own cost curve:
     :func:`popdispatch.dynamics.newton.revision_rates`; read by the curvature-scaled field
-    only)."""
+    only).
+
+    The local step (``local_step``, curvature-scaled field only; docs/agents.md, "The local
+    step"): ``lines_above`` are the limited lines between the generator and the source (those
+    whose price falls as its output rises), ``price_slope`` the fall of a priced line's half
+    price per MW (``C / 2``, EUR/MW per MW) and ``fan`` the most receivers the own sender
+    weight sums over (1 on the complete graph, the own degree plus one on a sparse graph)."""
 
     b: float
     c: float
@@ -136,12 +148,30 @@ class GeneratorRule:
     demand_mw: float
     step_s: float
     rate: float = 0.0
+    lines_above: tuple[int, ...] = ()
+    price_slope: float = 0.0
+    fan: int = 1
+    local_step: bool = False
 
     @property
     def scaled(self) -> bool:
         """Whether the field is the curvature-scaled one, whose receiver weights are
         normalised by the rates of a neighbourhood (dynamics/newton.py)."""
         return self.field == Field.CAPACITY_NEWTON
+
+    def step_factor(self, priced_above: int) -> float:
+        """The own step factor ``theta = 1 / (1 + h lam)`` (dimensionless, in (0, 1]): ``lam``
+        (1/s) is the fastest rate at which this generator's own fitness gap closes,
+        ``gain D fan r (2 c + price_slope m)`` with ``m = priced_above`` the priced lines
+        above it (each moves its half price by ``-C / 2`` per MW it adds). An Euler step of
+        ``theta h`` on the own mode ``y' = -lam y`` multiplies ``y`` by ``1 / (1 + h lam)``,
+        backward Euler's factor: never past the own marginal-cost equality, whatever ``h``.
+        1 without the local step or outside the curvature-scaled field."""
+        if not (self.local_step and self.scaled):
+            return 1.0
+        slope = 2.0 * self.c + self.price_slope * priced_above  # EUR/MW per MW
+        lam = self.gain * self.demand_mw * self.fan * self.rate * slope
+        return 1.0 / (1.0 + self.step_s * lam)
 
 
 class GeneratorAgent(RoundAgent):
@@ -419,7 +449,8 @@ class GeneratorAgent(RoundAgent):
             st = dict(group)[best]
             gap = st.f - f0
             if v0 > 0.0 and gap > 0.0 and hops is not None:
-                out.append((best, gap * st.w * v0, hops))
+                pair = min(self.own.theta, _theta(st)) if self.rule.local_step else 1.0
+                out.append((best, gap * st.w * v0 * pair, hops))
         return inflow, out
 
     def _apply(self, decision: Decision, sender: str) -> None:
@@ -544,13 +575,21 @@ class GeneratorAgent(RoundAgent):
         w, v, room, mass = self._weights()
         if self.normalises_itself:
             w = self._own_receiver_weight(w, room, mass)
-        self.own = Own(float(f[0]), w, v, room, mass)
+        theta = r.step_factor(self._priced_above())
+        self.own = Own(float(f[0]), w, v, room, mass, theta)
         self.status_round = rnd
         self.heard = {}
         self.forwarded = set()
-        status = Status(rnd, self.own.f, w, v, mass, room, self.index)
+        status = Status(rnd, self.own.f, w, v, mass, room, self.index,
+                        theta if r.local_step else None)  # fmt: skip
         for aid in self.neighbours:
             self.send(status, aid)
+
+    def _priced_above(self) -> int:
+        """The limited lines above this generator whose latest price is not zero (their
+        proportional part moves with this generator's output)."""
+        return sum(1 for k in self.rule.lines_above
+                   if self.signals.get(str(k), (0, 0.0))[1] != 0.0)  # fmt: skip
 
     def _receiver_weights(self, w: np.ndarray, room: np.ndarray, mass: np.ndarray) -> None:
         """Complete graph, curvature-scaled field: every receiver weight of the own star (the
@@ -573,6 +612,9 @@ class GeneratorAgent(RoundAgent):
         if self.rule.scaled and not self.relay:
             self._receiver_weights(w, np.array([room0] + [s.room for s in known]),
                                    np.array([mass0] + [s.mass for s in known]))  # fmt: skip
+        if self.rule.local_step:  # each pair at the step of its stiffer end
+            theta = self.own.theta
+            w[1:] *= np.minimum(theta, [_theta(s) for s in known])
         inflow, outflow = np.zeros(n), np.zeros(n)
         graph_flows(f, w, v, *star(n), inflow, outflow)
         relay_in, relay_out = self._relay_flows()

@@ -69,6 +69,7 @@ class Status:
     mass: float = 0.0
     room: float = 0.0
     index: int = -1  # the generator's position (ties between best receivers of a relay group)
+    theta: float | None = None  # its own step factor (GeneratorRule.step_factor); None: 1
 
 
 @json_serializable

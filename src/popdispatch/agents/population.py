@@ -97,15 +97,40 @@ def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int)
     return max(field, price)
 
 
-def default_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+def default_step(problem: DispatchProblem, settings: RunSettings, minute: int,
+                 local: bool = False) -> float:  # fmt: skip
     """The default round step, s: in exact mode ``STABLE_STEP / rate``
     (:data:`popdispatch.integrate.STABLE_STEP`, the largest ``h * rate`` the engine's Heun
-    steps take; ``rate``: :func:`stiffness_rate`); in paper mode the engine's own Euler
+    steps take; ``rate``: :func:`stiffness_rate`, or with the ``local`` step of the
+    curvature-scaled field :func:`local_stiffness_rate`); in paper mode the engine's own Euler
     substep (the mode's integrator: ``dt / substeps``)."""
     if not get_mode(settings.mode).bounded:
         stepping = settings.stepping
         return stepping.dt / stepping.substeps
+    if local and len(settings.revision_rates(problem)):
+        return STABLE_STEP / local_stiffness_rate(problem, settings, minute)
     return STABLE_STEP / stiffness_rate(problem, settings, minute)
+
+
+def local_stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
+    """The rate (1/s) that bounds the round step when every generator takes its own step
+    factor (:meth:`~popdispatch.agents.generator.GeneratorRule.step_factor`), which keeps
+    each generator's own mode, its curvature and the proportional part of the prices above
+    it, stable at any step: the larger of the line prices' rate ``2 STABLE_STEP alpha / C``
+    (:func:`stiffness_rate`) and LOCAL_FIELD_RATES times the rate at which every interior
+    marginal cost relaxes, ``gain D S / P`` (the coupling between generators, which no own
+    factor bounds)."""
+    fp = settings.game_constants(problem)
+    demand = float(problem.demand[minute - 1])
+    spread, reference = scales(problem)
+    field = LOCAL_FIELD_RATES * float(fp.gain) * demand * spread / reference
+    price = 2.0 * STABLE_STEP * float(fp.price_rate) / float(fp.C) if len(problem.limit) else 0.0
+    return max(field, price)
+
+
+#: The round step with the local step is at most ``STABLE_STEP / (LOCAL_FIELD_RATES gain D S /
+#: P)``: a step of several relaxation times of the economic dispatch's own rate.
+LOCAL_FIELD_RATES = 1.0
 
 
 
@@ -287,9 +312,10 @@ def generator_graph(problem: DispatchProblem, settings: RunSettings) -> nx.Graph
 def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
                  step_s: float, faults: Faults, timeout: int = 1, lag: int = 0,
                  copies: int = 1, engine_limiter: bool = True,
-                 stale_rounds: int = 10) -> AgentSystem:  # fmt: skip
+                 stale_rounds: int = 10, local_step: bool = False) -> AgentSystem:  # fmt: skip
     """The agents of one minute (not yet registered anywhere); ``timeout``: rounds an offer
-    stays open; ``lag``: rounds from a commit to the inverters' change."""
+    stays open; ``lag``: rounds from a commit to the inverters' change; ``local_step``: each
+    generator scales its pairs' steps by its own factor (GeneratorRule.step_factor)."""
     if not problem.online[minute - 1].all():
         off = ", ".join(problem.generators[~problem.online[minute - 1]])
         raise OptionError(f"the agents run with every generator online (offline: {off})")
@@ -303,15 +329,18 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     inverters = Inverters(initial_setpoints(problem, settings, minute))
     graph = generator_graph(problem, settings)
     names = list(problem.generators)
+    sparse = not _complete(graph)
     generators = []
     for i, name in enumerate(names):
+        neighbours = [n for n in names if graph.has_edge(name, n)]
         rule = GeneratorRule(
             float(problem.b[i]), float(problem.c[i]), float(problem.pmin[i]),
             float(problem.pmax[i]), float(fp.B), float(fp.m),
             float(fp.gain) if mode.bounded else 1.0, not mode.bounded, int(field_code),
             demand, step_s, float(rates[i]) if len(rates) else 0.0,
+            lines_above(problem, i), 0.5 * float(fp.C), len(neighbours) + 1 if sparse else 1,
+            bool(local_step) and mode.bounded,
         )  # fmt: skip
-        neighbours = [n for n in names if graph.has_edge(name, n)]
         generators.append(
             GeneratorAgent(
                 rule, i, inverters, neighbours, timeout, lag, copies, engine_limiter, network
@@ -332,6 +361,17 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     cap = mode.price_cap(problem) if mode.bounded else np.inf
     return AgentSystem(plant, controllers, generators, inverters, network, graph, demand,
                        source, price_cap=cap, line_names=_line_names(problem))  # fmt: skip
+
+
+def lines_above(problem: DispatchProblem, generator: int) -> tuple[int, ...]:
+    """The limited lines between ``generator`` and the source (indices among the limited
+    lines), nearest first: what the node controllers on its path tell it."""
+    above = []
+    k = int(problem.generator_line[generator])
+    while k >= 0:
+        above.append(k)
+        k = int(problem.line_up[k])
+    return tuple(above)
 
 
 def _line_names(problem: DispatchProblem) -> list[str]:
@@ -475,12 +515,15 @@ def _judged(run: AgentRun, engine, minute: int, tripped: list[str], tol_kw: floa
                    distance_bound_kw=bound, accuracy_kw=accuracy)  # fmt: skip
 
 
-def proved_distance_mw(engine, minute: int):
+def proved_distance_mw(engine, minute: int, tol_mw: float = np.inf):
     """``prove(system)``: the distance bound (MW) the certificate gives the agents' state now
     (the inverters' set points and the live controllers' prices), with ``engine`` (see
-    :func:`_auditor`)."""
+    :func:`_auditor`); none (infinite) while the source bus carries more than ``tol_mw`` (MW)
+    after a trip, which :func:`_judged` never calls converged."""
 
     def prove(system: AgentSystem) -> float:
+        if system.source is not None and abs(system.source.position_mw) > tol_mw:
+            return np.inf
         p_mw = system.inverters.p[None]
         z = line_states(controller_prices(system), len(engine.problem.limit))[None]
         return engine.certificates(np.array([minute]), p_mw, z)[0].distance_mw
@@ -497,7 +540,9 @@ def refuse(settings: RunSettings, opts: AgentSettings, faults: Faults) -> None:
 def step_for(opts: AgentSettings, problem: DispatchProblem, settings: RunSettings,
              minute: int) -> float:  # fmt: skip
     """The round's Euler step in force, s: the given one, else :func:`default_step`."""
-    return opts.step_s if opts.step_s is not None else default_step(problem, settings, minute)
+    if opts.step_s is not None:
+        return opts.step_s
+    return default_step(problem, settings, minute, opts.local_step)
 
 
 def run(problem: DispatchProblem, minute: int, settings: RunSettings, faults: Faults,
@@ -526,14 +571,15 @@ def prepared(problem, minute, settings, faults, opts: AgentSettings, step_s: flo
     (:func:`popdispatch.agents.world.simulate`)."""
     system = build_agents(problem, minute, settings, step_s, faults, opts.timeout_for(faults),
                           opts.lag_for(faults), opts.copies_for(faults),
-                          opts.engine_limiter_for(faults), opts.stale_for(faults))  # fmt: skip
+                          opts.engine_limiter_for(faults), opts.stale_for(faults),
+                          opts.local_step)  # fmt: skip
     ticks = opts.phase_ticks_for(faults, TICKS_PER_ROUND)
     if system.generators[0].relay:
         ticks = max(ticks, relay_phase_ticks(len(system.generators), faults.delay_max))
     for agent in system.agents:
         agent.phase_ticks = ticks
     if engine is not None and engine.mode.claims_dc_opf:
-        system.prove = proved_distance_mw(engine, minute)
+        system.prove = proved_distance_mw(engine, minute, opts.tol_kw / KW_PER_MW)
         system.accuracy_mw = float(settings.accuracy_mw(problem.demand[minute - 1]))
     system.extrapolate = bool(settings.stepping.extrapolate)
     return system

@@ -38,7 +38,8 @@ class AgentSettings:
     window : rounds over which the set points must move less than ``tol_kw`` to be at rest
         (and every controller's residual, modes/exact.py, be within ``tol_kw``: a price may
         still be decaying on a slack line while the set points wait at their limits).
-    tol_kw : rest tolerance, kW (None: :meth:`tol_for`, the engine's).
+    tol_kw : rest tolerance, kW (None: :meth:`tol_for`, the engine's; 0: neither a rest nor
+        a proof ends the run, it runs to its horizon).
     drain_rounds : most rounds after rest to decide and acknowledge every transaction.
     timeout : rounds an offer stays open (None: ``2 * delay_max + 1`` of the faults, so that
         an offer and its acceptance can both arrive as late as the network delays them).
@@ -53,6 +54,10 @@ class AgentSettings:
         accept ``room / offered``; see :mod:`popdispatch.agents.generator`). With it the
         agents follow the engine's Euler trajectory exactly; without it a receiver scales
         by the room it has left now over every offer that arrived (late or repeated ones).
+    local_step : curvature-scaled field (exact mode): every generator scales the steps of its
+        pairs by its own factor ``1 / (1 + h lam)`` and the round step is bounded by the line
+        prices and the economic dispatch's rate only (docs/agents.md, "The local step");
+        False: plain Euler rounds of the default step, the engine's Euler steps.
     """
 
     step_s: float | None = None
@@ -66,6 +71,7 @@ class AgentSettings:
     decision_copies: int | None = None
     engine_limiter: bool | None = None
     stale_rounds: int = 10
+    local_step: bool = True
 
     def tol_for(self, problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
         """The rest tolerance in force, kW: the given one, else the engine's in a mode that

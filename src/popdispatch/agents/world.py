@@ -122,7 +122,8 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
     proved distance bound is above the accuracy runs on for another window as long as each
     rest proves at least half the bound of the one before (the engine's rule,
     :func:`popdispatch.online.run_snapshot`): the rest window can stop a run whose last
-    watts still move."""
+    watts still move. A run the certificate proves within the accuracy every ``window``
+    rounds stops there, at rest or not (:func:`proved`)."""
     from mango import AgentAddress, create_world, graph_topology, per_node
 
     world = create_world(communication_sim=system.network, record_messages=False)
@@ -156,6 +157,9 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
                     bound = system.prove(system)
                     if bound > system.accuracy_mw and bound < 0.5 * last_bound:
                         rest_round, last_bound, check_after = None, bound, rnd + window
+                elif proved(system, rnd, window,
+                            rnd > check_after and unrest is None and opts.tol_kw > 0.0):
+                    rest_round = len(system.history) - 1
                 quiet = rest_round is not None or unrest is not None
                 if quiet:
                     system.drain()
@@ -176,6 +180,17 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
         duplicated=network.duplicated,
         wall_seconds=time.perf_counter() - start,
     )
+
+
+def proved(system: WorldSystem, rnd: int, window: int, due: bool) -> bool:
+    """Whether the state proves itself within the accuracy before it is at rest: every
+    ``window`` rounds, once ``due`` (after the last fault, the run still going, a rest
+    tolerance above 0: with 0 the run goes to its horizon), the distance
+    certificate (``system.prove``) of the set points and prices now. Such a run has reached
+    what ``converged`` claims, and further rounds would only move it within the accuracy."""
+    if not due or system.prove is None or rnd % window:
+        return False
+    return bool(system.prove(system) <= system.accuracy_mw)
 
 
 def verdict(system: WorldSystem, rnd: int, opts: WorldOptions,

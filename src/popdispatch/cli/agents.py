@@ -60,8 +60,9 @@ from popdispatch.progress import Progress
         help="Node controller (C<bus>, e.g. C505) stops at ROUND (restarts after ROUNDS) "
         "(repeatable).")  # fmt: skip
 @option("--step-s", type=click.FloatRange(0.0, min_open=True), default=None,
-        help="Euler step of one round, s (default: exact mode 1.5 over the estimated "
-        "stiffness of the minute, paper mode the engine's substep 1e-4).")  # fmt: skip
+        help="Euler step of one round, s (default: exact mode 1.5 over the larger of the "
+        "line prices' and the economic dispatch's rates, each DG damping its own steps; "
+        "paper mode the engine's substep 1e-4).")  # fmt: skip
 @option("--max-rounds", type=click.IntRange(1), default=4000, show_default=True,
         help="Horizon, rounds.")  # fmt: skip
 @option("--pace/--no-pace", default=True, show_default=True,
