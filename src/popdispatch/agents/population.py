@@ -40,8 +40,9 @@ from popdispatch.game.parameters import MinuteInputs, PriceLaw
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import STABLE_STEP
 from popdispatch.modes import get_mode
-from popdispatch.modes.exact import price_weights, scales
+from popdispatch.modes.exact import scales
 from popdispatch.online.settings import RunSettings, initial_shares
+from popdispatch.online.stiffness import price_loop_rate, stiffness_rate
 from popdispatch.warm_start import SHARES, warm_start
 
 #: The name the registry (:mod:`popdispatch.agents.algorithms`) knows this algorithm by.
@@ -52,58 +53,13 @@ MODES = ("paper", "exact")
 OPTIONS = frozenset(AgentSettings.__dataclass_fields__)
 
 
-def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
-    """An estimate of the fastest rate of exact mode's dynamics at ``minute``, 1/s
-    (docs/agents.md, "The round step").
-
-    Curvature-scaled field (dynamics/newton.py), the largest of
-
-    - ``kappa D g max_i r_i (2 c_i + C_i)``: a generator's own relaxation rate (``kappa`` the
-      revision gain per EUR/MW, ``D`` the minute's demand, MW, ``r_i`` its revision rate,
-      ``C_i`` the price weight of the nearest limited line above it,
-      :func:`popdispatch.modes.exact.price_weights`, 0 below none), at least ``kappa D g S /
-      P``, the rate at which every interior marginal cost relaxes; ``g`` the most receivers a
-      sender's weights can sum over: 1 on the complete graph (``sum_i r_i / R = 1``), the
-      largest degree plus one on a sparse graph (each neighbour's weight ``r_i / R_i`` is at
-      most 1, and a sender relays to one best receiver per group it belongs to);
-    - ``2 STABLE_STEP alpha / C`` where a line is limited: a line's price and the set points
-      below it, in their proportional and integral regime, move as ``s^2 + a s + b = 0``
-      with ``b / a = alpha / C`` whatever the generators; Euler's factor ``1 + h s`` of a
-      complex pair has ``|1 + h s|^2 = 1 - h a + h^2 b``, below 1 for ``h < C / alpha`` and
-      smallest at ``h = C / (2 alpha)``, the step this gives.
-
-    Capacity-constrained Smith (``ExactConstants(revision="capacity")``): ``kappa max(S, D
-    max_i (2 c_i + C_i))``. Dimensionless constants, so the same on a feeder scaled by 100.
-    Counts one priced line above a generator: limits nested several deep along one path (the
-    synthetic feeders with every line limited) are stiffer than this."""
-    fp = settings.game_constants(problem)
-    row = np.array([minute - 1])
-    weight = np.broadcast_to(price_weights(problem, settings.exact.price_law, fp.C, row),
-                             (1, len(problem.limit)))[0]  # fmt: skip
-    below = np.zeros(problem.n_generators)
-    limited = problem.generator_line >= 0
-    below[limited] = weight[problem.generator_line[limited]]
-    demand = float(problem.demand[minute - 1])
-    spread, reference = scales(problem)
-    rates = settings.revision_rates(problem)
-    if not len(rates):
-        own = float(np.max(demand * (2.0 * problem.c + below)))
-        return float(fp.gain) * max(spread, own)
-    graph = generator_graph(problem, settings)
-    fan = 1 if _complete(graph) else max(d for _, d in graph.degree) + 1
-    own = float(np.max(rates * (2.0 * problem.c + below)))
-    field = float(fp.gain) * demand * fan * max(own, spread / reference)
-    price = 2.0 * STABLE_STEP * float(fp.price_rate) / float(fp.C) if len(problem.limit) else 0.0
-    return max(field, price)
-
-
 def default_step(problem: DispatchProblem, settings: RunSettings, minute: int,
                  local: bool = False) -> float:  # fmt: skip
     """The default round step, s: in exact mode ``STABLE_STEP / rate``
     (:data:`popdispatch.integrate.STABLE_STEP`, the largest ``h * rate`` the engine's Heun
-    steps take; ``rate``: :func:`stiffness_rate`, or with the ``local`` step of the
-    curvature-scaled field :func:`local_stiffness_rate`); in paper mode the engine's own Euler
-    substep (the mode's integrator: ``dt / substeps``)."""
+    steps take; ``rate``: :func:`~popdispatch.online.stiffness.stiffness_rate`, or with the
+    ``local`` step of the curvature-scaled field :func:`local_stiffness_rate`); in paper mode
+    the engine's own Euler substep (the mode's integrator: ``dt / substeps``)."""
     if not get_mode(settings.mode).bounded:
         stepping = settings.stepping
         return stepping.dt / stepping.substeps
@@ -117,15 +73,14 @@ def local_stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute
     factor (:meth:`~popdispatch.agents.generator.GeneratorRule.step_factor`), which keeps
     each generator's own mode, its curvature and the proportional part of the prices above
     it, stable at any step: the larger of the line prices' rate ``2 STABLE_STEP alpha / C``
-    (:func:`stiffness_rate`) and LOCAL_FIELD_RATES times the rate at which every interior
-    marginal cost relaxes, ``gain D S / P`` (the coupling between generators, which no own
-    factor bounds)."""
+    (:func:`~popdispatch.online.stiffness.price_loop_rate`) and LOCAL_FIELD_RATES times the
+    rate at which every interior marginal cost relaxes, ``gain D S / P`` (the coupling
+    between generators, which no own factor bounds)."""
     fp = settings.game_constants(problem)
     demand = float(problem.demand[minute - 1])
     spread, reference = scales(problem)
     field = LOCAL_FIELD_RATES * float(fp.gain) * demand * spread / reference
-    price = 2.0 * STABLE_STEP * float(fp.price_rate) / float(fp.C) if len(problem.limit) else 0.0
-    return max(field, price)
+    return max(field, price_loop_rate(problem, settings))
 
 
 #: The round step with the local step is at most ``STABLE_STEP / (LOCAL_FIELD_RATES gain D S /

@@ -49,8 +49,16 @@ def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int)
     fan = _fan(problem, settings)
     own = float(np.max(rates * (2.0 * problem.c + below)))
     field = float(fp.gain) * demand * fan * max(own, spread / reference)
-    price = 2.0 * STABLE_STEP * float(fp.price_rate) / float(fp.C) if len(problem.limit) else 0.0
-    return max(field, price)
+    return max(field, price_loop_rate(problem, settings))
+
+
+def price_loop_rate(problem: DispatchProblem, settings: RunSettings) -> float:
+    """The line prices' part of :func:`stiffness_rate`, 1/s: ``2 STABLE_STEP alpha / C``
+    where a line is limited (``alpha`` the price rate, ``C`` the proportional weight), else 0."""
+    if not len(problem.limit):
+        return 0.0
+    fp = settings.game_constants(problem)
+    return 2.0 * STABLE_STEP * float(fp.price_rate) / float(fp.C)
 
 
 def round_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
