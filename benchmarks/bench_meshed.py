@@ -9,7 +9,8 @@ grid and mv_oberrhein with their rings closed (tests/test_meshed.py ``ring_net``
 ~2,000-bus meshed case with its own ratings (default ``case2383wp``).
 
 - *to accuracy*: the iteration the run is certified at (``converged_at``): within
-  ``max(1e-6 demand, 1e-6 kW)`` of the DC-OPF, proved by the distance certificate.
+  ``max(1e-3 kW, 1e-6 demand)`` (the default accuracy) of the DC-OPF, proved by the
+  distance certificate.
 - *to 1 %*: the first iteration from which every later one has a cost within 1 % of the
   DC-OPF's and no limited line more than 1 % over its limit (the criterion of the
   distributed-OPF literature, e.g. PowerModelsADA.jl's).
@@ -76,7 +77,7 @@ def to_gap(problem, run, cost: float, gap: float = 0.01) -> int:
 
 def restarts_to_accuracy(problem, settings: RunSettings, most: int = 40) -> str:
     """Run the engine, then restart it from each rest until the certificate proves the
-    accuracy (``run_snapshot`` continues only while each rest halves the proved bound):
+    accuracy (``run_snapshot`` continues only while each rest lowers the proved bound by 1 %):
     restarts, iterations in all, engine seconds and the bounds (kW)."""
     from popdispatch.online import initial_shares
     from popdispatch.online.engine import Engine

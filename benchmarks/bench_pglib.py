@@ -13,8 +13,8 @@ every branch), demand and linear or quadratic costs, read by ``read_matpower_net
 (MATPOWER's DC model; PGLib's angle-difference limits are not modelled).
 
 - *to accuracy*: the iteration the run is certified at (``converged_at``): within
-  ``max(1e-6 demand, 1e-6 kW)`` of the DC-OPF, proved by the distance certificate; "None"
-  when not proved.
+  ``max(1e-3 kW, 1e-6 demand)`` (the default accuracy) of the DC-OPF, proved by the
+  distance certificate; "None" when not proved.
 - *to 1 %*: the first iteration from which every later one has a cost within 1 % of
   Clarabel's optimal cost (relative to it) and no limited line more than 1 % over its rating
   (relative to the rating); every iterate meets the demand exactly (``sum p = P_d``).

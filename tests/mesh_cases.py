@@ -31,10 +31,15 @@ def pandapower_case(case: str, limits_mw: dict[tuple[int, int], float]):
     """pandapower's own copy of a MATPOWER case with the lines between the given MATPOWER
     buses limited (MW), solved by ``rundcopp``: set points in MATPOWER's generator order
     (ext_grid first, then gens; the slack is the cases' first generator) and the cost."""
-    import pandapower as pp
     import pandapower.networks as pn
 
-    net = getattr(pn, case)()
+    return rundcopp(getattr(pn, case)(), limits_mw)
+
+
+def rundcopp(net, limits_mw: dict[tuple[int, int], float]):
+    """:func:`pandapower_case` of a pandapower copy ``net`` of a MATPOWER case (changed)."""
+    import pandapower as pp
+
     for (a, b), mw in limits_mw.items():
         pair = ((net.line.from_bus == a - 1) & (net.line.to_bus == b - 1)) | (
             (net.line.from_bus == b - 1) & (net.line.to_bus == a - 1)

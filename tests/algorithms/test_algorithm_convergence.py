@@ -166,10 +166,9 @@ def test_what_the_defaults_do_not_reach_in_the_horizon_is_reported_so(label, nam
     assert _check_honest(run, problem, minute) > _tol(problem, minute)
 
 
-def test_population_dynamics_step_is_the_agents_round_step():
-    """The rounds' step follows exact mode's stiffness estimate, the one the agents pace
-    their rounds by (popdispatch.agents.population.default_step), on every case and graph."""
-    from popdispatch.agents.population import default_step
+def test_population_dynamics_run_exact_modes_field():
+    """The rounds revise by exact mode's default field (curvature-scaled), on every case and
+    graph."""
     from popdispatch.algorithms.base import Minute
     from popdispatch.algorithms.network import Network
     from popdispatch.algorithms.population import PopulationDynamics
@@ -183,6 +182,3 @@ def test_population_dynamics_step_is_the_agents_round_step():
                                    exact=ExactConstants(price_rate=params.price_rate))  # fmt: skip
             algorithm = PopulationDynamics(Minute.of(problem, minute), Network(), params)
             assert algorithm.field == settings.field == Field.CAPACITY_NEWTON
-            assert algorithm.h == pytest.approx(
-                params.step * default_step(problem, settings, minute), rel=1e-12
-            )

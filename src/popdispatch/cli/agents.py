@@ -169,6 +169,16 @@ class AgentOptions(NamedTuple):
     paced: bool
 
 
+def _local_step(settings) -> bool:
+    """Whether the agents' local step is in force (docs/agents.md, "The local step"): the
+    default in exact mode's curvature-scaled field."""
+    from popdispatch.agents.system import AgentSettings
+    from popdispatch.dynamics.fields import Field
+
+    return (AgentSettings().local_step and settings.mode == "exact"
+            and settings.field == Field.CAPACITY_NEWTON)  # fmt: skip
+
+
 def _agent_settings(options: AgentOptions):
     """The :class:`~popdispatch.agents.system.AgentSettings` of the command's options."""
     from popdispatch.agents.system import AgentSettings
@@ -233,6 +243,7 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
         rounds=run.rounds,
         step_s=run.step_s,
         step_source="given" if options.step_s is not None else "default",
+        local_step=_local_step(settings),
         horizon_reason=run.horizon_reason,
         paced=options.paced,
         phase_ticks=run.phase_ticks,
@@ -289,7 +300,9 @@ def agents_text(s: dict) -> str:
         + (f"; rounds paced to {s['phase_ticks']} ticks per phase" if s["phase_ticks"] > 1 else ""),
         limits_text(s["limits"], s["limits_in_force"]),
         f"status: {s['dynamics_status']} after {s['rounds']} rounds of {s['step_s']:.4g} s "
-        f"({s['step_source']} step)"
+        f"({s['step_source']} step"
+        + ("; each generator damps its own by its curvature" if s["local_step"] else "")
+        + ")"
         + (
             f" (at rest from round {s['rest_iteration']})"
             if s["rest_iteration"] is not None

@@ -360,8 +360,8 @@ def feeder_options(func):
             "--net",
             type=click.Path(exists=True, dir_okay=False, path_type=Path),
             help="Any network: MATPOWER case (.m), pandapower JSON (.json) or OpenDSS master "
-            "(.dss); runs on its own loads, generators and costs. A MATPOWER or pandapower "
-            "network with loops runs on MATPOWER's DC model (docs/meshed.md).",
+            "(.dss); runs on its own loads, generators and costs. A network with loops runs "
+            "on MATPOWER's DC model (docs/meshed.md).",
         ),
         option(
             "--case",

@@ -92,12 +92,14 @@ class DcNetwork:
 
     @cached_property
     def loads(self) -> pd.DataFrame:
-        """The buses with a fixed demand as loads: index ``load<bus>``, columns ``bus`` and
-        ``p_kw`` (kW, ``pd_mw``), so that a load table names them by load or by bus."""
+        """The buses with a fixed demand as loads: index ``load<bus>`` (the bus as the source
+        format names it), columns ``bus`` (its id) and ``p_kw`` (kW, ``pd_mw``), so that a
+        load table names them by load or by bus."""
         rows = self.buses[self.buses.pd_mw != 0]
         return pd.DataFrame(
             {"bus": rows.index.to_numpy(), "p_kw": rows.pd_mw.to_numpy(float) * KW_PER_MW},
-            index=pd.Index([f"load{bus}" for bus in rows.index], name="load"),
+            index=pd.Index([f"load{label}" for label in self.bus_labels(rows.index)],
+                           name="load"),
         )
 
     def bus_demand_mw(self, load_kw: np.ndarray) -> np.ndarray:

@@ -330,7 +330,8 @@ def _run_day_loop(engine: Engine, x: np.ndarray, minutes: np.ndarray, out: DayAr
     engine's seconds. In a mode that claims the DC-OPF, a minute that comes to rest without
     the certificate's proof runs on from its end state as a snapshot does
     (:func:`_run_until_proved`) and, where that lowers its proved bound, the minutes after it
-    run again from there (the state they continue from has changed)."""
+    run again from there (the state they continue from has changed), from then on in chunks of
+    at most :data:`PROGRESS_CHUNK` minutes (so that a later run-on wastes at most that)."""
     seconds, position = 0.0, 0
     while position < len(minutes):
         part = slice(position, min(position + chunk, len(minutes)))
@@ -344,7 +345,7 @@ def _run_day_loop(engine: Engine, x: np.ndarray, minutes: np.ndarray, out: DayAr
             lowered, ran = _run_on_minute(engine, x, minutes, out, row)
             seconds += ran
             if lowered:
-                end = row + 1
+                end, chunk = row + 1, min(chunk, PROGRESS_CHUNK)
                 break
         if progress is not None:
             for minute in minutes[position:end]:

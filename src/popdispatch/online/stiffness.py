@@ -21,7 +21,9 @@ def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int)
     - ``kappa D g max_i r_i (2 c_i + C_i)``: a generator's own relaxation rate (``kappa`` the
       revision gain per EUR/MW, ``D`` the minute's demand, MW, ``r_i`` its revision rate,
       ``C_i`` the price weight of the nearest limited line above it,
-      :func:`popdispatch.modes.exact.price_weights`, 0 below none), at least ``kappa D g S /
+      :func:`popdispatch.modes.exact.price_weights`, 0 below none; on a meshed network the
+      largest of each limited line's weight times the generator's distribution factor to it,
+      in size), at least ``kappa D g S /
       P``, the rate at which every interior marginal cost relaxes; ``g`` the most receivers a
       sender's weights can sum over: 1 on the complete graph, the largest degree plus one on
       a sparse graph;
@@ -40,6 +42,8 @@ def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int)
     below = np.zeros(problem.n_generators)
     limited = problem.generator_line >= 0
     below[limited] = weight[problem.generator_line[limited]]
+    if problem.meshed and len(problem.limit):  # the line its output moves most, as one line
+        below = (np.abs(problem.factor) * weight[:, None]).max(axis=0)
     demand = float(problem.demand[minute - 1])
     spread, reference = scales(problem)
     rates = settings.revision_rates(problem)

@@ -83,6 +83,7 @@ Conversion rules
 
 from __future__ import annotations
 
+import contextlib
 import re
 import warnings
 from pathlib import Path
@@ -153,20 +154,29 @@ def read_opendss_master(
     """
     fleet = as_fleet(fleet)
     path = Path(master_path)
+    with _compiled_circuit(path, ratings) as (ctx, circuit):
+        try:
+            feeder = _feeder(circuit, path, fleet, root, name)
+        except MeshedError as exc:
+            raise MeshedError(f"{path}: {exc}{_open_point(ctx, circuit, exc)}",
+                              exc.loop_lines) from None  # fmt: skip
+    return feeder
+
+
+@contextlib.contextmanager
+def _compiled_circuit(path: Path, ratings: bool):
+    """``(OpenDSS context, circuit)`` of the script ``path`` compiled in place (the context
+    answers questions while the block runs); a problem names the script's file and line, and
+    the script's notes (what was skipped or applied) are warned once the block ends."""
     with compiled_script(path) as script:
         try:
             circuit = read_circuit(script.ctx, ratings)
         except FeederError as exc:
             raise _located(exc, script) from None
-        try:
-            feeder = _feeder(circuit, path, fleet, root, name)
-        except MeshedError as exc:
-            raise MeshedError(f"{path}: {exc}{_open_point(script.ctx, circuit, exc)}",
-                              exc.loop_lines) from None  # fmt: skip
+        yield script.ctx, circuit
     summary = script.summary()
     if summary:
-        warnings.warn(f"{path}: {summary}", UserWarning, stacklevel=2)
-    return feeder
+        warnings.warn(f"{path}: {summary}", UserWarning, stacklevel=4)
 
 
 def _open_point(ctx, circuit: Circuit, exc: MeshedError) -> str:
@@ -315,11 +325,12 @@ def read_opendss_network(
     """
     fleet = as_fleet(fleet)
     path = Path(master_path)
-    with compiled_script(path) as script:
-        try:
-            circuit = read_circuit(script.ctx, ratings)
-        except FeederError as exc:
-            raise _located(exc, script) from None
+    with _compiled_circuit(path, ratings) as (_, circuit):
+        return _dc_network(circuit, path, fleet, root, name)
+
+
+def _dc_network(circuit: Circuit, path: Path, fleet, root, name) -> DcNetwork:
+    """:func:`read_opendss_network` of a circuit read."""
     names = circuit.buses
     ids = bus_ids(names)
     lines = _branch_table(circuit, ids, path)
