@@ -32,7 +32,7 @@ import numpy as np
 
 from popdispatch.game.mesh import build_mesh_problem
 from popdispatch.online import RunSettings, run_snapshot
-from popdispatch.opf import generation_cost, solve_opf
+from popdispatch.opf import solve_opf
 from popdispatch.readers.matpower import read_matpower_network
 from popdispatch.readers.pandapower import read_pandapower_network
 
@@ -41,7 +41,9 @@ from popdispatch.readers.pandapower import read_pandapower_network
 CURVATURE = 0.01
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
-from test_meshed import CASES, congested, ring_net  # noqa: E402
+from bench_pglib import to_gap  # noqa: E402
+from mesh_cases import congested  # noqa: E402
+from test_meshed import CASES, ring_net  # noqa: E402
 
 
 def problems(big: str | None):
@@ -61,18 +63,6 @@ def problems(big: str | None):
         yield f"{big} (its own linear costs)", problem
         curved = replace(problem, c=np.full(problem.n_generators, CURVATURE))
         yield f"{big}, c_i = {CURVATURE} EUR/MW^2h added", curved
-
-
-def to_gap(problem, run, cost: float, gap: float = 0.01) -> int:
-    """First iteration from which cost is within ``gap`` of ``cost`` and overflow within
-    ``gap`` of each limit, for good."""
-    p = run.trajectory_kw / 1e3
-    costs = generation_cost(problem, p)
-    flows = problem.line_load_flow[0][None, :] - p @ problem.down.T
-    over = ((np.abs(flows) - problem.limit) / problem.limit).max(axis=1, initial=0.0)
-    ok = (np.abs(costs - cost) <= gap * abs(cost)) & (over <= gap)
-    bad = np.flatnonzero(~ok)
-    return 0 if not len(bad) else int(bad[-1] + 1)
 
 
 def restarts_to_accuracy(problem, settings: RunSettings, most: int = 40) -> str:
