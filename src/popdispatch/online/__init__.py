@@ -169,8 +169,7 @@ def _run_until_proved(engine: Engine, x: np.ndarray, minute: int) -> tuple[Minut
     pieces, done, last_bound = [run.trajectory], run.iterations, np.inf
     first = run.first_congestion
     while run.status == Status.CONVERGED and done < horizon:
-        p = run.x * engine.problem.demand[minute - 1]
-        bound = engine.certificates(np.array([minute]), p[None], engine.z[None])[0].distance_mw
+        bound = _bound_mw(engine, minute, run.x * engine.problem.demand[minute - 1], engine.z)
         if bound <= accuracy or not bound < RUN_ON_FACTOR * last_bound:
             break
         last_bound = bound
@@ -341,8 +340,8 @@ def _run_day_loop(engine: Engine, x: np.ndarray, minutes: np.ndarray, out: DayAr
         seconds += time.perf_counter() - began
         out.last_demand = view.last_demand
         end = part.stop
-        for row in _unproved_rows(engine, minutes, out, part):
-            lowered, ran = _run_on_minute(engine, x, minutes, out, row)
+        for row, bound in _unproved_rows(engine, minutes, out, part):
+            lowered, ran = _run_on_minute(engine, x, minutes, out, row, bound)
             seconds += ran
             if lowered:
                 end, chunk = row + 1, min(chunk, PROGRESS_CHUNK)
@@ -354,9 +353,16 @@ def _run_day_loop(engine: Engine, x: np.ndarray, minutes: np.ndarray, out: DayAr
     return seconds
 
 
+def _bound_mw(engine: Engine, minute: int, p_mw: np.ndarray, z: np.ndarray) -> float:
+    """The distance certificate's bound (MW) of one minute's end state: set points ``p_mw``
+    (MW) and controller states ``z``."""
+    return engine.certificates(np.array([minute]), p_mw[None], z[None])[0].distance_mw
+
+
 def _unproved_rows(engine: Engine, minutes: np.ndarray, out: DayArrays, part: slice) -> list:
-    """Rows of ``part`` at rest whose end state the certificate does not prove within the
-    accuracy (none in a mode that does not claim the DC-OPF)."""
+    """``(row, proved bound in MW)`` of the rows of ``part`` at rest whose end state the
+    certificate does not prove within the accuracy (none in a mode that does not claim the
+    DC-OPF)."""
     rows = np.arange(part.start, part.stop)
     rows = rows[out.status[rows] == Status.CONVERGED]
     if not engine.mode.claims_dc_opf or not len(rows):
@@ -364,25 +370,23 @@ def _unproved_rows(engine: Engine, minutes: np.ndarray, out: DayArrays, part: sl
     proofs = engine.certificates(minutes[rows], out.setpoints[rows], out.states[rows])
     accuracy = engine.settings.accuracy_mw(engine.problem.demand[minutes[rows] - 1])
     bounds = np.array([proof.distance_mw for proof in proofs])
-    return [int(r) for r in rows[~(bounds <= np.atleast_1d(accuracy))]]
+    short = ~(bounds <= np.atleast_1d(accuracy))
+    return [(int(r), float(b)) for r, b in zip(rows[short], bounds[short], strict=True)]
 
 
 def _run_on_minute(engine: Engine, x: np.ndarray, minutes: np.ndarray, out: DayArrays,
-                   row: int) -> tuple[bool, float]:  # fmt: skip
-    """Continue the minute of ``row`` from its end state (:func:`_run_until_proved`):
-    ``(lowered, engine seconds)``. Where that lowers its proved bound by
-    :data:`RUN_ON_FACTOR` (``lowered``), its row, ``x`` and the engine's state become the new
-    end state; else everything is left as it was."""
+                   row: int, before: float) -> tuple[bool, float]:  # fmt: skip
+    """Continue the minute of ``row``, whose end state proves ``before`` (MW), from that state
+    (:func:`_run_until_proved`): ``(lowered, engine seconds)``. Where that lowers its proved
+    bound by :data:`RUN_ON_FACTOR` (``lowered``), its row, ``x`` and the engine's state become
+    the new end state; else everything is left as it was."""
     minute = int(minutes[row])
     demand = engine.problem.demand[minute - 1]
     kept = engine.z.copy(), engine.h_try
-    before = engine.certificates(np.array([minute]), out.setpoints[row][None],
-                                 out.states[row][None])[0].distance_mw  # fmt: skip
     engine.z[:] = out.states[row]
     run, seconds = _run_until_proved(engine, out.setpoints[row] / demand, minute)
     p = run.x * demand
-    after = engine.certificates(np.array([minute]), p[None], engine.z[None])[0].distance_mw
-    if not after < RUN_ON_FACTOR * before:
+    if not _bound_mw(engine, minute, p, engine.z) < RUN_ON_FACTOR * before:
         engine.z, engine.h_try = kept
         return False, seconds
     rested = run.converged_at >= 0
