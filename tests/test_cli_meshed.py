@@ -157,6 +157,40 @@ def test_a_closed_ring_pandapower_file_runs(tmp_path):
     assert np.abs(ours - reference).max() <= accuracy_kw(run["demand_kw"])
 
 
+def test_a_fleet_replaces_a_closed_ring_nets_own_generators(tmp_path):
+    """The CIGRE MV ring closed, saved without any cost data, and a ``--fleet`` file in its
+    place: ``snapshot`` lands on ``rundcopp`` of the net with that fleet as its only
+    dispatchable generators (the net's own sgens, not controllable, are fixed injections)."""
+    net = pn.create_cigre_network_mv(with_der="pv_wind")
+    net.switch["closed"] = True
+    net.sgen["controllable"] = False
+    net.line["max_loading_percent"] = net.trafo["max_loading_percent"] = 1000.0
+    pp.to_json(net, str(tmp_path / "cigre.json"))
+    grid_bus = int(net.ext_grid.bus.iloc[0])
+    fleet = [("grid", grid_bus, 40.0, 1.0, 100000.0), ("ga", 5, 20.0, 30.0, 3000.0),
+             ("gb", 11, 25.0, 35.0, 3000.0)]  # fmt: skip
+    (tmp_path / "fleet.csv").write_text("bus,name,a,b,c,pmin_kw,pmax_kw\n" + "".join(
+        f"{bus},{name},0,{b},{c},0,{pmax}\n" for name, bus, b, c, pmax in fleet))  # fmt: skip
+    net.ext_grid["min_p_mw"], net.ext_grid["max_p_mw"] = 0.0, 100.0
+    pp.create_poly_cost(net, net.ext_grid.index[0], "ext_grid", cp1_eur_per_mw=40.0,
+                        cp2_eur_per_mw2=1.0)  # fmt: skip
+    for _, bus, b, c, pmax in fleet[1:]:
+        g = pp.create_sgen(net, bus, p_mw=0.0, min_p_mw=0.0, max_p_mw=pmax / 1e3,
+                           controllable=True)  # fmt: skip
+        pp.create_poly_cost(net, g, "sgen", cp1_eur_per_mw=b, cp2_eur_per_mw2=c)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pp.rundcopp(net)
+    reference = np.r_[net.res_ext_grid.p_mw.to_numpy(), net.res_sgen.p_mw.to_numpy()[-2:]] * 1e3
+    out = popdispatch("snapshot", "--net", str(tmp_path / "cigre.json"), "--fleet",
+                      str(tmp_path / "fleet.csv"), "--minute", "1", "--mode", "exact", "--json",
+                      "-q")  # fmt: skip
+    run = json.loads(out.stdout)
+    ours = np.array([g["setpoint_kw"] for g in run["generators"]])
+    assert run["status"] == "converged"
+    assert np.abs(ours - reference).max() <= accuracy_kw(run["demand_kw"])
+
+
 @pytest.mark.parametrize(
     ("option", "extra"),
     [("--ac", []), ("--html", ["x.html"]), ("--price-law", ["tree", "--mode", "exact"])],

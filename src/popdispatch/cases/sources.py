@@ -181,25 +181,16 @@ def _read_dc_network(path: Path, source: FeederSource) -> DcNetwork:
     ``source``'s fleet, ratings and slack bus."""
     from dataclasses import replace
 
+    import popdispatch.readers as readers
     from popdispatch.feeder.generators import read_fleet
 
     fleet = read_fleet(source.fleet) if source.fleet is not None else None
-    if path.suffix.lower() == ".m":
-        from popdispatch.readers.matpower import read_matpower_network
-
-        net = read_matpower_network(path, fleet=fleet, ratings=source.ratings)
-    elif path.suffix.lower() == ".dss":
-        from popdispatch.readers.opendss_direct import read_opendss_network
-
-        return read_opendss_network(path, fleet=fleet, root=source.root, ratings=source.ratings)
-    else:
-        from popdispatch.readers.pandapower import read_pandapower_network
-
-        net = read_pandapower_network(path)
-        if fleet is not None:
-            net = replace(net, generators=fleet)
-        if not source.ratings:
-            net = replace(net, lines=net.lines.assign(limit_kw=float("inf")))
+    suffix = path.suffix.lower()
+    if suffix == ".dss":
+        return readers.read_opendss_network(path, fleet=fleet, root=source.root,
+                                            ratings=source.ratings)  # fmt: skip
+    read = readers.read_matpower_network if suffix == ".m" else readers.read_pandapower_network
+    net = read(path, fleet=fleet, ratings=source.ratings)
     if source.root is not None:
         net = replace(net, slack_bus=net.bus_id(source.root))
     return net

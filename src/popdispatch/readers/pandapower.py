@@ -755,7 +755,9 @@ def _known(pmax: float, et: str, index) -> float:
 OPF_DELTA_MW = 1e-10
 
 
-def read_pandapower_network(net_or_path, name: str = "") -> DcNetwork:
+def read_pandapower_network(
+    net_or_path, name: str = "", *, fleet: pd.DataFrame | None = None, ratings: bool = True
+) -> DcNetwork:
     """A pandapower net of any shape (closed rings, meshes) as a
     :class:`~popdispatch.feeder.dcnet.DcNetwork`, from pandapower's own conversion to its
     internal MATPOWER-format case for a DC OPF (``rundcopp``'s: closed bus-bus switches fuse
@@ -763,8 +765,9 @@ def read_pandapower_network(net_or_path, name: str = "") -> DcNetwork:
     net given is not changed). Buses keep the pandapower index of their fused group's smallest
     member; branches are named ``line<index>``/``trafo<index>``; the fleet is the ext_grids,
     gens and controllable sgens with their ``poly_cost`` (``G<table><index>``, e.g.
-    ``Gsgen3``), within their ``min_p_mw``/``max_p_mw``; what is not controllable is fixed
-    demand, as in ``rundcopp``. A ``pwl_cost`` is refused."""
+    ``Gsgen3``), within their ``min_p_mw``/``max_p_mw``, or ``fleet`` (buses by pandapower
+    index); what is not controllable is fixed demand, as in ``rundcopp``. A ``pwl_cost`` of
+    the net's own fleet is refused. ``ratings=False``: every line unlimited."""
     import copy
 
     from pandapower.auxiliary import _add_auxiliary_elements, _init_rundcopp_options
@@ -773,7 +776,7 @@ def read_pandapower_network(net_or_path, name: str = "") -> DcNetwork:
     net, default = _load(net_or_path)
     net = copy.deepcopy(net)
     pwl = _table(net, "pwl_cost")
-    if pwl is not None and len(pwl):
+    if fleet is None and pwl is not None and len(pwl):
         row = pwl.iloc[0]
         raise FleetError(f"{row.et} {row.element} has a piecewise-linear cost (pwl_cost): "
                          "popdispatch takes polynomial costs (poly_cost) only")  # fmt: skip
@@ -796,10 +799,10 @@ def read_pandapower_network(net_or_path, name: str = "") -> DcNetwork:
     lines = pd.DataFrame(
         {"from_bus": ids[branch[on, 0].astype(int)], "to_bus": ids[branch[on, 1].astype(int)],
          "x_pu": branch[on, 3], "tap": branch[on, 8], "shift_deg": branch[on, 9],
-         "limit_kw": np.where(rate > 0, rate, np.inf)},
+         "limit_kw": np.where((rate > 0) & ratings, rate, np.inf)},
         index=pd.Index(names[on], name="line"),
     )  # fmt: skip
-    fleet = _network_fleet(lookups, ids, gen, cost)
+    fleet = _network_fleet(lookups, ids, gen, cost) if fleet is None else as_fleet(fleet)
     slack = int(ids[np.flatnonzero(bus[:, 1] == 3)[0]])
     return DcNetwork(name or default, float(ppci["baseMVA"]), buses, lines, fleet, slack)
 
