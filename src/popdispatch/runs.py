@@ -280,7 +280,7 @@ def load_run(
             feeder = require_fleet(feeder)
         if note:
             progress.note(note)
-        if note and series_kind is not None:
+        if isinstance(feeder, DcNetwork) and series_kind is not None:
             raise OptionError(f"load shapes are not run on a meshed network ({feeder.name}: one "
                               "step, or a --loads table)", "--series")  # fmt: skip
         series = series_for(source, feeder, profiles, loads, minute, progress, series_kind)
