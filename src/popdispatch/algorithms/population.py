@@ -53,6 +53,7 @@ from popdispatch.algorithms.network import Message, Network
 from popdispatch.dynamics import communication_graph
 from popdispatch.dynamics.fields import field_tag, law_of
 from popdispatch.dynamics.pairwise import RELAY_MASS
+from popdispatch.game.controllers import overflow_signal
 from popdispatch.game.fitness import generator_fitness
 from popdispatch.online import RunSettings
 from popdispatch.online.stiffness import round_step
@@ -67,12 +68,15 @@ class SmithParams:
     default);
     graph: the communication graph (complete, or a sparse one of
     :data:`popdispatch.dynamics.GRAPHS`); silent_rounds: rounds without a report after which
-    a partner counts as gone."""
+    a partner counts as gone; mode: ``"exact"`` or ``"paper"`` (the paper's rule: the
+    generator-limit barrier of eq. 7 and the memoryless congestion signals of eq. 8, one
+    round the engine's Euler substep times ``step``; ``price_rate`` unused)."""
 
     step: float = 0.3
     price_rate: float | None = 1000.0
     graph: str = "complete"
     silent_rounds: int = 40
+    mode: str = "exact"
 
 
 class PopulationDynamics(Algorithm):
@@ -90,8 +94,11 @@ class PopulationDynamics(Algorithm):
         exact = ExactConstants() if params.price_rate is None else \
             ExactConstants(price_rate=params.price_rate)  # fmt: skip
         sparse = params.graph != "complete"
-        settings = RunSettings(mode="exact", dynamics="distributed-smith" if sparse else "smith",
+        settings = RunSettings(mode=params.mode,
+                               dynamics="distributed-smith" if sparse else "smith",
                                graph=params.graph, exact=exact)  # fmt: skip
+        self.paper = params.mode == "paper"
+        self.claims_optimum = not self.paper  # paper mode rests away from the DC-OPF
         self.fp = settings.game_constants(problem)
         self.field = settings.field
         tag = field_tag(self.field)
@@ -102,9 +109,15 @@ class PopulationDynamics(Algorithm):
         self.neighbours = [np.flatnonzero(self.graph[i]) for i in range(n)]
         self.complete = bool((self.graph + np.eye(n) > 0).all())
         self.p = balanced_start(minute)
+        # the range the transfers keep each DG in: its limits (exact mode's capacity rule),
+        # or any share of the demand (paper mode: the barrier of eq. 7 keeps the limits)
+        online = problem.online[minute.minute - 1]
+        self.lo_box, self.hi_box = (np.zeros(n), np.where(online, minute.demand, 0.0)) \
+            if self.paper else (minute.lo, minute.hi)  # fmt: skip
         # each DG's share of each line price: D_ki - 1/2 (+1/2 below the line and -1/2 above
         # it on a radial feeder; its distribution factor on a meshed network)
         self.split = np.ascontiguousarray(problem.down.T - 0.5)
+        self.factor_t = np.ascontiguousarray(problem.down.T)
         self._boxes: dict[tuple, tuple] = {}  # a view's (lo, hi, active, rate)
         self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
         self.z = np.zeros((len(problem.limit), 2))
@@ -113,6 +126,7 @@ class PopulationDynamics(Algorithm):
         self.heard = np.zeros((n, n), dtype=int)
         self.gone = np.zeros((n, n), dtype=bool)
         self.nu = np.zeros((n, len(problem.limit)))  # each DG's last price from each line
+        self.sides = np.zeros((n, len(problem.limit), 2))  # paper: (parent, child) signals
         self.nu_round = np.full((n, len(problem.limit)), -1)
         self.seq = np.zeros(n, dtype=int)
         self.outstanding: list[dict] = [{} for _ in range(n)]  # key -> [to, amount, sent, tries]
@@ -166,6 +180,11 @@ class PopulationDynamics(Algorithm):
         for k, name in enumerate(self.controllers):
             if self.net.crashed(name):
                 continue
+            if self.paper:
+                for dg in self.m.names:
+                    self.net.send(name, dg, "price", paper_signals(flows[k], limit[k], fp.C),
+                                  reveals="line price")  # fmt: skip
+                continue
             excess = np.array([flows[k] - limit[k], -flows[k] - limit[k]])
             mu = np.maximum(0.0, self.z[k] + fp.C * excess)
             self.z[k] = np.maximum(self.z[k] + h * fp.price_rate * excess, 0.0)
@@ -182,7 +201,11 @@ class PopulationDynamics(Algorithm):
         if message.kind == "price":
             k = self.controllers.index(message.sender)
             if message.sent > self.nu_round[i, k]:
-                self.nu[i, k], self.nu_round[i, k] = message.values[0], message.sent
+                self.nu_round[i, k] = message.sent
+                if self.paper:
+                    self.sides[i, k] = message.values
+                else:
+                    self.nu[i, k] = message.values[0]
         elif message.kind == "report":
             j = names.index(message.sender)
             if message.sent > self.heard[i, j]:
@@ -191,7 +214,7 @@ class PopulationDynamics(Algorithm):
         elif message.kind == "transfer":
             if message.key not in self.accepted[i]:
                 refunds = sum(e[1] for e in self.outstanding[i].values())
-                room = max(self.m.hi[i] - self.p[i] - refunds, 0.0)
+                room = max(self.hi_box[i] - self.p[i] - refunds, 0.0)
                 take = min(message.values[0], room)
                 self.accepted[i][message.key] = take
                 self.p[i] += take
@@ -229,8 +252,7 @@ class PopulationDynamics(Algorithm):
         view = [i] + partners
         seen = self.report[i, partners]  # (partners, 4): their last reports
         p_view = np.concatenate(([self.p[i]], seen[:, 2]))
-        signal = self.split[i] @ self.nu[i]
-        f_i = self._fitness(i, signal)
+        f_i = self._fitness(i, self._signal(i))
         f_view = np.concatenate(([f_i], seen[:, 0]))
         w, v, room, mass = self._weights(view, p_view, f_view)
         blocked = not (w[0] > 0 and mass[0] > RELAY_MASS and room[0] > RELAY_MASS)
@@ -252,7 +274,7 @@ class PopulationDynamics(Algorithm):
         hops = np.array([1 + len(r) for r in routes])
         out = self._limited_outflows(view, f_view, w_view, p_view, hops, known)
         pending = sum(a for _, a in self.debits[i])
-        movable = max(self.p[i] - m.lo[i] - pending, 0.0)
+        movable = max(self.p[i] - self.lo_box[i] - pending, 0.0)
         total = out.sum()
         if total > movable:
             out = out * (movable / total)
@@ -266,9 +288,10 @@ class PopulationDynamics(Algorithm):
         (:func:`popdispatch.reference.weights`), in shares of the demand."""
         box = self._boxes.get(tuple(view))
         if box is None:
-            m = self.m
-            lo, hi = m.lo[view] / m.demand, m.hi[view] / m.demand
-            box = self._boxes[tuple(view)] = (lo, hi, hi > lo, self.rate[view])
+            demand = self.m.demand
+            lo, hi = self.lo_box[view] / demand, self.hi_box[view] / demand
+            rate = self.rate[view] if len(self.rate) else self.rate  # none in paper mode
+            box = self._boxes[tuple(view)] = (lo, hi, hi > lo, rate)
         return self._law_weights(p / self.m.demand, f, *box)
 
     def _limited_outflows(self, view, f, w, p, hops, known=None) -> np.ndarray:
@@ -287,15 +310,26 @@ class PopulationDynamics(Algorithm):
         beta = np.where(h * inflow > room, room / (h * inflow), 1.0)
         out = h * beta[1:] * w[1:] * v[0] * np.maximum(f[1:] - f[0], 0.0) * m.demand
         waves = 4 * (1 + self.net.faults.delay_max) * hops * max(1, len(self.m.names) - 1)
-        return np.minimum(out, np.maximum(m.hi[view[1:]] - p[1:], 0.0) / waves)
+        return np.minimum(out, np.maximum(self.hi_box[view[1:]] - p[1:], 0.0) / waves)
+
+    def _signal(self, i: int) -> float:
+        """DG ``i``'s congestion signal from the line prices it last heard, EUR/MW: exact
+        mode's split ``(D_ki - 1/2) nu_k``; paper mode's side of each line, ``parent_k + D_ki
+        (child_k - parent_k)`` (eq. 8's value at the end of the line facing the DG)."""
+        if self.paper:
+            sides = self.sides[i]
+            return float(sides[:, 0].sum() + self.factor_t[i] @ (sides[:, 1] - sides[:, 0]))
+        return float(self.split[i] @ self.nu[i])
 
     def _fitness(self, i: int, signal: float) -> float:
-        """DG ``i``'s exact-mode fitness (the engine's kernel, as the reference calls it)."""
+        """DG ``i``'s fitness (the engine's kernel, as the reference calls it): exact mode's
+        (scaled by its gain, no barrier) or the paper's (eqs. 5-7, the barrier)."""
         pr, one = self.m.problem, slice(i, i + 1)
         fp = self.fp
+        gain = 1.0 if self.paper else float(fp.gain)
         return float(generator_fitness(self.p[one], pr.b[one], pr.c[one], self.m.lo[one],
                                        self.m.hi[one], float(fp.B), float(fp.m),
-                                       np.array([signal]), float(fp.gain), False)[0])  # fmt: skip
+                                       np.array([signal]), gain, self.paper)[0])  # fmt: skip
 
     def _send_transfer(self, i: int, j: int, amount: float, round_: int, via=()) -> None:
         key = (self.m.names[i], int(self.seq[i]))
@@ -329,7 +363,7 @@ class PopulationDynamics(Algorithm):
         candidates = []
         for j in self._partners(i):
             f, w, p, blocked = self.report[i, j]
-            if not blocked and w > 0 and m.hi[j] - p > RELAY_MASS * m.demand:
+            if not blocked and w > 0 and self.hi_box[j] - p > RELAY_MASS * m.demand:
                 candidates.append((f, -j, j, w, p, ()))
         for k, (b, f, w, p, via, sent) in self.announced[i].items():
             if self.gone[i, k] or round_ - sent > self._fresh(round_) or i in via or b == i:
@@ -342,6 +376,15 @@ class PopulationDynamics(Algorithm):
             if j != b and names[j] not in via:
                 self.net.send(names[i], names[j], "relay", [f, w, p], key=(b, via),
                               reveals="fitness")  # fmt: skip
+
+
+def paper_signals(flow: float, limit: float, C: float) -> tuple[float, float]:
+    """Eq. 8 at a limited line's two ends (EUR/MW), from its flow ``flow`` and rating
+    ``limit`` (MW, + towards the loads below): the parent-end controller's value and the
+    child-end one's (0 unless the parent end signals), as paper mode's engine computes them
+    (:func:`popdispatch.modes.paper.controller_values`)."""
+    parent = overflow_signal(flow, limit, C)
+    return parent, (overflow_signal(-flow, limit, C) if parent != 0.0 else 0.0)
 
 
 @cache

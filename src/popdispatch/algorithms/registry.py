@@ -22,6 +22,10 @@ class Entry:
 ALGORITHMS: dict[str, Entry] = {
     "smith": Entry(PopulationDynamics, SmithParams),
     "distributed-smith": Entry(PopulationDynamics, partial(SmithParams, step=1.0, graph="ring")),
+    "smith-paper": Entry(PopulationDynamics, partial(SmithParams, step=1.0, mode="paper")),
+    "distributed-smith-paper": Entry(
+        PopulationDynamics, partial(SmithParams, step=1.0, graph="ring", mode="paper")
+    ),
     "dual-decomposition": Entry(DualDecomposition, DualParams),
     "fast-dual-decomposition": Entry(
         DualDecomposition, partial(DualParams, balance_step=0.5, accelerated=True)

@@ -9,6 +9,7 @@ import numpy as np
 from popdispatch.dynamics import communication_graph, get_dynamics
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import STABLE_STEP
+from popdispatch.modes import get_mode
 from popdispatch.modes.exact import price_weights, scales
 from popdispatch.online.settings import RunSettings
 
@@ -68,7 +69,11 @@ def price_loop_rate(problem: DispatchProblem, settings: RunSettings) -> float:
 def round_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
     """The largest explicit round step of exact mode at ``minute``, s: ``STABLE_STEP /``
     :func:`stiffness_rate` (:data:`popdispatch.integrate.STABLE_STEP`, the largest ``h *
-    rate`` the engine's Heun steps take)."""
+    rate`` the engine's Heun steps take); in paper mode (a mode whose barrier keeps the
+    limits) the engine's own Euler substep, ``dt / substeps``."""
+    if not get_mode(settings.mode).bounded:
+        stepping = settings.stepping
+        return stepping.dt / stepping.substeps
     return STABLE_STEP / stiffness_rate(problem, settings, minute)
 
 
