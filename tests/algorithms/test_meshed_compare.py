@@ -1,7 +1,9 @@
 """The comparison on a meshed network (MATPOWER's case14, two lines limited below their
 unconstrained flows): population dynamics and dual decomposition weigh each line price by the
-DG's distribution factor and reach the DC-OPF (Clarabel, and pandapower's ``rundcopp``);
-ADMM, whose nets follow a radial feeder's limited lines, is refused in one line."""
+DG's distribution factor, consensus ADMM gives each line's controller a copy of the DGs with a
+factor on its line, and all reach the DC-OPF (Clarabel, and pandapower's ``rundcopp``); ADMM
+by proximal message passing, whose nets follow a radial feeder's limited lines, is refused in
+one line."""
 
 from __future__ import annotations
 
@@ -33,11 +35,14 @@ def problem():
 
 
 @pytest.mark.parametrize(
-    "name", ["smith", "distributed-smith", "dual-decomposition", "fast-dual-decomposition"]
-)
-def test_the_algorithms_reach_the_dc_opf_of_a_mesh(problem, name):
-    """At the registry's defaults (tuned on a radial feeder)."""
-    run = run_algorithm(name, problem, 1, Faults())
+    ("name", "loss"),
+    [("smith", 0.0), ("distributed-smith", 0.0), ("dual-decomposition", 0.0),
+     ("fast-dual-decomposition", 0.0), ("consensus-admm", 0.0), ("consensus-admm", 0.1)],
+)  # fmt: skip
+def test_the_algorithms_reach_the_dc_opf_of_a_mesh(problem, name, loss):
+    """At the registry's defaults (tuned on a radial feeder); consensus ADMM's line
+    controllers hold a copy of every DG with a factor on their line."""
+    run = run_algorithm(name, problem, 1, Faults(loss=loss, seed=1))
     opf = solve_opf(problem, 1)
     reference, _ = pandapower_case("case14", {(a, b): kw / 1e3 for a, b, kw in LIMITS})
     assert (np.abs(opf.line_price) > 1e-3).any()  # the limits bind

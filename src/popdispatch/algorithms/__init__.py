@@ -9,6 +9,7 @@ not the mango agents of :mod:`popdispatch.agents`). The registry
 from __future__ import annotations
 
 from popdispatch.algorithms.admm import AdmmParams
+from popdispatch.algorithms.consensus_admm import ConsensusAdmmParams
 from popdispatch.algorithms.dual import DualParams
 from popdispatch.algorithms.network import Faults, Network
 from popdispatch.algorithms.population import SmithParams
@@ -16,6 +17,7 @@ from popdispatch.algorithms.registry import ALGORITHMS
 from popdispatch.algorithms.runner import AlgorithmRun, RunOptions, run_algorithm
 
 __all__ = [
-    "ALGORITHMS", "AlgorithmRun", "AdmmParams", "DualParams", "Faults", "Network",
+    "ALGORITHMS", "AlgorithmRun", "AdmmParams", "ConsensusAdmmParams", "DualParams", "Faults",
+    "Network",
     "RunOptions", "SmithParams", "run_algorithm",
 ]  # fmt: skip

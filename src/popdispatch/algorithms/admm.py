@@ -98,8 +98,8 @@ class Admm(Algorithm):
             from popdispatch.errors import OptionError
 
             raise OptionError(f"admm's nets follow a radial feeder's limited lines; "
-                              f"{problem.feeder.name} is meshed (the other algorithms run on "
-                              "it)", "--algorithms")  # fmt: skip
+                              f"{problem.feeder.name} is meshed (consensus-admm and the "
+                              "other algorithms run on it)", "--algorithms")  # fmt: skip
 
     def __init__(self, minute: Minute, network: Network, params: AdmmParams):
         super().__init__(minute, network, params)

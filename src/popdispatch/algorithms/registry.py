@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from functools import partial
 
 from popdispatch.algorithms.admm import Admm, AdmmParams
+from popdispatch.algorithms.consensus_admm import ConsensusAdmm, ConsensusAdmmParams
 from popdispatch.algorithms.dual import DualDecomposition, DualParams
 from popdispatch.algorithms.population import PopulationDynamics, SmithParams
 
@@ -31,4 +32,5 @@ ALGORITHMS: dict[str, Entry] = {
         DualDecomposition, partial(DualParams, balance_step=0.5, accelerated=True)
     ),
     "admm": Entry(Admm, AdmmParams),
+    "consensus-admm": Entry(ConsensusAdmm, ConsensusAdmmParams),
 }

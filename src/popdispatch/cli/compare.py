@@ -36,10 +36,10 @@ from popdispatch.progress import Progress
 
 #: The registry's names (checked against :data:`popdispatch.algorithms.ALGORITHMS` by a test).
 ALGORITHM_NAMES = ("smith", "distributed-smith", "dual-decomposition",
-                   "fast-dual-decomposition", "admm", "smith-paper",
+                   "fast-dual-decomposition", "admm", "consensus-admm", "smith-paper",
                    "distributed-smith-paper")  # fmt: skip
 #: What ``--algorithms`` runs by default: each method in the mode that claims the DC-OPF.
-DEFAULT_ALGORITHMS = ALGORITHM_NAMES[:5]
+DEFAULT_ALGORITHMS = ALGORITHM_NAMES[:6]
 
 
 class AlgorithmsType(click.ParamType):
@@ -100,7 +100,8 @@ class CrashType(click.ParamType):
 def compare(algorithms, minute, limits, loss, delay_max, duplicate, crash, seeds, seed,
             max_rounds, profiles, source, out, as_json, quiet) -> int:  # fmt: skip
     """Population dynamics (Smith, distributed Smith on a ring), dual decomposition (plain and
-    fast) and ADMM on one minute, by messages through one simulated network with the same
+    fast) and ADMM (proximal message passing; consensus ADMM, which runs on meshes too) on one
+    minute, by messages through one simulated network with the same
     faults and counter, each measured every round against the DC-OPF. A run is converged only
     when its applied set points are within max(1e-3 kW, 1e-6 x demand) of the DC-OPF,
     balanced and within the line limits for 10 rounds in a row. smith-paper and
