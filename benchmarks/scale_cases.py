@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from popdispatch.feeder import Feeder
-from popdispatch.feeder.generators import make_fleet
+from popdispatch.feeder.generators import FLEET_COLUMNS, make_fleet
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.feeder.synthetic import synthetic_feeder, synthetic_load_kw
 from popdispatch.feeder.tree import depths
@@ -60,7 +60,7 @@ def test_fleet(feeder: Feeder) -> pd.DataFrame:
         path.append(int(tree.parent[path[-1]]))
     path = path[::-1]  # source .. far
     buses = feeder.buses.index
-    at = [int(buses[path[max(1, len(path) * k // 3)]]) for k in (1, 2)] + [int(buses[far])]
+    at = [buses[path[max(1, len(path) * k // 3)]] for k in (1, 2)] + [buses[far]]
     mw = float(feeder.loads.p_kw.sum()) / 1000.0
     rows = [
         (feeder.source_bus, 0.0, 20.0, 2.0 / mw, 0.0, 2000.0 * mw),
@@ -68,10 +68,14 @@ def test_fleet(feeder: Feeder) -> pd.DataFrame:
         (at[1], 0.0, 14.0, 20.0 / mw, 0.0, 200.0 * mw),
         (at[2], 0.0, 10.0, 40.0 / mw, 0.0, 150.0 * mw),
     ]
-    seen: dict[int, tuple] = {}
+    seen: dict = {}
     for row in rows:  # one generator per bus (short paths may repeat a bus)
         seen.setdefault(row[0], row)
-    return make_fleet(seen.values())
+    if all(isinstance(bus, (int, np.integer)) for bus in seen):
+        return make_fleet(seen.values())
+    table = pd.DataFrame(list(seen.values()), columns=FLEET_COLUMNS)  # OpenDSS bus names
+    table.index = pd.Index([f"G{bus}" for bus in seen], name="generator")
+    return table
 
 
 def problem_of(feeder: Feeder, load_kw: np.ndarray | None = None) -> DispatchProblem:
@@ -94,7 +98,7 @@ def with_binding_limit(feeder: Feeder) -> Feeder:
     np.add.at(load, buses.get_indexer(feeder.loads.bus), feeder.loads.p_kw.to_numpy(float))
     best, chosen = 0.0, None
     for i, node in enumerate(nodes):
-        if int(gens.bus.iloc[i]) == feeder.source_bus:
+        if gens.bus.iloc[i] == feeder.source_bus:
             continue
         flow, least = _subtree_flow(tree, node, load, nodes, p_kw, gens)
         if abs(flow) - least > best:
