@@ -61,3 +61,21 @@ def test_admm_is_refused_on_a_mesh_in_one_line():
     assert done.returncode == 2, done.stderr
     error = done.stderr.strip().splitlines()[-1]
     assert "admm" in error and "case14 is meshed" in error and "Traceback" not in done.stderr
+
+
+def test_the_default_list_leaves_admm_out_on_a_mesh_and_says_so():
+    """Without --algorithms every default that can run the mesh runs; ADMM is left out with
+    its reason on stderr and in the JSON (given by name it is refused, above)."""
+    import json
+
+    args = ["compare", "--net", str(CASE), "--minute", "1", "--max-rounds", "20", "--json"]
+    for a, b, kw in LIMITS:
+        args += ["--limit", f"{a}:{b}={kw}"]
+    done = subprocess.run([sys.executable, "-m", "popdispatch.cli", *args], capture_output=True,
+                          text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    payload = json.loads(done.stdout)
+    ran = [row["algorithm"] for row in payload["algorithms"]]
+    assert "admm" not in ran and "consensus-admm" in ran and "smith" in ran
+    assert len(payload["left_out"]) == 1 and payload["left_out"][0].startswith("admm left out")
+    assert "admm left out: admm's nets follow a radial feeder" in done.stderr

@@ -27,6 +27,19 @@ def check_algorithms(problem: DispatchProblem, names: Sequence[str]) -> None:
             raise OptionError(f"{exc} (leave {name} out of --algorithms)", exc.option) from None
 
 
+def runnable(problem: DispatchProblem, names: Sequence[str]) -> tuple[list[str], list[str]]:
+    """``(the algorithms of names that can run problem, one line per one that cannot: why)``."""
+    kept, notes = [], []
+    for name in names:
+        try:
+            ALGORITHMS[name].cls.check(problem)
+        except OptionError as exc:
+            notes.append(f"{name} left out: {exc}")
+            continue
+        kept.append(name)
+    return kept, notes
+
+
 def compare_algorithms(problem: DispatchProblem, minute: int, names: Sequence[str],
                        faults: Faults, seeds: int = 1, options: RunOptions | None = None,
                        params: dict | None = None) -> dict[str, list[AlgorithmRun]]:  # fmt: skip

@@ -97,7 +97,8 @@ class CrashType(click.ParamType):
 @out_option
 @json_option
 @quiet_option
-def compare(algorithms, minute, limits, loss, delay_max, duplicate, crash, seeds, seed,
+@click.pass_context
+def compare(ctx, algorithms, minute, limits, loss, delay_max, duplicate, crash, seeds, seed,
             max_rounds, profiles, source, out, as_json, quiet) -> int:  # fmt: skip
     """Population dynamics (Smith, distributed Smith on a ring), dual decomposition (plain and
     fast) and ADMM (proximal message passing; consensus ADMM, which runs on meshes too) on one
@@ -106,7 +107,9 @@ def compare(algorithms, minute, limits, loss, delay_max, duplicate, crash, seeds
     when its applied set points are within max(1e-3 kW, 1e-6 x demand) of the DC-OPF,
     balanced and within the line limits for 10 rounds in a row. smith-paper and
     distributed-smith-paper (not run unless named) follow the paper's rule, which rests away
-    from the DC-OPF: their distance is the paper mode's error."""
+    from the DC-OPF: their distance is the paper mode's error. The default list leaves out,
+    with a note, what cannot run the network (ADMM by proximal message passing on a mesh, dual
+    decomposition on a linear cost); a list given is refused instead."""
     check_out(out)
     progress = Progress(quiet)
     problem, _ = build(source, Series(profiles), minute, limits, progress)
@@ -118,11 +121,17 @@ def compare(algorithms, minute, limits, loss, delay_max, duplicate, crash, seeds
     from popdispatch.algorithms.comparison import (
         check_algorithms,
         compare_algorithms,
+        runnable,
         runs_table,
         summary_table,
     )
     from popdispatch.opf import solve_opf
 
+    left_out: list[str] = []
+    if ctx.get_parameter_source("algorithms") == click.core.ParameterSource.DEFAULT:
+        algorithms, left_out = runnable(problem, algorithms)  # the defaults that can run it
+        for note in left_out:
+            progress.note(note)
     check_algorithms(problem, algorithms)
     if solve_opf(problem, minute).status != "optimal":
         raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given limits")
@@ -137,7 +146,7 @@ def compare(algorithms, minute, limits, loss, delay_max, duplicate, crash, seeds
     summary = summary_table(table)
     payload = {"minute": minute, "faults": faults.label(), "seeds": seeds,
                "max_rounds": max_rounds, "demand_kw": float(problem.demand[minute - 1] * 1e3),
-               "algorithms": summary.to_dict(orient="records"),
+               "algorithms": summary.to_dict(orient="records"), "left_out": left_out,
                "reveals": {n: g[0].reveals for n, g in runs.items()},
                "loss_handling": {n: g[0].loss_handling for n, g in runs.items()},
                "runs": table.to_dict(orient="records")}  # fmt: skip
