@@ -19,6 +19,8 @@ from popdispatch.errors import OptionError
 #: Algorithm name -> the module implementing it.
 ALGORITHMS: dict[str, str] = {
     "population": "popdispatch.agents.population",
+    "dual-decomposition": "popdispatch.agents.dual_decomposition",
+    "fast-dual-decomposition": "popdispatch.agents.fast_dual_decomposition",
 }
 #: The algorithm :func:`popdispatch.agents.system.run_agents` runs by default.
 DEFAULT_ALGORITHM = "population"
