@@ -80,8 +80,9 @@ NAME = "dual-decomposition"
 MODES = ("exact",)
 #: The :class:`~popdispatch.agents.system.AgentSettings` fields it reads: the world's.
 OPTIONS = frozenset({"max_rounds", "window", "tol_kw", "drain_rounds", "paced"})
-#: The run settings it reads (the accuracy to prove); any other given is refused.
-SETTINGS = frozenset({"mode", "accuracy_kw", "accuracy_rel", "tol_floor_kw"})
+#: The snapshot's run options (``popdispatch agents``) it reads: the mode only (exact);
+#: the population dynamics' own (``--dynamics``, ``--x0``, ...) given are refused.
+RUN_OPTIONS = frozenset({"mode"})
 #: The options that set the run settings it does not read.
 _SETTING_OPTIONS = {"dynamics": "--dynamics", "graph": "--graph", "x0": "--x0", "eta": "--eta",
                     "fitness": "--constants", "exact": "--constants or --price-law",
@@ -580,8 +581,8 @@ def refuse(settings: RunSettings, opts: AgentSettings, faults: Faults, name: str
     """Refuse, before any work, run settings it does not read that differ from the
     defaults (the population dynamics' options), one line naming the option."""
     defaults = RunSettings(mode=MODES[0])
-    for name, option in _SETTING_OPTIONS.items():
-        if getattr(settings, name) != getattr(defaults, name):
+    for setting, option in _SETTING_OPTIONS.items():
+        if getattr(settings, setting) != getattr(defaults, setting):
             raise OptionError(f"the {name} agents do not use {option} (population dynamics "
                               "only)", option)  # fmt: skip
 

@@ -4,12 +4,12 @@ comparison's ``fast-dual-decomposition`` and its default steps)."""
 
 from __future__ import annotations
 
-from popdispatch.agents.dual_decomposition import MODES, OPTIONS, make_run
+from popdispatch.agents.dual_decomposition import MODES, OPTIONS, RUN_OPTIONS, make_run
 from popdispatch.agents.dual_decomposition import refuse as _refuse
 
 #: The name the registry (:mod:`popdispatch.agents.algorithms`) knows this algorithm by.
 NAME = "fast-dual-decomposition"
-__all__ = ["MODES", "NAME", "OPTIONS", "refuse", "run"]
+__all__ = ["MODES", "NAME", "OPTIONS", "RUN_OPTIONS", "refuse", "run"]
 
 
 def refuse(settings, opts, faults) -> None:
