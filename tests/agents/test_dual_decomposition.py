@@ -175,6 +175,7 @@ def test_a_line_controller_crashed_for_good_is_never_converged():
     assert run.status != "converged"
     assert np.abs(run.setpoints_kw - opf_kw).max() > _accuracy_kw(problem, minute)
     assert run.distance_bound_kw > run.accuracy_kw
+    assert f"line controller {controller} is down" in run.reason
 
 
 # -- the command, in a subprocess ---------------------------------------------------------------

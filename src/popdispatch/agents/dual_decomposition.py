@@ -678,7 +678,11 @@ def _judged(system: DualSystem, world: WorldRun) -> AgentRun:
                  f"{bound_kw:.4g} kW from the DC-OPF (or off balance or over a line by that)")
         reason = f"{where}; accuracy {run.accuracy_kw:.3g} kW"  # fmt: skip
     at_rest = world.rest_round is not None
+    down = [aid for aid, c in system.controllers.items() if c.crashed]
+    hint = (f"line controller {', '.join(down)} is down: its price is frozen" if down
+            else "give more rounds")  # fmt: skip
     return replace(run, certified=certified, distance_bound_kw=bound_kw,
-                   stall_reason=f"at rest, but {reason}" if reason and at_rest else None,
-                   horizon_reason=(f"not converged after {run.rounds} rounds: {reason} (give "
-                                   "more rounds)" if reason and not at_rest else None))  # fmt: skip
+                   stall_reason=f"at rest, but {reason} ({hint})" if reason and at_rest
+                   else None,
+                   horizon_reason=(f"not converged after {run.rounds} rounds: {reason} "
+                                   f"({hint})" if reason and not at_rest else None))  # fmt: skip
