@@ -7,7 +7,8 @@ agents (:mod:`~popdispatch.agents.controller`) and the plant
 mango's simulated world with seeded loss, delay and duplication
 (:mod:`~popdispatch.agents.network`); :func:`run_agents` runs one minute
 (:mod:`~popdispatch.agents.system`) of an algorithm (:mod:`~popdispatch.agents.algorithms`:
-today :mod:`~popdispatch.agents.population`) in the generic world
+:mod:`~popdispatch.agents.population`, :mod:`~popdispatch.agents.dual_decomposition`) in the
+generic world
 (:mod:`~popdispatch.agents.world`). Needs the ``agents`` extra (mango-agents):
 ``pip install "popdispatch[agents]"``.
 """

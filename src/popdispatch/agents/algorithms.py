@@ -1,7 +1,9 @@
 """The registry of agent algorithms: a name, the module that implements it.
 
 An algorithm module provides ``NAME``; ``MODES``, the modes (``--mode``) it runs; ``OPTIONS``,
-the :class:`~popdispatch.agents.system.AgentSettings` fields it reads; ``refuse(settings, opts,
+the :class:`~popdispatch.agents.system.AgentSettings` fields it reads; optionally
+``RUN_OPTIONS``, the names of ``popdispatch agents``' run options (``--dynamics``, ``--x0``,
+...) it reads (absent: all; the command refuses any other given); ``refuse(settings, opts,
 faults)``, which raises :class:`~popdispatch.errors.OptionError` for what else it cannot
 honour; and ``run(problem, minute, settings, faults, opts, on_round) -> AgentRun``, which
 builds its agents and runs them in the generic world (:func:`popdispatch.agents.world.
@@ -19,6 +21,8 @@ from popdispatch.errors import OptionError
 #: Algorithm name -> the module implementing it.
 ALGORITHMS: dict[str, str] = {
     "population": "popdispatch.agents.population",
+    "dual-decomposition": "popdispatch.agents.dual_decomposition",
+    "fast-dual-decomposition": "popdispatch.agents.fast_dual_decomposition",
 }
 #: The algorithm :func:`popdispatch.agents.system.run_agents` runs by default.
 DEFAULT_ALGORITHM = "population"

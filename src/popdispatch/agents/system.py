@@ -152,7 +152,9 @@ class AgentRun:
     not at the DC-OPF (exact mode's KKT check, :func:`popdispatch.online.kkt_violations`, on
     the set points and the controllers' prices), None otherwise; ``horizon_reason``: why a run
     never came to rest (:func:`horizon_reason`, :func:`runaway`), None otherwise;
-    ``infeasible``: the line prices ran away (:func:`runaway`).
+    ``infeasible``: the line prices ran away (:func:`runaway`);
+    ``line_price_eur_per_mwh``: an algorithm's own price of each limited line at the end
+    (``mu_up - mu_down``, dual decomposition), None where ``prices`` hold the mode's states.
     """
 
     generators: list[str]
@@ -183,6 +185,7 @@ class AgentRun:
     certified: bool = False
     distance_bound_kw: float | None = None
     accuracy_kw: float | None = None
+    line_price_eur_per_mwh: np.ndarray | None = None
 
     @property
     def status(self) -> str:

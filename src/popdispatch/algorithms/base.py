@@ -48,14 +48,20 @@ class Minute:
 
 
 def balanced_start(minute: Minute) -> np.ndarray:
-    """Equal shares of the demand clipped to each DG's range, the rest spread over the DGs
-    with room (the uniform start, kept within limits): sum = demand where the fleet allows."""
-    lo, hi, n = minute.lo, minute.hi, len(minute.lo)
-    p = np.clip(np.full(n, minute.demand / n), lo, hi)
+    """The uniform start of ``minute`` (:func:`balanced_shares`), MW."""
+    return balanced_shares(minute.lo, minute.hi, minute.demand)
+
+
+def balanced_shares(lo: np.ndarray, hi: np.ndarray, demand: float) -> np.ndarray:
+    """Equal shares of the demand (MW) clipped to each DG's range ``[lo, hi]``, the rest
+    spread over the DGs with room (the uniform start, kept within limits): sum = demand where
+    the fleet allows."""
+    n = len(lo)
+    p = np.clip(np.full(n, demand / n), lo, hi)
     for _ in range(n):
-        gap = minute.demand - p.sum()
+        gap = demand - p.sum()
         free = (hi - p > 1e-15) if gap > 0 else (p - lo > 1e-15)
-        if abs(gap) <= 1e-15 * max(minute.demand, 1.0) or not free.any():
+        if abs(gap) <= 1e-15 * max(demand, 1.0) or not free.any():
             break
         p[free] = np.clip(p[free] + gap / free.sum(), lo[free], hi[free])
     return p

@@ -51,7 +51,7 @@ from popdispatch.algorithms.base import (
     COORDINATOR,
     Algorithm,
     Minute,
-    balanced_start,
+    balanced_shares,
     controller_name,
 )
 from popdispatch.algorithms.network import Message, Network
@@ -65,6 +65,86 @@ class DualParams:
     balance_step: float = 1.0
     line_step: float = 1.0
     accelerated: bool = False
+
+
+# -- the rules, shared by this runtime and the mango agents (popdispatch.agents.dual) ------
+
+
+def price_response(c, lo, hi) -> np.ndarray:
+    """Each DG's price response ``1 / (2 c_i)`` (MW per EUR/MW) where it has a range
+    (``hi > lo``), else 0: the slope of its best response inside its limits."""
+    return np.where(hi > lo, 1.0 / (2.0 * np.asarray(c, dtype=float)), 0.0)
+
+
+def balance_step_size(balance_step: float, response: np.ndarray) -> float:
+    """The balance price's step ``alpha = balance_step / sum_i response_i`` (EUR/MW per MW)."""
+    return balance_step / response.sum()
+
+
+def line_step_sizes(line_step: float, factor: np.ndarray, response: np.ndarray) -> np.ndarray:
+    """The line prices' steps ``beta_k = line_step / sum_i D_ki^2 response_i`` (EUR/MW per MW;
+    ``factor``: the DGs' weights ``D_ki`` on each line price, lines x DGs; infinite curvature,
+    a zero step, for a line no DG with a range moves)."""
+    line_response = (factor**2) @ response  # the dual's curvature along each price
+    return line_step / np.where(line_response > 0, line_response, np.inf)
+
+
+def initial_balance_price(b, c, lo, hi, demand_mw: float) -> float:
+    """The balance price's start, EUR/MW: the DGs' mean marginal cost ``b_i + 2 c_i p_i`` at
+    the uniform start (:func:`~popdispatch.algorithms.base.balanced_shares`), over the DGs
+    with a range."""
+    start = balanced_shares(lo, hi, demand_mw)
+    return float(np.mean((b + 2.0 * c * start)[hi > lo]))
+
+
+def best_response(price, b, c, lo, hi):
+    """The set point (MW) minimising ``b p + c p^2 - price p`` within ``[lo, hi]``: a DG's
+    best response to its locational price (EUR/MW)."""
+    return np.clip((price - b) / (2.0 * c), lo, hi)
+
+
+def balance_price_step(lam: float, alpha: float, shortfall_mw: float) -> float:
+    """Gradient ascent of the balance price on the measured shortfall ``P_d - sum p`` (MW)."""
+    return lam + alpha * shortfall_mw
+
+
+def line_gradient(flow_mw: float, limit_mw: float) -> np.ndarray:
+    """The dual's gradient along a line's two direction prices: ``(flow - U, -flow - U)``."""
+    return np.array([flow_mw - limit_mw, -flow_mw - limit_mw])
+
+
+def line_price_step(mu: np.ndarray, beta: float, gradient: np.ndarray) -> np.ndarray:
+    """Projected gradient ascent of a line's direction prices ``(mu_up, mu_down) >= 0``."""
+    return np.maximum(0.0, mu + beta * gradient)
+
+
+class Momentum:
+    """One price holder's Nesterov state (the module docstring): its last ascent point
+    ``x_last`` and its momentum counter ``t`` (1 after a restart)."""
+
+    def __init__(self, x0):
+        self.x_last = np.array(x0, dtype=float)
+        self.t = 1.0
+        self._x = self.x_last
+
+    def ascend(self, y, grad, step: float, lower: float) -> float:
+        """Step from the prices ``y`` it sent, ``x = max(lower, y + step grad)`` (kept
+        pending), and return its restart term ``grad . (x - x_last)`` (EUR/h)."""
+        self._x = np.maximum(y + step * grad, lower)
+        return float(np.sum(grad * (self._x - self.x_last)))
+
+    def extrapolate(self, lower: float) -> np.ndarray:
+        """The prices to send: the pending ``x`` moved on by ``(t_k - 1) / t_{k+1}`` of the
+        last move."""
+        x = self._x
+        t = (1.0 + np.sqrt(1.0 + 4.0 * self.t**2)) / 2.0
+        y = np.maximum(x + (self.t - 1.0) / t * (x - self.x_last), lower)
+        self.x_last, self.t = x, t
+        return y
+
+    def restart(self) -> None:
+        """Drop the momentum (the joint restart test failed)."""
+        self.t = 1.0
 
 
 class DualDecomposition(Algorithm):
@@ -90,18 +170,15 @@ class DualDecomposition(Algorithm):
         # each DG's weight on each line price: 1 below the line, 0 above it on a radial
         # feeder; its distribution factor D_ki on a meshed network
         self.factor = problem.down
-        tradable = minute.hi > minute.lo
-        response = np.where(tradable, 1.0 / (2.0 * problem.c), 0.0)  # MW per EUR/MW
-        self.alpha = params.balance_step / response.sum()
-        line_response = (self.factor**2) @ response  # the dual's curvature along each price
-        self.beta = params.line_step / np.where(line_response > 0, line_response, np.inf)
+        response = price_response(problem.c, minute.lo, minute.hi)  # MW per EUR/MW
+        self.alpha = balance_step_size(params.balance_step, response)
+        self.beta = line_step_sizes(params.line_step, self.factor, response)
         self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
-        start = balanced_start(minute)  # the balance price starts at the DGs' mean
-        self.lam = float(np.mean((problem.b + 2.0 * problem.c * start)[tradable]))  # marginal cost
+        self.lam = initial_balance_price(problem.b, problem.c, minute.lo, minute.hi,
+                                         minute.demand)  # fmt: skip
         self.mu = np.zeros((len(problem.limit), 2))
-        # acceleration: each holder's last ascent point, momentum counter and restart state
-        self.x_last = np.r_[self.lam, self.mu.ravel()]
-        self.t = np.ones(1 + len(problem.limit))
+        # acceleration: each holder's Nesterov state (0 the coordinator, 1 + k controller k)
+        self.momentum = [Momentum([self.lam])] + [Momentum(mu) for mu in self.mu]
         self.terms = np.zeros(len(problem.limit))  # the controllers' terms, at the coordinator
         self.restart = np.zeros(len(problem.limit), dtype=bool)  # restarts to send
         self.lam_seen = np.full(n, self.lam)  # each DG's last balance price and its round
@@ -124,8 +201,8 @@ class DualDecomposition(Algorithm):
     def _best_response(self, who) -> np.ndarray:
         problem = self.m.problem
         price = self.lam_seen[who] + (self.nu_seen[who] * self.factor[:, who].T).sum(axis=1)
-        p = (price - problem.b[who]) / (2.0 * problem.c[who])
-        return np.clip(p, self.m.lo[who], self.m.hi[who])
+        return best_response(price, problem.b[who], problem.c[who], self.m.lo[who],
+                             self.m.hi[who])  # fmt: skip
 
     def local_update(self, inbox: dict[str, list[Message]], round_: int) -> None:
         live = []
@@ -145,13 +222,13 @@ class DualDecomposition(Algorithm):
             self._accelerated(inbox)
             return
         if not self.net.crashed(COORDINATOR):
-            self.lam += self.alpha * (self.m.demand - self.p.sum())
+            self.lam = balance_price_step(self.lam, self.alpha, self.m.demand - self.p.sum())
         flows = self.m.flows(self.p)
         limit = self.m.problem.limit
         for k, name in enumerate(self.controllers):
             if not self.net.crashed(name):
-                excess = np.array([flows[k] - limit[k], -flows[k] - limit[k]])
-                self.mu[k] = np.maximum(0.0, self.mu[k] + self.beta[k] * excess)
+                gradient = line_gradient(flows[k], limit[k])
+                self.mu[k] = line_price_step(self.mu[k], self.beta[k], gradient)
 
     def _accelerated(self, inbox) -> None:
         """Nesterov's fast gradient on the dual with a joint gradient restart (the module
@@ -167,41 +244,21 @@ class DualDecomposition(Algorithm):
         limit = self.m.problem.limit
         if not self.net.crashed(COORDINATOR):
             grad = np.array([self.m.demand - self.p.sum()])
-            own = self._momentum(0, np.array([self.lam]), grad, self.alpha, -np.inf)
+            own = self.momentum[0].ascend(np.array([self.lam]), grad, self.alpha, -np.inf)
             if own + self.terms.sum() < 0.0:
-                self.t[0] = 1.0
+                self.momentum[0].restart()
                 self.restart[:] = True
-            self.lam = float(self._extrapolate(0, -np.inf)[0])
+            self.lam = float(self.momentum[0].extrapolate(-np.inf)[0])
         for k, name in enumerate(self.controllers):
             if self.net.crashed(name):
                 continue
             if any(m.kind == "restart" for m in inbox.get(name, [])):
-                self.t[1 + k] = 1.0
-            grad = np.array([flows[k] - limit[k], -flows[k] - limit[k]])
-            term = self._momentum(1 + k, self.mu[k], grad, self.beta[k], 0.0)
+                self.momentum[1 + k].restart()
+            grad = line_gradient(flows[k], limit[k])
+            term = self.momentum[1 + k].ascend(self.mu[k], grad, self.beta[k], 0.0)
             self.net.send(name, COORDINATOR, "restart term", [term],
                           reveals="price step")  # fmt: skip
-            self.mu[k] = self._extrapolate(1 + k, 0.0)
-
-    def _momentum(self, h: int, y, grad, step: float, lower: float) -> float:
-        """Holder ``h``'s ascent point from the prices ``y`` it sent (kept as its pending
-        point) and its restart term ``grad . (x - x_last)``."""
-        block = self._block(h)
-        x = np.maximum(y + step * grad, lower)
-        term = float(np.sum(grad * (x - self.x_last[block])))
-        self._pending = (block, x)
-        return term
-
-    def _extrapolate(self, h: int, lower: float) -> np.ndarray:
-        block, x = self._pending
-        t = (1.0 + np.sqrt(1.0 + 4.0 * self.t[h] ** 2)) / 2.0
-        y = np.maximum(x + (self.t[h] - 1.0) / t * (x - self.x_last[block]), lower)
-        self.x_last[block], self.t[h] = x, t
-        return y
-
-    def _block(self, h: int) -> slice:
-        """Holder ``h``'s prices in ``x_last``: 0 the balance price, ``1 + k`` line ``k``'s."""
-        return slice(0, 1) if h == 0 else slice(2 * h - 1, 2 * h + 1)
+            self.mu[k] = self.momentum[1 + k].extrapolate(0.0)
 
     def exchange(self, round_: int) -> None:
         for k in np.flatnonzero(self.restart):

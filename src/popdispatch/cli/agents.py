@@ -1,6 +1,8 @@
 """``popdispatch agents``: one minute dispatched by agents exchanging messages (mango-agents).
 
-The snapshot's options (minute, limits, dynamics, mode, x0, graph, feeder) plus the simulated
+``--algorithm`` picks the agents' algorithm (:mod:`popdispatch.agents.algorithms`: the
+population dynamics by default, dual decomposition and its fast variant). The snapshot's
+options (minute, limits, dynamics, mode, x0, graph, feeder) plus the simulated
 network's faults (``--loss``, ``--delay-max``, ``--duplicate``, ``--noise-kw``, ``--seed``) and
 the round's Euler step (``--step-s``). The output is the snapshot's (``--json``: the snapshot
 keys, with ``iterations`` counting rounds) plus what the messages did: ``messages``, ``lost``,
@@ -18,6 +20,7 @@ from typing import NamedTuple
 
 import click
 
+from popdispatch.agents.algorithms import ALGORITHMS, DEFAULT_ALGORITHM
 from popdispatch.cli.clock import Failure, stamp
 from popdispatch.cli.options import (
     duplicate_option,
@@ -42,6 +45,10 @@ from popdispatch.progress import Progress
 @option("--minute", "--step", "minute", type=click.IntRange(1),
         help="1-based minute of the day (566 = the peak); required.")  # fmt: skip
 @limit_option
+@option("--algorithm", type=click.Choice(list(ALGORITHMS)), default=DEFAULT_ALGORITHM,
+        show_default=True,
+        help="The agents' algorithm: population dynamics, or dual decomposition (plain or "
+        "fast, exact mode: the DC-OPF) with the comparison's steps (docs/agents.md).")  # fmt: skip
 @run_options
 @loss_option
 @option("--delay-max", type=click.IntRange(0), default=0, show_default=True,
@@ -73,9 +80,10 @@ from popdispatch.progress import Progress
 @json_option
 @quiet_option
 @click.pass_context
-def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, duplicate, noise_kw,
-           seed, trips, crashes, controller_crashes, step_s, max_rounds, pace, profiles, source,
-           as_json, quiet, constants=None, price_law="plain", eta=None) -> int:  # fmt: skip
+def agents(ctx, minute, limits, algorithm, dynamics, mode, x0, graph, loss, delay_max, duplicate,
+           noise_kw, seed, trips, crashes, controller_crashes, step_s, max_rounds, pace, profiles,
+           source, as_json, quiet, constants=None, price_law="plain",
+           eta=None) -> int:  # fmt: skip
     """One minute dispatched by agents: one per generator, one per node controller and the
     plant, exchanging messages in mango's simulated world with seeded loss, delay and
     duplication; power moves only in pairwise transactions (offer, accept, commit), compared
@@ -89,21 +97,19 @@ def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, dupl
     progress = Progress(quiet)
     events = {"trip": trips, "crash": crashes, "controller-crash": controller_crashes}
     faults = _faults(loss, delay_max, duplicate, noise_kw, seed, events)
-    from popdispatch.agents.algorithms import (
-        DEFAULT_ALGORITHM,
-        get_algorithm,
-        refuse_mode,
-        refuse_options,
-    )
+    from popdispatch.agents.algorithms import get_algorithm, refuse_mode, refuse_options
 
-    algorithm = get_algorithm(DEFAULT_ALGORITHM)
-    refuse_mode(algorithm, mode)  # before the mode's own options are asked for (--vmin)
+    chosen = get_algorithm(algorithm)
+    _refuse_unread(ctx, chosen)
+    mode = _mode_of(ctx, chosen, mode)
+    refuse_mode(chosen, mode)  # before the mode's own options are asked for (--vmin)
     settings = settings_from(dynamics, mode, x0, graph, None, constants, price_law, eta=eta)
     options = AgentOptions(step_s, max_rounds, pace)
-    refuse_options(algorithm, settings, _agent_settings(options), faults)  # before any work
+    refuse_options(chosen, settings, _agent_settings(options), faults)  # before any work
     problem = _problem(source, profiles, minute, limits, progress)
-    with progress.step(f"minute {minute}: {dynamics} dynamics by agents"):
-        summary = agents_summary(problem, minute, settings, faults, options, limits)
+    what = f"{dynamics} dynamics" if algorithm == DEFAULT_ALGORITHM else algorithm
+    with progress.step(f"minute {minute}: {what} by agents"):
+        summary = agents_summary(problem, minute, settings, faults, options, limits, algorithm)
     emit(stamp(summary), as_json, agents_text(summary))
     if summary["status"] == "infeasible":
         raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given limits")
@@ -112,6 +118,31 @@ def agents(ctx, minute, limits, dynamics, mode, x0, graph, loss, delay_max, dupl
                       f"({summary['dynamics_status']}): "
                       f"{summary['stall_reason'] or summary['horizon_reason']}")  # fmt: skip
     return 0
+
+
+#: The run options (:func:`~popdispatch.cli.options.run_options`) an algorithm may not read.
+RUN_OPTION_NAMES = ("dynamics", "eta", "mode", "x0", "graph", "constants", "price_law")
+
+
+def _refuse_unread(ctx: click.Context, algorithm) -> None:
+    """Usage error naming the first run option given on the command line that the
+    algorithm does not read (its ``RUN_OPTIONS``; absent: it reads them all)."""
+    reads = getattr(algorithm, "RUN_OPTIONS", None)
+    if reads is None:
+        return
+    typed = click.core.ParameterSource.COMMANDLINE
+    for param in ctx.command.params:
+        if param.name in RUN_OPTION_NAMES and param.name not in reads \
+                and ctx.get_parameter_source(param.name) == typed:  # fmt: skip
+            raise click.BadParameter(f"the {algorithm.NAME} agents do not use it (population "
+                                     "dynamics only)", param_hint=f"'{param.opts[0]}'")
+
+
+def _mode_of(ctx: click.Context, algorithm, mode: str) -> str:
+    """The mode to run: the one given, else the default if the algorithm runs it, else the
+    algorithm's own (dual decomposition runs exact mode only)."""
+    given = ctx.get_parameter_source("mode") == click.core.ParameterSource.COMMANDLINE
+    return mode if given or mode in algorithm.MODES else algorithm.MODES[0]
 
 
 def _refuse_group_options(ctx: click.Context) -> None:
@@ -187,8 +218,10 @@ def _agent_settings(options: AgentOptions):
                          paced=options.paced)  # fmt: skip
 
 
-def agents_summary(problem, minute, settings, faults, options: AgentOptions, limits) -> dict:
-    """The snapshot summary of the agents' run against the DC-OPF, plus the messages' keys."""
+def agents_summary(problem, minute, settings, faults, options: AgentOptions, limits,
+                   algorithm: str = DEFAULT_ALGORITHM) -> dict:  # fmt: skip
+    """The snapshot summary of the agents' run against the DC-OPF, plus the messages' keys
+    (``algorithm``: a name of :data:`popdispatch.agents.algorithms.ALGORITHMS`)."""
     import numpy as np
 
     from popdispatch.agents.system import run_agents, without
@@ -202,10 +235,13 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
     from popdispatch.runs import check_x0
 
     check_x0(settings.x0, problem.generators)
-    run = run_agents(problem, minute, settings, faults, _agent_settings(options))
+    run = run_agents(problem, minute, settings, faults, _agent_settings(options),
+                     algorithm=algorithm)  # fmt: skip
     final_mw = run.setpoints_kw / 1000.0
     line_prices = voltage_prices = None
-    if get_mode(settings.mode).claims_dc_opf:  # the prices the controllers broadcast at the end
+    if run.line_price_eur_per_mwh is not None:  # the algorithm's own prices (no voltage rows)
+        line_prices, voltage_prices = run.line_price_eur_per_mwh, np.zeros(0)
+    elif get_mode(settings.mode).claims_dc_opf:  # the prices the controllers broadcast at the end
         weight = price_weights(problem, settings.exact.price_law,
                                settings.game_constants(problem).C, np.array([minute - 1]))
         line_prices, voltage_prices = (
@@ -238,12 +274,15 @@ def agents_summary(problem, minute, settings, faults, options: AgentOptions, lim
     remaining = without(problem, minute, [e.agent for e in faults.events if e.kind == "trip"])
     comparison = SnapshotComparison(result, solve_opf(remaining, minute))
     summary = snapshot_summary(remaining, comparison, limits)
+    population = algorithm == DEFAULT_ALGORITHM
     summary.update(
+        algorithm=algorithm,
         iterations=run.rounds,
         rounds=run.rounds,
-        step_s=run.step_s,
-        step_source="given" if options.step_s is not None else "default",
-        local_step=_local_step(settings),
+        step_s=run.step_s if population else None,
+        step_source=("given" if options.step_s is not None else "default") if population
+        else None,
+        local_step=_local_step(settings) and population,
         horizon_reason=run.horizon_reason,
         paced=options.paced,
         phase_ticks=run.phase_ticks,
@@ -292,17 +331,19 @@ def agents_text(s: dict) -> str:
     """What people read: set points against the DC-OPF and what the messages did."""
     from popdispatch.report.text import limits_text
 
+    population = s["algorithm"] == DEFAULT_ALGORITHM
+    by = (f"{s['dynamics']} dynamics, {s['mode']} mode, by {s['agents']} agents "
+          f"({s['graph']} graph)" if population else f"{s['algorithm']} by {s['agents']} agents")
+    step = (f" of {s['step_s']:.4g} s ({s['step_source']} step"
+            + ("; each generator damps its own by its curvature" if s["local_step"] else "")
+            + ")") if population else ""  # fmt: skip
     lines = [
-        f"minute {s['minute']}, demand {s['demand_kw']:.3f} kW: {s['dynamics']} dynamics, "
-        f"{s['mode']} mode, by {s['agents']} agents ({s['graph']} graph)",
+        f"minute {s['minute']}, demand {s['demand_kw']:.3f} kW: {by}",
         f"network: loss {s['loss']:g}, delays up to {s['delay_max']} rounds, duplicates "
         f"{s['duplicate']:g}, noise {s['noise_kw']:g} kW, seed {s['seed']}"
         + (f"; rounds paced to {s['phase_ticks']} ticks per phase" if s["phase_ticks"] > 1 else ""),
         limits_text(s["limits"], s["limits_in_force"]),
-        f"status: {s['dynamics_status']} after {s['rounds']} rounds of {s['step_s']:.4g} s "
-        f"({s['step_source']} step"
-        + ("; each generator damps its own by its curvature" if s["local_step"] else "")
-        + ")"
+        f"status: {s['dynamics_status']} after {s['rounds']} rounds{step}"
         + (
             f" (at rest from round {s['rest_iteration']})"
             if s["rest_iteration"] is not None
