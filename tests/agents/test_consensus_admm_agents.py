@@ -192,6 +192,7 @@ def test_the_agents_reach_the_dc_opf_of_a_mesh():
     mango = _agents(problem, 1, max_rounds=3000)
     assert mango.status == "converged", mango.reason
     assert np.abs(mango.setpoints_kw - opf.p_kw).max() <= _accuracy_kw(problem, 1)
+    np.testing.assert_allclose(mango.line_price_eur_per_mwh, opf.line_price, atol=1e-2)
     same = run_algorithm(NAME, problem, 1, options=RunOptions(max_rounds=mango.rounds,
                                                               hold=mango.rounds + 1))
     np.testing.assert_allclose(mango.trajectory_kw, same.trajectory_kw, rtol=0, atol=1e-9)
@@ -219,7 +220,8 @@ def _case69(tmp_path: Path) -> list[str]:
 
 def test_the_command_runs_consensus_admm_to_the_dc_opf(tmp_path):
     """case69 with a fleet and a binding limit: converged, within the accuracy of Clarabel's
-    DC-OPF (solved here), the messages counted."""
+    DC-OPF (solved here), the line's price read from its controller at the DC-OPF's dual, the
+    messages counted."""
     args = _case69(tmp_path)
     result = run("agents", "--algorithm", NAME, *args, "--json", "-q")
     assert result.returncode == 0, result.stderr
@@ -234,6 +236,8 @@ def test_the_command_runs_consensus_admm_to_the_dc_opf(tmp_path):
     assert s["algorithm"] == NAME and s["status"] == "converged"
     assert np.abs(setpoints - opf.p_kw).max() <= s["accuracy_kw"] == pytest.approx(
         _accuracy_kw(problem, 1))
+    [line] = s["line_prices"]  # rho u.a / a.a of the controller's term: the dual
+    assert line["price_eur_per_mwh"] == pytest.approx(opf.line_price[0], abs=1e-3)
     assert s["rounds"] > 0 and s["messages"] > s["rounds"] and s["scalars_sent"] > 0
     assert s["agents"] == 4 + 1 + 1 + 1  # the DGs, the controller, the coordinator, the plant
 

@@ -419,7 +419,22 @@ def _result(system: AdmmSystem, world: WorldRun | None) -> AgentRun:
         events=sorted(system.events, key=lambda e: e["round"]),
         scalars_sent=world.scalars_sent if world else 0,
         accuracy_kw=system.accuracy_mw * KW_PER_MW,
+        line_price_eur_per_mwh=np.array([line_price(c, system.coordinator.rho)
+                                         for c in system.controllers.values()]),
     )  # fmt: skip
+
+
+def line_price(controller: AdmmHolderAgent, rho: float | None) -> float:
+    """Line ``k``'s price read from its controller's term, EUR/MWh: at a fixed point its
+    consensus duals ``rho u_k`` are ``nu_k a`` (the slab's normal), so ``nu_k = rho u_k.a /
+    a.a`` over the DGs it still counts (the sign of dual decomposition's ``mu_up -
+    mu_down``); 0 before the penalty is set or without DGs."""
+    h = controller.holder
+    a = np.where(h.free, controller.a, 0.0)
+    norm = float(a @ a)
+    if rho is None or norm == 0.0:
+        return 0.0
+    return float(rho * (h.u @ a) / norm)
 
 
 def _infeasible(system: AdmmSystem, minute: int) -> AgentRun:
