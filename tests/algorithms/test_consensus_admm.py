@@ -113,3 +113,18 @@ def test_one_iteration_sends_the_messages_counted_by_hand():
     assert run.messages[4] - run.messages[0] == 2 * 2 * pairs
     assert run.scalars[4] - run.scalars[0] == 2 * 3 * pairs
     assert run.bytes == (n + 5 * pairs) * HEADER_BYTES + (4 * n + 8 * pairs) * SCALAR_BYTES
+
+
+def test_the_penalty_is_exact_modes_scales():
+    """:func:`penalty` (what the coordinator agent computes from the DGs' curves) is
+    ``rho_scale S / P`` of exact mode's :func:`~popdispatch.modes.exact.scales`, to the bit,
+    also where the spread is zero (equal marginal costs)."""
+    from popdispatch.algorithms.consensus_admm import penalty
+    from popdispatch.modes.exact import scales
+
+    problem = compare_cases.case33bw()
+    flat = replace(problem, b=np.full_like(problem.b, 30.0), c=np.zeros_like(problem.c))
+    for p in (problem, flat):
+        spread, demand = scales(p)
+        assert penalty(2.5, p.b, p.c, p.pmin, p.pmax, float(np.max(p.demand))) == \
+            2.5 * spread / demand  # fmt: skip

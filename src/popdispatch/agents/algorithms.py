@@ -23,6 +23,7 @@ ALGORITHMS: dict[str, str] = {
     "population": "popdispatch.agents.population",
     "dual-decomposition": "popdispatch.agents.dual_decomposition",
     "fast-dual-decomposition": "popdispatch.agents.fast_dual_decomposition",
+    "consensus-admm": "popdispatch.agents.consensus_admm",
 }
 #: The algorithm :func:`popdispatch.agents.system.run_agents` runs by default.
 DEFAULT_ALGORITHM = "population"

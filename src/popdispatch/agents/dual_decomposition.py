@@ -665,9 +665,13 @@ def _infeasible(system: DualSystem, minute: int) -> AgentRun:
 
 
 def _judged(system: DualSystem, world: WorldRun) -> AgentRun:
-    """The run, ``converged`` only when :func:`proved_bound_mw` is within the accuracy at
-    the end; otherwise the reason with the distance."""
-    run = _result(system, world)
+    return judged(system, world, _result(system, world), "its price is frozen")
+
+
+def judged(system: DualSystem, world: WorldRun, run: AgentRun, frozen: str) -> AgentRun:
+    """``run``, ``converged`` only when :func:`proved_bound_mw` is within the accuracy at
+    the end; otherwise the reason with the distance (``frozen``: what a crashed line
+    controller leaves behind, named in the reason)."""
     bound = proved_bound_mw(system)
     certified = bool(bound <= system.accuracy_mw)
     bound_kw = float(bound * KW_PER_MW)
@@ -679,7 +683,7 @@ def _judged(system: DualSystem, world: WorldRun) -> AgentRun:
         reason = f"{where}; accuracy {run.accuracy_kw:.3g} kW"  # fmt: skip
     at_rest = world.rest_round is not None
     down = [aid for aid, c in system.controllers.items() if c.crashed]
-    hint = (f"line controller {', '.join(down)} is down: its price is frozen" if down
+    hint = (f"line controller {', '.join(down)} is down: {frozen}" if down
             else "give more rounds")  # fmt: skip
     return replace(run, certified=certified, distance_bound_kw=bound_kw,
                    stall_reason=f"at rest, but {reason} ({hint})" if reason and at_rest

@@ -122,8 +122,9 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
     proved distance bound is above the accuracy runs on for another window as long as each
     rest proves at least half the bound of the one before (the engine runs on while the
     bound falls by 1 %, :func:`popdispatch.online.run_snapshot`; the agents' rounds cost
-    messages, so they ask more of each window): the rest window can stop a run whose last
-    watts still move. A run the certificate proves within the accuracy every ``window``
+    messages, so they ask more of each window; a system's ``rest_progress``, when it has one,
+    replaces :data:`REST_PROGRESS`): the rest window can stop a run whose last watts still
+    move. A run the certificate proves within the accuracy every ``window``
     rounds stops there, at rest or not (:func:`proved`)."""
     from mango import AgentAddress, create_world, graph_topology, per_node
 
@@ -156,7 +157,8 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
                 rest_round, unrest, infeasible = verdict(system, rnd, opts, rnd > check_after)
                 if rest_round is not None and system.prove is not None and rnd < opts.max_rounds:
                     bound = system.prove(system)
-                    if bound > system.accuracy_mw and bound < 0.5 * last_bound:
+                    progress = getattr(system, "rest_progress", REST_PROGRESS)
+                    if bound > system.accuracy_mw and bound < progress * last_bound:
                         rest_round, last_bound, check_after = None, bound, rnd + window
                 elif proved(system, rnd, window,
                             rnd > check_after and unrest is None and opts.tol_kw > 0.0):
@@ -181,6 +183,11 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
         duplicated=network.duplicated,
         wall_seconds=time.perf_counter() - start,
     )
+
+
+#: The factor each further rest's proved bound must fall below, times the one before, for a
+#: run at rest above the accuracy to go on (:func:`simulate`).
+REST_PROGRESS = 0.5
 
 
 def proved(system: WorldSystem, rnd: int, window: int, due: bool) -> bool:

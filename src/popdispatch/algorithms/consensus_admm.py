@@ -35,7 +35,12 @@ averages the last value each holder sent (stale), a holder steps from the last `
 heard; a DG silent for ``silent_rounds`` rounds counts as gone (a crashed DG's inverter holds
 its set point): each holder fixes its copy at the set point the DG last applied and projects
 the others. The DGs send their cost curves to the coordinator once (configuration,
-counted), which sets the penalty."""
+counted), which sets the penalty.
+
+The rules are functions and one class (:func:`penalty`, :func:`prox_cost`, :func:`onto_slab`,
+:func:`slab_of_line`, :func:`consensus_value`, :class:`Holder`: the holder's price update,
+x-update, what it hears and the silence rule), which the mango agents of
+:mod:`popdispatch.agents.consensus_admm` call as well."""
 
 from __future__ import annotations
 
@@ -51,7 +56,6 @@ from popdispatch.algorithms.base import (
     controller_name,
 )
 from popdispatch.algorithms.network import Message, Network
-from popdispatch.modes.exact import scales
 
 
 @dataclass(frozen=True)
@@ -80,6 +84,13 @@ class Holder:
         self.free = np.ones(len(members), dtype=bool)
         self.stepped = False  # whether it has taken an x-update (then u moves by z)
 
+    def hear(self, slot: int, sent: int, z: float, applied: float) -> None:
+        """DG ``members[slot]``'s consensus value and applied set point (MW), sent in round
+        ``sent``: kept when newer than what it holds (older or repeated ones are stale)."""
+        if sent > self.z_round[slot]:
+            self.z[slot], self.applied[slot] = z, applied
+            self.z_round[slot] = sent
+
     def step(self, project) -> None:
         """Prices by the latest ``z``, then the x-update ``project(v, free)`` at ``v = z -
         u`` with the gone members at their last applied set points."""
@@ -89,7 +100,13 @@ class Holder:
         self.x = project(v, self.free)
         self.stepped = True
 
+    def proposals(self) -> np.ndarray:
+        """``x + u`` of each member (MW): what it sends each free member."""
+        return self.x + self.u
+
     def forget_silent(self, round_: int, silent_rounds: int) -> None:
+        """Count as gone (for good) the members not heard for more than ``silent_rounds``
+        rounds at round ``round_``."""
         self.free &= round_ - self.z_round <= silent_rounds
 
 
@@ -101,8 +118,8 @@ class ConsensusAdmm(Algorithm):
     def __init__(self, minute: Minute, network: Network, params: ConsensusAdmmParams):
         super().__init__(minute, network, params)
         problem, n = minute.problem, len(minute.names)
-        spread, demand = scales(problem)
-        self.rho = params.rho_scale * spread / demand
+        self.rho = penalty(params.rho_scale, problem.b, problem.c, problem.pmin, problem.pmax,
+                           float(np.max(problem.demand)))  # fmt: skip
         self.z = balanced_start(minute)
         self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
         self.factor = problem.down  # D_ki
@@ -145,10 +162,7 @@ class ConsensusAdmm(Algorithm):
             for msg in messages:
                 if msg.kind == "consensus":  # (z_i, x_ii) from DG i to a holder
                     holder, i = by_name[receiver], names.index(msg.sender)
-                    slot = int(np.searchsorted(holder.members, i))
-                    if msg.sent > holder.z_round[slot]:
-                        holder.z[slot], holder.applied[slot] = msg.values
-                        holder.z_round[slot] = msg.sent
+                    holder.hear(int(np.searchsorted(holder.members, i)), msg.sent, *msg.values)
                 elif msg.kind == "copy":  # x_ji + u_ji from holder j to DG i
                     i = names.index(receiver)
                     if msg.sent > self.heard[i][msg.sender][1]:
@@ -161,11 +175,8 @@ class ConsensusAdmm(Algorithm):
                 continue
             dg.z[0] = self.z[i]  # its own consensus value: local
 
-            def prox(v, free, i=i):
-                p = (rho * v - problem.b[i]) / (2.0 * problem.c[i] + rho)
-                return np.clip(p, m.lo[i], m.hi[i])
-
-            dg.step(prox)
+            dg.step(lambda v, free, i=i: prox_cost(v, problem.b[i], problem.c[i], m.lo[i],
+                                                   m.hi[i], rho))  # fmt: skip
             self.p[i] = dg.x[0]
         for k, holder in enumerate((self.coordinator, *self.lines)):
             if self.net.crashed(holder.name) or not len(holder.members):
@@ -173,16 +184,14 @@ class ConsensusAdmm(Algorithm):
             holder.forget_silent(round_, self.params.silent_rounds)
             a = np.ones(len(holder.members)) if k == 0 else self.factor[k - 1, holder.members]
             lo, hi = (m.demand, m.demand) if k == 0 else \
-                (m.load_flow[k - 1] - problem.limit[k - 1],
-                 m.load_flow[k - 1] + problem.limit[k - 1])  # fmt: skip
-            holder.step(lambda v, free, a=a, lo=lo, hi=hi: _onto_slab(v, free, a, lo, hi))
+                slab_of_line(m.load_flow[k - 1], problem.limit[k - 1])  # fmt: skip
+            holder.step(lambda v, free, a=a, lo=lo, hi=hi: onto_slab(v, free, a, lo, hi))
 
     def _averages(self) -> None:
         for i, dg in enumerate(self.dgs):
             if self.net.crashed(dg.name):
                 continue
-            others = [value for value, _ in self.heard[i].values()]
-            self.z[i] = (dg.x[0] + dg.u[0] + sum(others)) / (1 + len(others))
+            self.z[i] = consensus_value(dg, [value for value, _ in self.heard[i].values()])
 
     def exchange(self, round_: int) -> None:
         names = self.m.names
@@ -193,14 +202,49 @@ class ConsensusAdmm(Algorithm):
                                   reveals="set point")  # fmt: skip
             return
         for holder in (self.coordinator, *self.lines):
-            values = holder.x + holder.u
+            values = holder.proposals()
             for slot in np.flatnonzero(holder.free):
                 self.net.send(holder.name, names[holder.members[slot]], "copy", [values[slot]],
                               reveals="set-point proposal")  # fmt: skip
 
 
-def _onto_slab(v: np.ndarray, free: np.ndarray, a: np.ndarray, lo: float,
-               hi: float) -> np.ndarray:  # fmt: skip
+def penalty(rho_scale: float, b: np.ndarray, c: np.ndarray, pmin: np.ndarray,
+            pmax: np.ndarray, reference_demand_mw: float) -> float:  # fmt: skip
+    """The penalty ``rho = rho_scale S / P``, EUR/MW per MW, from the DGs' cost curves ``b``
+    (EUR/MWh), ``c`` (EUR/MW^2h) and ratings ``pmin``, ``pmax`` (MW) and the reference demand
+    ``P`` (MW, the problem's largest): exact mode's scales
+    (:func:`popdispatch.modes.exact.scales`), the spread ``S = max(b + 2 c Pmax) - min(b + 2 c
+    Pmin)`` (if zero, the largest marginal cost, at least 1)."""
+    top = b + 2.0 * c * pmax
+    spread = float(top.max() - (b + 2.0 * c * pmin).min())
+    if not spread > 0.0:
+        spread = max(float(np.abs(top).max()), 1.0)
+    return rho_scale * spread / reference_demand_mw
+
+
+def prox_cost(v: np.ndarray, b: float, c: float, lo: float, hi: float,
+              rho: float) -> np.ndarray:  # fmt: skip
+    """A DG's x-update: the prox of its cost ``b p + c p^2`` (EUR/MWh, EUR/MW^2h) on its range
+    ``[lo, hi]`` (MW) at ``v`` (MW) with penalty ``rho``, ``clip((rho v - b) / (2 c + rho),
+    lo, hi)`` (unique for a linear cost too)."""
+    return np.clip((rho * v - b) / (2.0 * c + rho), lo, hi)
+
+
+def slab_of_line(load_flow_mw: float, limit_mw: float) -> tuple[float, float]:
+    """Line ``k``'s slab ``(F_k - U_k, F_k + U_k)`` for ``a.y`` (MW): the flow of the loads
+    alone ``F_k`` and the limit ``U_k``."""
+    return load_flow_mw - limit_mw, load_flow_mw + limit_mw
+
+
+def consensus_value(own: Holder, others: list[float]) -> float:
+    """A DG's average: ``z_i = mean_j (x_ji + u_ji)`` (MW) over its own term (``own``, its
+    :class:`Holder` of one member) and the latest ``x_ji + u_ji`` of each other holder
+    (``others``, in the order coordinator, lines)."""
+    return (own.x[0] + own.u[0] + sum(others)) / (1 + len(others))
+
+
+def onto_slab(v: np.ndarray, free: np.ndarray, a: np.ndarray, lo: float,
+              hi: float) -> np.ndarray:  # fmt: skip
     """The Euclidean projection of ``v`` (MW) onto ``lo <= a.y <= hi`` moving only the
     ``free`` entries: the balance (``a = 1``, ``lo = hi = P_d``) or a line's limit (``a`` its
     distribution factors, ``F_k - U_k <= a.y <= F_k + U_k``)."""

@@ -48,7 +48,8 @@ from popdispatch.progress import Progress
 @option("--algorithm", type=click.Choice(list(ALGORITHMS)), default=DEFAULT_ALGORITHM,
         show_default=True,
         help="The agents' algorithm: population dynamics, or dual decomposition (plain or "
-        "fast, exact mode: the DC-OPF) with the comparison's steps (docs/agents.md).")  # fmt: skip
+        "fast) or consensus ADMM (exact mode: the DC-OPF) with the comparison's parameters "
+        "(docs/agents.md).")  # fmt: skip
 @run_options
 @loss_option
 @option("--delay-max", type=click.IntRange(0), default=0, show_default=True,
