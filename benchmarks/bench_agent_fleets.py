@@ -7,6 +7,7 @@ the status, and the distance to the project's DC-OPF (Clarabel, its own toleranc
 as in ``bench_fleets.py``).
 
 Usage: python benchmarks/bench_agent_fleets.py [--runs N] [--seed S] [--max-rounds R]
+[--synthetic 1000] [--price-law plain|scaled]
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from fleet_cases import fleet_case  # noqa: E402
 
 from popdispatch.agents.network import Faults  # noqa: E402
 from popdispatch.agents.system import AgentSettings, run_agents  # noqa: E402
+from popdispatch.modes.exact import ExactConstants  # noqa: E402
 from popdispatch.online import RunSettings  # noqa: E402
 from popdispatch.opf import OpfSolver  # noqa: E402
 
@@ -33,8 +35,10 @@ from popdispatch.opf import OpfSolver  # noqa: E402
 GRAPHS = (("complete", "smith", "complete"), ("ring", "distributed-smith", "ring"))
 
 
-def run_one(problem, dynamics: str, graph: str, local: bool, max_rounds: int, opf) -> dict:
-    settings = RunSettings(mode="exact", dynamics=dynamics, graph=graph)
+def run_one(problem, dynamics: str, graph: str, local: bool, max_rounds: int, opf,
+            law: str = "plain") -> dict:  # fmt: skip
+    settings = RunSettings(mode="exact", dynamics=dynamics, graph=graph,
+                           exact=ExactConstants(price_law=law))  # fmt: skip
     began = time.process_time()
     run = run_agents(problem, 1, settings, Faults(),
                      AgentSettings(max_rounds=max_rounds, local_step=local))  # fmt: skip
@@ -67,13 +71,16 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--max-rounds", type=int, default=2000)
     parser.add_argument("--synthetic", default="", help="synthetic feeder sizes, e.g. 1000")
+    parser.add_argument("--price-law", default="plain", choices=("plain", "scaled"),
+                        help="the node controllers' price law")
     args = parser.parse_args()
     bases = feeders([int(n) for n in args.synthetic.split(",") if n])
     names = sorted(bases)
     loaded: dict = {}
     rng = np.random.default_rng(args.seed)
     print(f"# bench_agent_fleets, {date.today()}, {platform.machine()}, "
-          f"{platform.python_version()}, {args.runs} random fleets, seed {args.seed}")  # fmt: skip
+          f"{platform.python_version()}, {args.runs} random fleets, seed {args.seed}, "
+          f"{args.price_law} price law")  # fmt: skip
     rows: dict[tuple, list[dict]] = {}
     for _ in range(args.runs):
         name = names[rng.integers(len(names))]
@@ -85,7 +92,8 @@ def main() -> None:
             continue
         for label, dynamics, graph in GRAPHS:
             for local in (False, True):
-                row = run_one(case.problem, dynamics, graph, local, args.max_rounds, opf)
+                row = run_one(case.problem, dynamics, graph, local, args.max_rounds, opf,
+                              args.price_law)  # fmt: skip
                 rows.setdefault((label, local), []).append(row)
                 print(f"{case.label} | {label} | local {local} | {row['status']} | "
                       f"{row['rounds']} rounds | h {row['step_s']:.3g} s | "

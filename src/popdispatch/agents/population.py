@@ -40,7 +40,7 @@ from popdispatch.game.parameters import MinuteInputs, PriceLaw
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import STABLE_STEP
 from popdispatch.modes import get_mode
-from popdispatch.modes.exact import scales
+from popdispatch.modes.exact import scaled_weights, scales
 from popdispatch.online.settings import RunSettings, initial_shares
 from popdispatch.online.stiffness import price_loop_rate, stiffness_rate
 from popdispatch.warm_start import SHARES, warm_start
@@ -80,7 +80,7 @@ def local_stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute
     demand = float(problem.demand[minute - 1])
     spread, reference = scales(problem)
     field = float(fp.gain) * demand * spread / reference
-    return max(field, price_loop_rate(problem, settings))
+    return max(field, price_loop_rate(problem, settings, minute))
 
 
 
@@ -300,7 +300,8 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     for gen in generators:
         gen.relay = relay
         gen.stale_rounds = stale_rounds
-    controllers, line_ends = _controllers(problem, settings, fp, step_s, network)
+    controllers, line_ends = _controllers(problem, settings, fp, step_s, network,
+                                          line_scales(problem, settings, minute))
     for controller in controllers.values():  # the generators report a silence first
         controller.stale_rounds = 2 * stale_rounds
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
@@ -337,16 +338,15 @@ def _line_names(problem: DispatchProblem) -> list[str]:
 
 def check_settings(settings: RunSettings) -> None:
     """Refuse run settings the agents cannot honour: a mode other than paper and exact (their
-    node controllers price limited lines only), a price law other than plain (they hear only
-    their own lines; the tree law needs its neighbours' excesses, the scaled law the count of
-    tradable generators below each line)."""
+    node controllers price limited lines only), the tree price law (each controller hears only
+    its own lines; the tree law needs its neighbours' excesses). The scaled law needs only two
+    counts per line, which each controller has from configuration (:func:`line_scales`)."""
     if get_mode(settings.mode).code not in PAYOFFS:
         raise OptionError(f"the agents run paper and exact mode, not {settings.mode}", "--mode")
-    if settings.exact.price_law != PriceLaw.PLAIN:
+    if settings.exact.price_law == PriceLaw.TREE:
         raise OptionError(
-            "the agents' node controllers run the plain price law (each hears only its own "
-            "lines; the tree law needs its neighbours' excesses, the scaled law the count of "
-            "tradable generators below each line)",
+            "the agents' node controllers run the plain and scaled price laws (each hears only "
+            "its own lines; the tree law needs its neighbours' excesses)",
             "--price-law",
         )
 
@@ -398,10 +398,23 @@ def controller_id(bus) -> str:
     return f"C{bus_name(bus)}"
 
 
-def _controllers(problem, settings: RunSettings, fp, step_s: float, network):
+def line_scales(problem: DispatchProblem, settings: RunSettings, minute: int) -> np.ndarray:
+    """Each limited line's factor ``s_k`` of the price law in force at ``minute``
+    (dimensionless): the scaled law's ``N / N_k``, the fleet's online tradable generators over
+    those below the line (:func:`popdispatch.modes.exact.scaled_weights`: configuration, the
+    two counts each controller is told), 1 under the plain law and in paper mode."""
+    scaled = get_mode(settings.mode).bounded and settings.exact.price_law == PriceLaw.SCALED
+    if not scaled or not len(problem.limit):
+        return np.ones(len(problem.limit))
+    return scaled_weights(problem, np.array([minute - 1]), 1.0)[0] ** 2
+
+
+def _controllers(problem, settings: RunSettings, fp, step_s: float, network, scale):
     """``({id: controller}, line_ends)`` from the problem's controller table; each line priced
     by the mode's own payoff map (:class:`~popdispatch.agents.controller.LinePrice`) with the
-    problem's limit of the line."""
+    problem's limit of the line; under the scaled law line ``k``'s price rate times ``s_k``
+    and its proportional weight ``C`` times ``sqrt(s_k)`` (``scale``, :func:`line_scales`:
+    the scaled law is the plain law with these per-line constants)."""
     table = NodeControllers.from_problem(problem).table
     position = {line: k for k, line in enumerate(problem.lines)}
     payoff = PAYOFFS[get_mode(settings.mode).code]
@@ -411,8 +424,8 @@ def _controllers(problem, settings: RunSettings, fp, step_s: float, network):
     for row in table.itertuples():
         aid = controller_id(row.bus)
         k = position[row.line]
-        price = LinePrice(payoff, float(problem.limit[k]), float(fp.C), float(fp.price_rate),
-                          n_states)  # fmt: skip
+        price = LinePrice(payoff, float(problem.limit[k]), float(fp.C) * np.sqrt(scale[k]),
+                          float(fp.price_rate) * scale[k], n_states)  # fmt: skip
         weights = None
         if problem.meshed:  # each generator's factor to the line
             weights = dict(zip(problem.generators, problem.factor[k].tolist(), strict=True))

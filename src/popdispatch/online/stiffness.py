@@ -54,16 +54,20 @@ def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int)
     fan = _fan(problem, settings)
     own = float(np.max(rates * (2.0 * problem.c + below)))
     field = float(fp.gain) * demand * fan * max(own, spread / reference)
-    return max(field, price_loop_rate(problem, settings))
+    return max(field, price_loop_rate(problem, settings, minute))
 
 
-def price_loop_rate(problem: DispatchProblem, settings: RunSettings) -> float:
+def price_loop_rate(problem: DispatchProblem, settings: RunSettings, minute: int = 1) -> float:
     """The line prices' part of :func:`stiffness_rate`, 1/s: ``2 STABLE_STEP alpha / C``
-    where a line is limited (``alpha`` the price rate, ``C`` the proportional weight), else 0."""
+    where a line is limited (``alpha`` the price rate, ``C`` the proportional weight), else 0;
+    under the scaled law each line's ``alpha s_k / (C sqrt(s_k))``, so the largest ``sqrt(s_k)``
+    times the plain law's (``s_k = (weight / C)^2`` at ``minute``,
+    :func:`popdispatch.modes.exact.price_weights`)."""
     if not len(problem.limit):
         return 0.0
     fp = settings.game_constants(problem)
-    return 2.0 * STABLE_STEP * float(fp.price_rate) / float(fp.C)
+    weight = price_weights(problem, settings.exact.price_law, 1.0, np.array([minute - 1]))
+    return 2.0 * STABLE_STEP * float(fp.price_rate) / float(fp.C) * float(np.max(weight))
 
 
 def round_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
