@@ -46,15 +46,38 @@ RATE_CAP = 50.0
 
 
 def revision_rates(
-    c: np.ndarray, spread: float, demand: float, cap: float = RATE_CAP
+    c: np.ndarray,
+    spread: float,
+    demand: float,
+    cap: float = RATE_CAP,
+    priced: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Each generator's revision rate ``r_i = (S / P) / (2 c_i)``, at most ``cap``
-    (dimensionless): ``c`` EUR/MW^2h, ``spread`` ``S`` EUR/MWh and ``demand`` ``P`` MW (the
-    scales of :func:`popdispatch.modes.exact.scales`)."""
+    """Each generator's revision rate ``r_i = (S / P) / (2 c_i)`` (dimensionless): ``c``
+    EUR/MW^2h, ``spread`` ``S`` EUR/MWh and ``demand`` ``P`` MW (the scales of
+    :func:`popdispatch.modes.exact.scales`).
+
+    ``priced``: the generators whose output moves a priced row (a limited line above them, a
+    monitored voltage; default all). Their rates are at most ``cap``: a price's proportional
+    weight ``C`` adds to their curvature, and the field's fastest rate grows with ``r_i C``.
+    The others' rates are not capped: the field near an interior rest point is ``p' = -kappa D
+    (diag(r) - r r^T / R) (2 diag(c) + C A^T A)`` (``A`` the priced rows), whose eigenvalues
+    are at most ``max_i r_i 2 c_i + C sum_(priced i) r_i``, so an unpriced generator adds at
+    most ``S / P`` whatever its rate, and its marginal cost relaxes at the same speed as a
+    steep one's however flat it is (capped, a flat unpriced pair crawled where a steep
+    generator made ``S`` large). An unpriced linear generator (``c = 0``) adds nothing and
+    takes the largest rate of the fleet (at least ``cap``), so it trades with every other
+    generator at that generator's own rate."""
     unit = spread / demand  # EUR/MW^2h
+    c = np.asarray(c, dtype=float)
     with np.errstate(divide="ignore"):
-        rate = unit / (2.0 * np.asarray(c, dtype=float))
-    return np.minimum(rate, cap)
+        rate = unit / (2.0 * c)
+    if priced is None:
+        return np.minimum(rate, cap)
+    priced = np.asarray(priced, dtype=bool)
+    rate = np.where(priced, np.minimum(rate, cap), rate)
+    finite = rate[np.isfinite(rate)]
+    fastest = max(cap, float(finite.max())) if len(finite) else cap
+    return np.minimum(rate, fastest)
 
 
 @nb.njit(cache=True, inline="always")
