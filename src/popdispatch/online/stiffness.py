@@ -68,7 +68,7 @@ def price_loop_rate(problem: DispatchProblem, settings: RunSettings) -> float:
 def round_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
     """The largest explicit round step of exact mode at ``minute``, s: ``STABLE_STEP /``
     :func:`stiffness_rate` (:data:`popdispatch.integrate.STABLE_STEP`, the largest ``h *
-    rate`` the engine's Heun steps take)."""
+    rate`` of an explicit step on a real rate)."""
     return STABLE_STEP / stiffness_rate(problem, settings, minute)
 
 
