@@ -59,25 +59,20 @@ def revision_rates(
     ``priced``: the generators whose output moves a priced row (a limited line above them, a
     monitored voltage; default all). Their rates are at most ``cap``: a price's proportional
     weight ``C`` adds to their curvature, and the field's fastest rate grows with ``r_i C``.
-    The others' rates are not capped: the field near an interior rest point is ``p' = -kappa D
-    (diag(r) - r r^T / R) (2 diag(c) + C A^T A)`` (``A`` the priced rows), whose eigenvalues
-    are at most ``max_i r_i 2 c_i + C sum_(priced i) r_i``, so an unpriced generator adds at
-    most ``S / P`` whatever its rate, and its marginal cost relaxes at the same speed as a
-    steep one's however flat it is (capped, a flat unpriced pair crawled where a steep
-    generator made ``S`` large). An unpriced linear generator (``c = 0``) adds nothing and
-    takes the largest rate of the fleet (at least ``cap``), so it trades with every other
-    generator at that generator's own rate."""
+    The other quadratic generators' rates are not capped: the field near an interior rest
+    point is ``p' = -kappa D (diag(r) - r r^T / R) (2 diag(c) + C A^T A)`` (``A`` the priced
+    rows), whose eigenvalues are at most ``max_i r_i 2 c_i + C sum_(priced i) r_i``, so such a
+    generator adds at most ``S / P`` whatever its rate, and its marginal cost relaxes as fast
+    as a steep one's however flat it is (capped, a flat pair crawled where a steep generator
+    made ``S`` large). A linear generator (``c = 0``) keeps the cap: its weights are
+    indicators times its rate, so a large rate makes it chatter along a limit it relays
+    through, and the adaptive steps resolve that chatter at a cost that grows with the rate."""
     unit = spread / demand  # EUR/MW^2h
     c = np.asarray(c, dtype=float)
     with np.errstate(divide="ignore"):
         rate = unit / (2.0 * c)
-    if priced is None:
-        return np.minimum(rate, cap)
-    priced = np.asarray(priced, dtype=bool)
-    rate = np.where(priced, np.minimum(rate, cap), rate)
-    finite = rate[np.isfinite(rate)]
-    fastest = max(cap, float(finite.max())) if len(finite) else cap
-    return np.minimum(rate, fastest)
+    capped = (c <= 0.0) | (True if priced is None else np.asarray(priced, dtype=bool))
+    return np.where(capped, np.minimum(rate, cap), rate)
 
 
 @nb.njit(cache=True, inline="always")
