@@ -173,7 +173,7 @@ class ReferenceMinute:
             inputs.hi,
         )
         self.integrator = settings.stepping
-        self.rate = settings.revision_rates(problem)
+        self.rate = settings.engine_revision_rates(problem)
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
 
     def evaluate(self, x, z):
