@@ -7,8 +7,9 @@ Two families:
 - **a flat pair priced by no line** beside a steep generator below a binding line: the steep
   generator's range makes the spread of marginal costs ``S`` large, so the flat generators'
   revision rates, capped in units of ``S / P``, let their marginal costs meet at a few % per
-  iteration (235 iterations on case33mg). A generator below no priced row takes its full
-  Newton rate (dynamics/newton.py);
+  iteration (235 iterations on case33mg; 137 on case15nbr, where one of the pair is linear).
+  In the engine a quadratic generator below no priced row takes its Newton rate up to
+  ``free_rate_cap`` (dynamics/newton.py, ``RunSettings.engine_revision_rates``);
 - **a weakly damped price loop** under the scaled law (a line with one generator of four
   below it: rate x4, weight x2): the adaptive Heun steps hovered at the stability edge of the
   loop's complex pair and the set points chattered above the stopping tolerance to the
