@@ -211,9 +211,14 @@ def test_reference_agrees_on_random_limited_feeders(seed, dynamics, eta):
     problem = limited_random_problem(seed + 10, n_gens=12)
     # 12 generators and many prices: the adaptive steps see round-off of different summation
     # orders (prefix sums vs all pairs; the logit's box target by bisection vs Brent's
-    # method); 1e-6 MW is 1 W.
+    # method); 1e-6 MW is 1 W. The fixed-point stop compares an iteration's movement with
+    # round-off, which the two orders can reach at different iterations, and the window stop
+    # dates convergence from the window's start (seed 2, logit: the engine at rest at
+    # iteration 13, converged at 12; the reference's prices still moving by 2.4e-13 and
+    # 2.9e-13 of their size at 13 and 14, over ROUND_OFF, so its window stops it at 15,
+    # converged at 10).
     settings = RunSettings(mode="exact", dynamics=dynamics, eta=eta)
-    compare(problem, settings, 1, 200, atol=1e-6, min_rows=5)
+    compare(problem, settings, 1, 200, atol=1e-6, min_rows=5, stop_slack=2)
 
 
 @pytest.mark.parametrize("method", ["euler", "heun"])

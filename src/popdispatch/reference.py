@@ -23,7 +23,7 @@ from popdispatch.dynamics.pairwise import RELAY_MASS
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
 from popdispatch.game.parameters import MinuteInputs
 from popdispatch.game.problem import DispatchProblem
-from popdispatch.integrate import ROUND_OFF, STABLE_STEP, Status
+from popdispatch.integrate import HEUN_STEP, ROUND_OFF, Status
 from popdispatch.modes import ModeCode, get_mode
 
 
@@ -173,7 +173,7 @@ class ReferenceMinute:
             inputs.hi,
         )
         self.integrator = settings.stepping
-        self.rate = settings.revision_rates(problem)
+        self.rate = settings.engine_revision_rates(problem)
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
 
     def evaluate(self, x, z):
@@ -251,8 +251,8 @@ class ReferenceMinute:
             if err <= 1.0:
                 x, z, remaining, point = x2, z2, remaining - h, None
             h_try = h * min(5.0, max(0.2, 0.9 / np.sqrt(err))) if err > 0.0 else 5.0 * h
-            if rate * h_try > STABLE_STEP:
-                h_try = STABLE_STEP / rate
+            if rate * h_try > HEUN_STEP:
+                h_try = HEUN_STEP / rate
         return x, z, congested, residual, min(h_try, it.dt)
 
     def stiffness(self, h, x, z, one, two) -> float:

@@ -46,15 +46,36 @@ RATE_CAP = 50.0
 
 
 def revision_rates(
-    c: np.ndarray, spread: float, demand: float, cap: float = RATE_CAP
+    c: np.ndarray,
+    spread: float,
+    demand: float,
+    cap: float = RATE_CAP,
+    priced: np.ndarray | None = None,
+    free_cap: float = np.inf,
 ) -> np.ndarray:
-    """Each generator's revision rate ``r_i = (S / P) / (2 c_i)``, at most ``cap``
-    (dimensionless): ``c`` EUR/MW^2h, ``spread`` ``S`` EUR/MWh and ``demand`` ``P`` MW (the
-    scales of :func:`popdispatch.modes.exact.scales`)."""
+    """Each generator's revision rate ``r_i = (S / P) / (2 c_i)`` (dimensionless): ``c``
+    EUR/MW^2h, ``spread`` ``S`` EUR/MWh and ``demand`` ``P`` MW (the scales of
+    :func:`popdispatch.modes.exact.scales`).
+
+    ``priced``: the generators whose output moves a priced row (a limited line above them, a
+    monitored voltage; default all). Their rates are at most ``cap``: a price's proportional
+    weight ``C`` adds to their curvature, and the field's fastest rate grows with ``r_i C``.
+    The other quadratic generators' rates are capped only at ``free_cap``, far higher: the
+    field near an interior rest point is ``p' = -kappa D (diag(r) - r r^T / R) (2 diag(c) + C
+    A^T A)`` (``A`` the priced rows), whose eigenvalues are at most ``max_i r_i 2 c_i + C
+    sum_(priced i) r_i``, so such a generator adds at most ``S / P`` whatever its rate, and its
+    marginal cost relaxes as fast as a steep one's however flat it is (capped at ``cap``, a
+    flat pair crawled where a steep generator made ``S`` large). Far from rest a very large
+    rate costs the adaptive steps many evaluations on a flat generator's fast moves, which
+    ``free_cap`` bounds. A linear generator (``c = 0``) keeps ``cap``: its weights are
+    indicators times its rate, so a large rate makes it chatter along a limit it relays
+    through, and the adaptive steps resolve that chatter at a cost that grows with the rate."""
     unit = spread / demand  # EUR/MW^2h
+    c = np.asarray(c, dtype=float)
     with np.errstate(divide="ignore"):
-        rate = unit / (2.0 * np.asarray(c, dtype=float))
-    return np.minimum(rate, cap)
+        rate = unit / (2.0 * c)
+    capped = (c <= 0.0) | (True if priced is None else np.asarray(priced, dtype=bool))
+    return np.where(capped, np.minimum(rate, cap), np.minimum(rate, max(cap, free_cap)))
 
 
 @nb.njit(cache=True, inline="always")

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from popdispatch.constants import KW_PER_MW
 from popdispatch.integrate.solve import Outcome, integrate
 from popdispatch.integrate.steppers import (
+    HEUN_STEP,
     STABLE_STEP,
     Method,
     StepperSettings,
@@ -113,6 +114,7 @@ class Integrator:
 __all__ = [
     "METHODS",
     "ROUND_OFF",
+    "HEUN_STEP",
     "STABLE_STEP",
     "Integrator",
     "Method",

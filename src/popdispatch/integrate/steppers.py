@@ -81,8 +81,17 @@ def method_tag(method: Method) -> MethodTag:
     return (EulerTag if Method(method) == Method.EULER else HeunTag)(int(method))
 
 
-#: Largest ``h * rate`` a Heun step may take (its stability interval on the real axis is 2).
+#: Largest ``h * rate`` of an explicit step on a real rate (Heun's and Euler's stability
+#: interval on the real axis is 2): the agents' Euler rounds (online/stiffness.py).
 STABLE_STEP = 1.5
+#: Largest ``h * rate`` an adaptive Heun step takes on the rate it measures
+#: (:func:`stiffness`), whose direction in the complex plane it does not know. The price
+#: loops are complex pairs: Heun's factor ``|1 + z + z^2 / 2|`` at ``|z| = 1.5`` is 0.99 at 76
+#: degrees from the negative real axis and above 1 beyond, where at ``|z| = 1`` it is 0.80 at
+#: 76 degrees and below 1 up to 85. A cap of 1.5 lets the steps hover at the edge of a weakly
+#: damped loop, where the set points chatter with the error tolerance's amplitude, above the
+#: stopping tolerance (docs/exact-mode.md, "Step size and stopping").
+HEUN_STEP = 1.0
 
 
 class StepperSettings(NamedTuple):
@@ -397,8 +406,8 @@ def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
         else:
             counters.rejected[0] += 1
         h_try = h * min(5.0, max(0.2, 0.9 / np.sqrt(err))) if err > 0.0 else 5.0 * h
-        if rate * h_try > STABLE_STEP:
-            h_try = STABLE_STEP / rate
+        if rate * h_try > HEUN_STEP:
+            h_try = HEUN_STEP / rate
     return congested, residual, min(h_try, dt)
 
 

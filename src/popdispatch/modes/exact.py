@@ -37,6 +37,10 @@ GAIN, WEIGHT, PRICE_RATE = 1000.0, 2.5, 1500.0
 #: rate, measured on random fleets, the ieee-elv day and the synthetic feeders
 #: (docs/exact-mode.md, "Revision rates").
 NEWTON_GAIN, NEWTON_PRICE_RATE, NEWTON_RATE_CAP = 300.0, 3000.0, 10.0
+#: The cap of the revision rate of a quadratic generator whose output moves no priced row, in
+#: the adaptive engine on the complete graph (dynamics/newton.py): measured on the random
+#: fleets and the ELV congestion minute (docs/exact-mode.md, "Revision").
+NEWTON_FREE_RATE_CAP = 1000.0
 #: Exact mode's revision protocols: each generator's revision scaled by its own curvature
 #: (dynamics/newton.py), or capacity-constrained Smith (dynamics/capacity.py).
 REVISIONS = ("newton", "capacity")
@@ -67,6 +71,7 @@ class ExactConstants:
     price_law: PriceLaw = PriceLaw.PLAIN
     revision: str = "newton"
     rate_cap: float = NEWTON_RATE_CAP
+    free_rate_cap: float = NEWTON_FREE_RATE_CAP
 
     def __post_init__(self) -> None:
         if self.revision not in REVISIONS:
@@ -76,7 +81,7 @@ class ExactConstants:
             object.__setattr__(self, "gain", NEWTON_GAIN if newton else GAIN)
         if self.price_rate is None:
             object.__setattr__(self, "price_rate", NEWTON_PRICE_RATE if newton else PRICE_RATE)
-        for name in ("gain", "C", "price_rate", "rate_cap"):
+        for name in ("gain", "C", "price_rate", "rate_cap", "free_rate_cap"):
             value = getattr(self, name)
             if not (value > 0 and value < float("inf")):
                 raise ValueError(f"exact-mode constant {name} must be finite and > 0, got {value}")

@@ -53,7 +53,8 @@ class Engine:
         self.term = Term.of(field, tag, *self._graph())
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
-        self.params = GameParameters.of(problem, self.constants, settings.revision_rates(problem))
+        rates = settings.engine_revision_rates(problem)
+        self.params = GameParameters.of(problem, self.constants, rates)
         self.z = np.zeros(self.mode.controller_states(problem))
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         integrator = settings.stepping

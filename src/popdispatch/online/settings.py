@@ -224,13 +224,33 @@ class RunSettings:
 
     def revision_rates(self, problem: DispatchProblem) -> np.ndarray:
         """The per-generator revision rates of the field in force (dimensionless; empty for a
-        field that takes none): ``(S / P) / (2 c_i)`` capped (dynamics/newton.py)."""
+        field that takes none): ``(S / P) / (2 c_i)`` capped (dynamics/newton.py). The rates
+        of fixed explicit steps: the engine's Euler steps and the agents' rounds."""
         if self.field != Field.CAPACITY_NEWTON:
             return np.zeros(0)
         from popdispatch.dynamics.newton import revision_rates
         from popdispatch.modes.exact import scales
 
         return revision_rates(problem.c, *scales(problem), self.exact.rate_cap)
+
+    def engine_revision_rates(self, problem: DispatchProblem) -> np.ndarray:
+        """The revision rates the engine integrates with: with adaptive Heun steps on the
+        complete graph, capped at ``rate_cap`` only for the generators whose output moves a
+        priced row and the linear ones, the others at ``free_rate_cap``
+        (:func:`priced_generators`, dynamics/newton.py); else
+        :meth:`revision_rates`. The uncapped rates' stiffness bound holds near a rest point
+        and needs one normalisation ``R`` for every receiver (the complete graph); far from
+        rest a flat generator's fast moves are resolved by the adaptive steps, not by fixed
+        ones."""
+        capped = self.revision_rates(problem)
+        complete = not get_dynamics(self.dynamics).uses_graph or self.graph == "complete"
+        if not (complete and self.stepping.method == "heun" and len(capped)):
+            return capped
+        from popdispatch.dynamics.newton import revision_rates
+        from popdispatch.modes.exact import scales
+
+        return revision_rates(problem.c, *scales(problem), self.exact.rate_cap,
+                              priced_generators(problem), self.exact.free_rate_cap)  # fmt: skip
 
     @property
     def stepping(self) -> Integrator:
@@ -316,3 +336,15 @@ def check_voltage_limits(vmin_pu: float | None, vmax_pu: float | None) -> tuple[
     if low >= high:
         raise OptionError(f"--vmin {low:g} p.u. is not below --vmax {high:g} p.u.", "--vmin")
     return low, high
+
+
+def priced_generators(problem: DispatchProblem) -> np.ndarray:
+    """Per generator: does its output move a row the controllers price (a limited line it is
+    below, or on a meshed network with a non-zero distribution factor to; a monitored bus's
+    voltage)?"""
+    priced = np.zeros(problem.n_generators, dtype=bool)
+    if len(problem.limit):
+        priced |= np.any(problem.down != 0.0, axis=0)
+    if problem.n_voltage:
+        priced |= np.any(problem.voltage_sens != 0.0, axis=0)
+    return priced

