@@ -56,16 +56,17 @@ from popdispatch.agents.dual_decomposition import (
     OPTIONS,
     PLANT_ID,
     RUN_OPTIONS,
+    CostCurve,
     DualSystem,
-    _check_events,
-    _check_ids,
+    check_ids,
     controller_ids,
     judged,
+    proposal_run,
 )
 from popdispatch.agents.dual_decomposition import refuse as _refuse
 from popdispatch.agents.network import Faults, LossyNetwork
 from popdispatch.agents.plant import Inverters
-from popdispatch.agents.system import W_PER_MW, AgentRun, AgentSettings
+from popdispatch.agents.system import AgentRun, AgentSettings, check_events
 from popdispatch.agents.world import WorldOptions, WorldRun, run_world
 from popdispatch.algorithms.base import COORDINATOR, Minute, balanced_start
 from popdispatch.algorithms.consensus_admm import (
@@ -77,7 +78,6 @@ from popdispatch.algorithms.consensus_admm import (
     prox_cost,
     slab_of_line,
 )
-from popdispatch.constants import KW_PER_MW
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.online.settings import RunSettings
 
@@ -95,18 +95,6 @@ class AdmmPhase(IntEnum):
 
 
 # -- messages (mango's JSON codec carries them between processes as well) --------------------
-
-
-@json_serializable
-@dataclass(frozen=True)
-class RatedCurve:
-    """DG -> coordinator (configuration): its cost ``b`` (EUR/MWh), ``c`` (EUR/MW^2h) and
-    its ratings ``pmin``, ``pmax`` (MW), from which the coordinator sets the penalty."""
-
-    b: float
-    c: float
-    pmin_mw: float
-    pmax_mw: float
 
 
 @json_serializable
@@ -150,7 +138,7 @@ class AdmmDgAgent(RoundAgent):
     ROUND = AdmmPhase
     PHASES = (AdmmPhase.RECORD, AdmmPhase.UPDATE)
 
-    def __init__(self, index: int, curve: RatedCurve, lo: float, hi: float,
+    def __init__(self, index: int, curve: CostCurve, lo: float, hi: float,
                  holders: list[str], z0: float, inverters: Inverters,
                  network=None):  # fmt: skip
         super().__init__(network)
@@ -253,12 +241,12 @@ class AdmmCoordinatorAgent(AdmmHolderAgent):
         super().__init__(dgs, np.arange(n), z0, np.ones(n), (demand_mw, demand_mw),
                          params.silent_rounds, network)  # fmt: skip
         self.rho_scale, self.reference_demand_mw = params.rho_scale, reference_demand_mw
-        self.curves: dict[str, RatedCurve] = {}
+        self.curves: dict[str, CostCurve] = {}
         self.asking: set[str] = set()
         self.rho: float | None = None
 
     def take(self, content, sender) -> None:
-        if isinstance(content, RatedCurve) and sender in self.slot:
+        if isinstance(content, CostCurve) and sender in self.slot:
             self.curves[sender] = content
             self.asking.add(sender)
 
@@ -337,7 +325,7 @@ def build(problem: DispatchProblem, minute: int, params: ConsensusAdmmParams, fa
         for k, aid in enumerate(ids)
     }  # fmt: skip
     dgs = [
-        AdmmDgAgent(i, RatedCurve(float(problem.b[i]), float(problem.c[i]),
+        AdmmDgAgent(i, CostCurve(float(problem.b[i]), float(problem.c[i]),
                                   float(problem.pmin[i]), float(problem.pmax[i])),
                     float(m.lo[i]), float(m.hi[i]),
                     [COORDINATOR, *(ids[k] for k in np.flatnonzero(factor[:, i]))],
@@ -352,8 +340,8 @@ def build(problem: DispatchProblem, minute: int, params: ConsensusAdmmParams, fa
     graph.add_edges_from((aid, names[i]) for aid, ks in zip(ids, members, strict=True)
                          for i in ks)  # fmt: skip
     graph.add_node(PLANT_ID)
-    _check_ids(names, ids)
-    _check_events(faults.events, names, ids)
+    check_ids(names, ids)
+    check_events(faults.events, names, ids)
     return AdmmSystem(m, plant, coordinator, controllers, dgs, inverters, network, graph,
                       accuracy_mw, hold)  # fmt: skip
 
@@ -396,32 +384,8 @@ def run_admm(problem: DispatchProblem, minute: int, settings: RunSettings, fault
 
 
 def _result(system: AdmmSystem, world: WorldRun | None) -> AgentRun:
-    p = system.inverters.p
-    history = system.history or [p.copy()]
-    return AgentRun(
-        generators=list(system.minute.names),
-        trajectory_kw=np.array(history) * KW_PER_MW,
-        setpoints_kw=p * KW_PER_MW,
-        rounds=world.rounds if world else 0,
-        rest_round=world.rest_round if world else None,
-        messages=world.messages if world else 0,
-        lost=world.lost if world else 0,
-        duplicated=world.duplicated if world else 0,
-        max_imbalance_w=system.max_imbalance_mw * W_PER_MW,
-        max_transient_w=system.max_imbalance_mw * W_PER_MW,
-        final_imbalance_w=-system.shortfall_mw() * W_PER_MW,
-        open_transactions=0,
-        residual_kw=system.residual_mw() * KW_PER_MW,
-        wall_seconds=world.wall_seconds if world else 0.0,
-        agents=len(system.agents),
-        step_s=system.step_s,
-        phase_ticks=system.plant.phase_ticks,
-        events=sorted(system.events, key=lambda e: e["round"]),
-        scalars_sent=world.scalars_sent if world else 0,
-        accuracy_kw=system.accuracy_mw * KW_PER_MW,
-        line_price_eur_per_mwh=np.array([line_price(c, system.coordinator.rho)
-                                         for c in system.controllers.values()]),
-    )  # fmt: skip
+    return proposal_run(system, world, np.array([line_price(c, system.coordinator.rho)
+                                                 for c in system.controllers.values()]))
 
 
 def line_price(controller: AdmmHolderAgent, rho: float | None) -> float:

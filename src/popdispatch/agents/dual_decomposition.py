@@ -52,7 +52,7 @@ from popdispatch.agents.base import RoundAgent
 from popdispatch.agents.messages import Measurement
 from popdispatch.agents.network import Faults, LossyNetwork
 from popdispatch.agents.plant import Inverters, PlantAgent
-from popdispatch.agents.system import W_PER_MW, AgentRun, AgentSettings, without
+from popdispatch.agents.system import W_PER_MW, AgentRun, AgentSettings, check_events, without
 from popdispatch.agents.world import WorldOptions, WorldRun, run_world
 from popdispatch.algorithms.base import COORDINATOR, Minute, balanced_shares
 from popdispatch.algorithms.dual import (
@@ -551,13 +551,13 @@ def build(problem: DispatchProblem, minute: int, params: DualParams, faults: Fau
     graph.add_edges_from((PLANT_ID, aid) for aid in [COORDINATOR, *ids])
     if params.accelerated:
         graph.add_edges_from((COORDINATOR, aid) for aid in ids)
-    _check_ids(names, ids)
-    _check_events(faults.events, names, ids)
+    check_ids(names, ids)
+    check_events(faults.events, names, ids)
     return DualSystem(m, plant, coordinator, controllers, dgs, inverters, network, graph,
                       accuracy_mw, hold)  # fmt: skip
 
 
-def _check_ids(generators: list[str], controllers: list[str]) -> None:
+def check_ids(generators: list[str], controllers: list[str]) -> None:
     """No DG may carry another agent's id (one line naming it)."""
     taken = {PLANT_ID, COORDINATOR, *controllers}
     for name in generators:
@@ -565,16 +565,6 @@ def _check_ids(generators: list[str], controllers: list[str]) -> None:
             raise OptionError(f"generator {name!r} has the agent id of another agent "
                               "(the plant, the coordinator or a line controller): rename it "
                               "in the fleet", "--fleet")  # fmt: skip
-
-
-def _check_events(events, generators: list[str], controllers: list[str]) -> None:
-    """Every fault names an agent of its kind (one line naming it)."""
-    for event in events:
-        known = controllers if event.kind == "controller-crash" else generators
-        if event.agent not in known:
-            what = "line controller" if event.kind == "controller-crash" else "generator"
-            raise OptionError(f"{event.kind}: no {what} {event.agent!r} (known: "
-                              f"{', '.join(known) or 'none'})", "--" + event.kind)  # fmt: skip
 
 
 def refuse(settings: RunSettings, opts: AgentSettings, faults: Faults, name: str = NAME) -> None:
@@ -627,10 +617,22 @@ def run_dual(problem: DispatchProblem, minute: int, settings: RunSettings, fault
 
 
 def _result(system: DualSystem, world: WorldRun | None) -> AgentRun:
-    p = system.inverters.p
-    history = system.history or [p.copy()]
     prices = {aid: [(c.line, float(c.mu[0]), float(c.mu[1]))]
               for aid, c in system.controllers.items() if not c.crashed}  # fmt: skip
+    return proposal_run(system, world, np.array([c.mu[0] - c.mu[1]
+                                                 for c in system.controllers.values()]),
+                        prices)  # fmt: skip
+
+
+def proposal_run(system, world: WorldRun | None, line_prices: np.ndarray,
+                 prices: dict | None = None) -> AgentRun:  # fmt: skip
+    """The :class:`~popdispatch.agents.system.AgentRun` of an algorithm whose inverters follow
+    proposals (dual decomposition, consensus ADMM): the plant's history, the world's counts,
+    the imbalance of the applied set points, the controllers' ``line_prices`` (EUR/MWh) and
+    their ``prices`` by controller (as the population's run reports them), not yet judged
+    (:func:`judged`)."""
+    p = system.inverters.p
+    history = system.history or [p.copy()]
     return AgentRun(
         generators=list(system.minute.names),
         trajectory_kw=np.array(history) * KW_PER_MW,
@@ -649,12 +651,11 @@ def _result(system: DualSystem, world: WorldRun | None) -> AgentRun:
         agents=len(system.agents),
         step_s=system.step_s,
         phase_ticks=system.plant.phase_ticks,
-        prices=prices,
+        prices=prices if prices is not None else {},
         events=sorted(system.events, key=lambda e: e["round"]),
         scalars_sent=world.scalars_sent if world else 0,
         accuracy_kw=system.accuracy_mw * KW_PER_MW,
-        line_price_eur_per_mwh=np.array([c.mu[0] - c.mu[1]
-                                         for c in system.controllers.values()]),
+        line_price_eur_per_mwh=line_prices,
     )  # fmt: skip
 
 

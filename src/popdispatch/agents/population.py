@@ -28,6 +28,7 @@ from popdispatch.agents.system import (
     W_PER_MW,
     AgentRun,
     AgentSettings,
+    check_events,
     line_states,
     without,
 )
@@ -308,7 +309,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
                        network)  # fmt: skip
     source = SourceAgent(names, timeout, copies, network)
     _check_ids(names, controllers)
-    _check_events(faults.events, names, controllers)
+    check_events(faults.events, names, list(controllers))
     cap = mode.price_cap(problem) if mode.bounded else np.inf
     return AgentSystem(plant, controllers, generators, inverters, network, graph, demand,
                        source, price_cap=cap, line_names=_line_names(problem))  # fmt: skip
@@ -360,16 +361,6 @@ def _check_ids(generators: list[str], controllers: dict) -> None:
         if str(name) in others:
             raise OptionError(f"generator {name!r} has the agent id of {others[str(name)]}: "
                               "rename it in the fleet", "--fleet")  # fmt: skip
-
-
-def _check_events(events, generators: list[str], controllers: dict) -> None:
-    """Every fault names an agent of its kind (one-line error naming it)."""
-    for event in events:
-        known = list(controllers) if event.kind == "controller-crash" else generators
-        if event.agent not in known:
-            what = "node controller" if event.kind == "controller-crash" else "generator"
-            raise OptionError(f"{event.kind}: no {what} {event.agent!r} (known: "
-                              f"{', '.join(map(str, known))})", "--" + event.kind)  # fmt: skip
 
 
 def _complete(graph: nx.Graph) -> bool:

@@ -266,3 +266,16 @@ def without(problem: DispatchProblem, minute: int, names: list[str]) -> Dispatch
     return replace(problem, online=online)
 
 
+def check_events(events, generators: list[str], controllers: list[str]) -> None:
+    """Every fault event names an agent of its kind: a controller crash one of the node
+    controllers ``controllers``, any other fault one of the ``generators`` (one-line
+    :class:`~popdispatch.errors.OptionError` naming the option and the agents known)."""
+    from popdispatch.errors import OptionError
+
+    for event in events:
+        known = list(controllers) if event.kind == "controller-crash" else list(generators)
+        if event.agent not in known:
+            what = "node controller" if event.kind == "controller-crash" else "generator"
+            raise OptionError(f"{event.kind}: no {what} {event.agent!r} (known: "
+                              f"{', '.join(map(str, known)) or 'none'})",
+                              "--" + event.kind)  # fmt: skip
