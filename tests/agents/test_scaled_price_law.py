@@ -91,15 +91,3 @@ def test_a_dg_pinned_below_a_limited_line_in_under_200_rounds(tmp_path, graph):
     setpoints = np.array([by_name[str(g)] for g in problem.generators])
     assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]
 
-
-def test_the_tree_law_is_refused_in_one_line():
-    """Each controller hears only its own line: the tree law's neighbour excesses are not
-    there. One line, exit 2, before any work."""
-    done = subprocess.run(
-        [sys.executable, "-m", "popdispatch.cli", "agents", "--minute", "566", "--limit",
-         "505:666=28", "--mode", "exact", "--price-law", "tree"],
-        capture_output=True, text=True, timeout=300,
-    )  # fmt: skip
-    assert done.returncode == 2
-    lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and "tree law" in lines[0] and "Traceback" not in done.stderr
