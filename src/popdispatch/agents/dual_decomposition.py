@@ -54,7 +54,7 @@ from popdispatch.agents.network import Faults, LossyNetwork
 from popdispatch.agents.plant import Inverters, PlantAgent
 from popdispatch.agents.system import W_PER_MW, AgentRun, AgentSettings, check_events, without
 from popdispatch.agents.world import WorldOptions, WorldRun, run_world
-from popdispatch.algorithms.base import COORDINATOR, Minute, balanced_shares
+from popdispatch.algorithms.base import COORDINATOR, Minute, balanced_shares, with_held
 from popdispatch.algorithms.dual import (
     DualDecomposition,
     DualParams,
@@ -494,13 +494,8 @@ def proved_bound_mw(system: DualSystem) -> float:
 def dc_opf_in_force(minute: Minute, tripped: list[str], held: dict[int, float]):
     """The DC-OPF of the minute with the ``tripped`` DGs offline and each DG of ``held``
     (position -> MW) fixed where its inverter stays."""
-    problem = without(minute.problem, minute.minute, tripped)
-    if held:
-        pmin, pmax = problem.pmin.copy(), problem.pmax.copy()
-        for i, p in held.items():
-            pmin[i] = pmax[i] = p
-        problem = replace(problem, pmin=pmin, pmax=pmax)
-    return solve_opf(problem, minute.minute)
+    return solve_opf(with_held(without(minute.problem, minute.minute, tripped), held),
+                     minute.minute)
 
 
 # -- building, running and judging ------------------------------------------------------------

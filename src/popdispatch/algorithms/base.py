@@ -10,7 +10,7 @@ iterative method.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -65,6 +65,17 @@ def balanced_shares(lo: np.ndarray, hi: np.ndarray, demand: float) -> np.ndarray
             break
         p[free] = np.clip(p[free] + gap / free.sum(), lo[free], hi[free])
     return p
+
+
+def with_held(problem: DispatchProblem, held: dict[int, float]) -> DispatchProblem:
+    """``problem`` with each generator of ``held`` (position -> MW) fixed at that output, as
+    an inverter whose agent stopped holds it: the yardstick's DC-OPF after a crash."""
+    if not held:
+        return problem
+    pmin, pmax = problem.pmin.copy(), problem.pmax.copy()
+    for i, p_mw in held.items():
+        pmin[i] = pmax[i] = p_mw
+    return replace(problem, pmin=pmin, pmax=pmax)
 
 
 def controller_name(problem: DispatchProblem, k: int) -> str:

@@ -13,11 +13,11 @@ certificate); else ``not_converged`` at the horizon, with the distance it ended 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from popdispatch.algorithms.base import Minute
+from popdispatch.algorithms.base import Minute, with_held
 from popdispatch.algorithms.network import Faults, Network
 from popdispatch.algorithms.registry import ALGORITHMS
 from popdispatch.constants import KW_PER_MW
@@ -101,12 +101,9 @@ class Yardstick:
             raise ValueError(f"the DC-OPF of minute {minute} is infeasible")
 
     def hold(self, i: int, p_mw: float) -> None:
-        problem = self.problem
-        pmin, pmax = problem.pmin.copy(), problem.pmax.copy()
-        pmin[i] = pmax[i] = p_mw
-        self.opf = solve_opf(replace(problem, pmin=pmin, pmax=pmax), self.minute)
+        self.opf = solve_opf(with_held(self.problem, {i: p_mw}), self.minute)
         if self.opf.status != "optimal":
-            raise ValueError(f"the DC-OPF with generator {problem.generators[i]} held at "
+            raise ValueError(f"the DC-OPF with generator {self.problem.generators[i]} held at "
                              f"{p_mw * KW_PER_MW:.3f} kW is infeasible")  # fmt: skip
 
 

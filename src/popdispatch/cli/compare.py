@@ -132,7 +132,8 @@ def compare(ctx, algorithms, minute, limits, loss, delay_max, duplicate, crash, 
         algorithms, left_out = runnable(problem, algorithms)  # the defaults that can run it
         for note in left_out:
             progress.note(note)
-    check_algorithms(problem, algorithms)
+    else:
+        check_algorithms(problem, algorithms)
     if solve_opf(problem, minute).status != "optimal":
         raise Failure(f"the DC-OPF of minute {minute} is infeasible with the given limits")
     faults = Faults(loss, delay_max, duplicate, seed, crash)
