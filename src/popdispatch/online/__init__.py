@@ -151,37 +151,47 @@ def run_snapshot(
 #: A snapshot at rest without the proof runs on while each rest's proved bound is at least 1 % below
 #: the last one's (the bound still falling, not at a floor).
 RUN_ON_FACTOR = 0.99
+#: Iterations between two certificates of a snapshot that is not at rest: a proof ends the run
+#: there, at rest or not (a state can sit within the accuracy while its last microwatts still
+#: move, and never satisfy the rest rule).
+PROOF_EVERY = 20
 
 
 def _run_until_proved(engine: Engine, x: np.ndarray, minute: int) -> tuple[MinuteRun, float]:
-    """:meth:`Engine.run_minute`, continued from each rest that the certificate does not prove
-    within the accuracy while the proved bound keeps falling (:data:`RUN_ON_FACTOR`) and the
-    horizon allows (see
-    :func:`run_snapshot`); the rest iteration counts from the start. Also the seconds spent in
-    the engine (the certificates' checks not counted: they are the audit, not the dispatch)."""
-    began = time.perf_counter()
-    run = engine.run_minute(x, minute)
-    seconds = time.perf_counter() - began
+    """:meth:`Engine.run_minute` in pieces of :data:`PROOF_EVERY` iterations, each piece's end
+    state certified: a state proved within the accuracy ends the run; a rest that the
+    certificate does not prove runs on while the proved bound keeps falling
+    (:data:`RUN_ON_FACTOR`) and the horizon allows (see :func:`run_snapshot`); iterations
+    count from the start. Also the seconds spent in the engine (the certificates' checks not
+    counted: they are the audit, not the dispatch)."""
     if not engine.mode.claims_dc_opf:
-        return run, seconds
+        began = time.perf_counter()
+        run = engine.run_minute(x, minute)
+        return run, time.perf_counter() - began
     horizon = engine.settings.stepping.max_iterations
     accuracy = float(engine.settings.accuracy_mw(engine.problem.demand[minute - 1]))
-    pieces, done, last_bound = [run.trajectory], run.iterations, np.inf
-    first = run.first_congestion
-    while run.status == Status.CONVERGED and done < horizon:
-        bound = _bound_mw(engine, minute, run.x * engine.problem.demand[minute - 1], engine.z)
-        if bound <= accuracy or not bound < RUN_ON_FACTOR * last_bound:
-            break
-        last_bound = bound
+    pieces, done, last_bound, seconds = [], 0, np.inf, 0.0
+    first, run = -1, None
+    while done < horizon:
         began = time.perf_counter()
-        more = engine.run_minute(run.x, minute, max_iterations=horizon - done)
+        more = engine.run_minute(x if run is None else run.x, minute,
+                                 max_iterations=min(PROOF_EVERY, horizon - done))  # fmt: skip
         seconds += time.perf_counter() - began
-        pieces.append(more.trajectory[1:])
+        pieces.append(more.trajectory if run is None else more.trajectory[1:])
+        if first < 0 <= more.first_congestion:
+            first = done + more.first_congestion
         converged_at = done + more.converged_at if more.converged_at >= 0 else -1
         done += more.iterations
         run = more._replace(converged_at=converged_at)
-    if len(pieces) == 1:
-        return run, seconds
+        if run.status == Status.INFEASIBLE:
+            break
+        bound = _bound_mw(engine, minute, run.x * engine.problem.demand[minute - 1], engine.z)
+        if bound <= accuracy:
+            break
+        if run.status == Status.CONVERGED:  # at rest and not proved
+            if not bound < RUN_ON_FACTOR * last_bound:
+                break
+            last_bound = bound
     return run._replace(trajectory=np.concatenate(pieces), iterations=done,
                         first_congestion=first), seconds  # fmt: skip
 
