@@ -23,7 +23,8 @@ from popdispatch.dynamics.pairwise import RELAY_MASS
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
 from popdispatch.game.parameters import MinuteInputs
 from popdispatch.game.problem import DispatchProblem
-from popdispatch.integrate import HEUN_STEP, ROUND_OFF, Status
+from popdispatch.integrate import ROUND_OFF, Status
+from popdispatch.integrate.steppers import next_step
 from popdispatch.modes import ModeCode, get_mode
 
 
@@ -232,7 +233,7 @@ class ReferenceMinute:
                 congested = max(congested, congestion)
                 x, z = self.limited_stage(h, x, z, point)
             return x, z, congested, residual, h_try
-        remaining, point = it.dt, None
+        remaining, point, switches = it.dt, None, 0
         while remaining > 1e-12 * it.dt:
             if point is None:
                 point, congestion, step_residual = self.evaluate(x, z)
@@ -250,9 +251,7 @@ class ReferenceMinute:
             rate = self.stiffness(h, x, z, point, second)
             if err <= 1.0:
                 x, z, remaining, point = x2, z2, remaining - h, None
-            h_try = h * min(5.0, max(0.2, 0.9 / np.sqrt(err))) if err > 0.0 else 5.0 * h
-            if rate * h_try > HEUN_STEP:
-                h_try = HEUN_STEP / rate
+            h_try, switches = next_step(h, err, rate, switches)
         return x, z, congested, residual, min(h_try, it.dt)
 
     def stiffness(self, h, x, z, one, two) -> float:

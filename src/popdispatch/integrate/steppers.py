@@ -92,6 +92,16 @@ STABLE_STEP = 1.5
 #: damped loop, where the set points chatter with the error tolerance's amplitude, above the
 #: stopping tolerance (docs/exact-mode.md, "Step size and stopping").
 HEUN_STEP = 1.0
+#: A measured ``h * rate`` beyond this is a switch of the field between the two stages of a
+#: step (a limiter, or distributed Smith's relay, turning on or off), not a linear rate: it
+#: stays about the same whatever ``h`` (beyond Heun's real stability limit, 2, a step the error
+#: control accepts holds no unstable linear mode above the tolerances).
+SWITCH_TURN = 3.0
+#: Switches per iteration the stiffness cap may shrink the step for; after them a switch only
+#: holds the step. A state sliding along a switch sees it at every step, and capping each time
+#: shrank the steps by the same factor without end (measured: to 1e-16 s on a random connected
+#: graph, an iteration that never ended).
+SWITCH_CAPS = 16
 
 
 class StepperSettings(NamedTuple):
@@ -360,6 +370,21 @@ def stiffness(h, x, z, mass1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,
     return np.sqrt(turned / moved) / h
 
 
+@nb.njit(cache=True)
+def next_step(h, err, rate, switches):
+    """``(next h, switches)`` after a Heun step of ``h`` (s) with error norm ``err`` and
+    measured rate ``rate`` (1/s, :func:`stiffness`), ``switches`` seen so far this iteration:
+    the error control's step, capped at ``HEUN_STEP / rate`` (:data:`HEUN_STEP`) where that is
+    smaller, except for a switch (:data:`SWITCH_TURN`) seen more than :data:`SWITCH_CAPS`
+    times, which only holds the step (a state sliding along it)."""
+    h_try = h * min(5.0, max(0.2, 0.9 / np.sqrt(err))) if err > 0.0 else 5.0 * h
+    if rate * h_try > HEUN_STEP:
+        switch = rate * h > SWITCH_TURN
+        switches += 1 if switch else 0
+        h_try = min(h_try, h) if switch and switches > SWITCH_CAPS else HEUN_STEP / rate
+    return h_try, switches
+
+
 def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
     """One iteration of adaptive Heun steps; ``(congested, largest residual, next h_try)``.
     Compiled by numba as :func:`advance` for a :class:`HeunTag`."""
@@ -376,6 +401,7 @@ def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
     congested = 0.0
     residual = 0.0
     fresh = False
+    switches = 0
     while remaining > 1e-12 * dt:
         h = min(h_try, remaining)
         # residual: the largest at the start of any step, the iteration's first sample
@@ -405,9 +431,7 @@ def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
             fresh = False
         else:
             counters.rejected[0] += 1
-        h_try = h * min(5.0, max(0.2, 0.9 / np.sqrt(err))) if err > 0.0 else 5.0 * h
-        if rate * h_try > HEUN_STEP:
-            h_try = HEUN_STEP / rate
+        h_try, switches = next_step(h, err, rate, switches)
     return congested, residual, min(h_try, dt)
 
 

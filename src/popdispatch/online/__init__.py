@@ -151,19 +151,20 @@ def run_snapshot(
 #: A snapshot at rest without the proof runs on while each rest's proved bound is at least 1 % below
 #: the last one's (the bound still falling, not at a floor).
 RUN_ON_FACTOR = 0.99
-#: Iterations between two certificates of a snapshot that is not at rest: a proof ends the run
-#: there, at rest or not (a state can sit within the accuracy while its last microwatts still
-#: move, and never satisfy the rest rule).
+#: Iterations between two certificates of a snapshot that is not at rest (at least; a quarter
+#: of the iterations so far once that is more, so that a long run on a large feeder asks a
+#: few dozen times, not hundreds): a proof ends the run there, at rest or not (a state can sit
+#: within the accuracy while its last microwatts still move, and never satisfy the rest rule).
 PROOF_EVERY = 20
 
 
 def _run_until_proved(engine: Engine, x: np.ndarray, minute: int) -> tuple[MinuteRun, float]:
-    """:meth:`Engine.run_minute` in pieces of :data:`PROOF_EVERY` iterations, each piece's end
-    state certified: a state proved within the accuracy ends the run; a rest that the
-    certificate does not prove runs on while the proved bound keeps falling
-    (:data:`RUN_ON_FACTOR`) and the horizon allows (see :func:`run_snapshot`); iterations
-    count from the start. Also the seconds spent in the engine (the certificates' checks not
-    counted: they are the audit, not the dispatch)."""
+    """:meth:`Engine.run_minute` in pieces of :data:`PROOF_EVERY` iterations (or a quarter
+    of those done, if more), each piece's end state certified: a state proved within the
+    accuracy ends the run; a rest that the certificate does not prove runs on while the
+    proved bound keeps falling (:data:`RUN_ON_FACTOR`) and the horizon allows (see
+    :func:`run_snapshot`); iterations count from the start. Also the seconds spent in the
+    engine (the certificates' checks not counted: they are the audit, not the dispatch)."""
     if not engine.mode.claims_dc_opf:
         began = time.perf_counter()
         run = engine.run_minute(x, minute)
@@ -175,7 +176,8 @@ def _run_until_proved(engine: Engine, x: np.ndarray, minute: int) -> tuple[Minut
     while done < horizon:
         began = time.perf_counter()
         more = engine.run_minute(x if run is None else run.x, minute,
-                                 max_iterations=min(PROOF_EVERY, horizon - done))  # fmt: skip
+                                 max_iterations=min(max(PROOF_EVERY, done // 4),
+                                                    horizon - done))  # fmt: skip
         seconds += time.perf_counter() - began
         pieces.append(more.trajectory if run is None else more.trajectory[1:])
         if first < 0 <= more.first_congestion:
