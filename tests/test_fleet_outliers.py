@@ -25,6 +25,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import networkx as nx
 import numpy as np
 import pandas as pd
 import pytest
@@ -94,12 +95,27 @@ DRAWN = {
 }  # fmt: skip
 
 
-def _check(problem, law: str) -> None:
+#: A fleet of ``bench_fleets.py --runs 500 --seed 1 --distributed`` (run 64) whose distributed
+#: Smith run slid along its relay's switch until the Heun steps were 1e-16 s and its second
+#: iteration never ended (integrate/steppers.py, ``SWITCH_CAPS``), and its communication graph.
+SLIDING = ("case33bw", "L10-11", 397.4262743762491, [
+    (1, 0.0, 33.071043, 0.183900, 0.0, 7430.0),
+    (24, 0.0, 33.616501, 0.031866, 0.0, 581.696961),
+    (14, 0.0, 50.924572, 0.0, 0.0, 942.512578),
+    (11, 0.0, 36.733947, 4.491852, 0.0, 598.408784),
+    (20, 0.0, 28.543735, 5.221131, 512.916547, 1035.635872),
+])  # fmt: skip
+SLIDING_GRAPH = [("g0", "g1"), ("g0", "g2"), ("g0", "g3"), ("g1", "g3"), ("src", "g0"),
+                 ("src", "g1"), ("src", "g2")]  # fmt: skip
+
+
+def _check(problem, law: str, **dynamics) -> None:
     """Converged in at most :data:`HORIZON` iterations, within the run's accuracy of the exact
-    optimum, the certificate's bound never below the true distance."""
+    optimum, the certificate's bound never below the true distance (``dynamics``: more
+    :class:`RunSettings`)."""
     optimum = exact_dc_opf(problem)
     assert optimum is not None
-    settings_ = RunSettings(mode="exact", exact=ExactConstants(price_law=law))
+    settings_ = RunSettings(mode="exact", exact=ExactConstants(price_law=law), **dynamics)
     run = run_snapshot(problem, 1, settings_)
     distance_kw = float(np.abs(run.setpoints_kw - optimum * 1e3).max())
     assert run.status == "converged", (run.status, run.stall_reason)
@@ -127,6 +143,12 @@ def test_the_slowest_benchmark_fleets_converge_in_200_iterations(drawn, law):
     problem = _drawn_problem(*DRAWN[drawn])
     assert problem.limit.size == 1
     _check(problem, law)
+
+
+def test_distributed_smith_sliding_along_its_relay_converges_in_200_iterations():
+    problem = _drawn_problem(*SLIDING)
+    graph = nx.Graph(SLIDING_GRAPH)
+    _check(problem, "plain", dynamics="distributed-smith", graph=graph)
 
 
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
