@@ -101,7 +101,7 @@ SWITCH_TURN = 3.0
 #: holds the step. A state sliding along a switch sees it at every step, and capping each time
 #: shrank the steps by the same factor without end (measured: to 1e-16 s on a random connected
 #: graph, an iteration that never ended).
-SWITCH_CAPS = 16
+SWITCH_CAPS = 64
 
 
 class StepperSettings(NamedTuple):
