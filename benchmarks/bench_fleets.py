@@ -167,7 +167,8 @@ def main() -> None:
         if name not in loaded:
             loaded[name] = bases[name]()
         case = fleet_case(rng, name, loaded[name], limit=bool(rng.random() < 0.5))
-        graph = random_connected_graph(graph_rng, list(case.problem.generators))
+        graph = random_connected_graph(graph_rng, list(case.problem.generators)) \
+            if args.distributed else None  # fmt: skip
         for label, law, distributed in variants:
             row = run_one(case.problem, law, args.horizon, graph if distributed else None)
             row.update(case=case.label, law=label, binding=case.binding, run=k)
