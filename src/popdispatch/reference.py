@@ -132,9 +132,9 @@ def pair_flows(f, w, v, graph, mass=None, room=None, kernel=Kernel.COMPARISON):
 def relay_matrix(f, w, v, graph, mass, room) -> np.ndarray:
     """The relay of distributed Smith on a graph (dynamics/pairwise.py ``relay_flows``),
     written from its definition with networkx: each connected set of blocked strategies
-    together with its neighbours is a group; every member of it sends to the group's best
-    receiver (largest fitness with ``w > 0``, lowest index on ties) at ``w_b v_a [f_b -
-    f_a]_+``. Nothing on the complete graph."""
+    together with its neighbours is a group; within it every member sends to every member
+    that can receive (``w > 0``, room above ``RELAY_MASS``) at ``w_b v_a [f_b - f_a]_+``.
+    Nothing on the complete graph."""
     n = len(f)
     relay = np.zeros((n, n))
     if (graph + np.eye(n) > 0).all():
@@ -142,13 +142,11 @@ def relay_matrix(f, w, v, graph, mass, room) -> np.ndarray:
     blocked = ~((w > 0) & (mass > RELAY_MASS) & (room > RELAY_MASS))
     g = nx.from_numpy_array(graph)
     for members in nx.connected_components(g.subgraph(np.flatnonzero(blocked).tolist())):
-        group = set(members) | {b for k in members for b in g.neighbors(k)}
-        receivers = [c for c in sorted(group) if w[c] > 0 and room[c] > RELAY_MASS]
-        if not receivers:
-            continue
-        best = max(receivers, key=lambda c: (f[c], -c))
-        for a in group - {best}:
-            relay[best, a] += w[best] * v[a] * max(f[best] - f[a], 0.0)
+        group = sorted(set(members) | {b for k in members for b in g.neighbors(k)})
+        for b in group:
+            if w[b] > 0 and room[b] > RELAY_MASS:
+                for a in group:
+                    relay[b, a] += w[b] * v[a] * max(f[b] - f[a], 0.0)
     return relay
 
 

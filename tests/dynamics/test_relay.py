@@ -26,21 +26,17 @@ OPF_ATOL_KW = 1e-3
 
 def reference_relay(f, w, v, graph: nx.Graph):
     """``(inflow, outflow)`` of the relay by its definition: the blocked strategies' connected
-    sets ``S`` (networkx), their groups ``S + N(S)``, each group's best receiver ``b`` (largest
-    ``f`` among ``w > 0``, lowest index on ties) and ``w_b v_a [f_b - f_a]_+`` from every member
-    ``a``."""
+    sets ``S`` (networkx), their groups ``S + N(S)``, and within each group
+    ``w_b v_a [f_b - f_a]_+`` from every member ``a`` to every member ``b`` with ``w_b > 0``."""
     n = len(f)
     blocked = [k for k in range(n) if not (w[k] > 0 and v[k] > RELAY_MASS)]
     flows = np.zeros((n, n))  # [receiver, sender]
     for members in nx.connected_components(graph.subgraph(blocked)):
         group = set(members) | {b for k in members for b in graph.neighbors(k)}
-        receivers = [c for c in sorted(group) if w[c] > 0]
-        if not receivers:
-            continue
-        best = max(receivers, key=lambda c: (f[c], -c))
-        for a in group:
-            if a != best:
-                flows[best, a] += w[best] * v[a] * max(f[best] - f[a], 0.0)
+        for b in group:
+            if w[b] > 0:
+                for a in group:
+                    flows[b, a] += w[b] * v[a] * max(f[b] - f[a], 0.0)
     return flows.sum(axis=1), flows.sum(axis=0)
 
 
@@ -168,3 +164,28 @@ def test_the_congestion_minute_on_a_ring_or_path_reaches_the_dc_opf(graph):
     run = run_snapshot(problem, PEAK_MINUTE, settings_)
     assert run.status == "converged"
     assert np.abs(run.setpoints_kw - solve_opf(problem, PEAK_MINUTE).p_kw).max() <= OPF_ATOL_KW
+
+
+def test_the_relay_is_continuous_where_two_receivers_tie():
+    """Star around a blocked centre 0 (at its upper limit): a dear sender 1 and two receivers
+    2, 3 whose fitness cross. Every flow moves by O(eps) when ``f_3`` passes ``f_2`` by eps
+    (sending to the best receiver alone moved sender 1's whole relayed flow from 2 to 3)."""
+    graph = nx.star_graph(3)
+    indptr, indices = csr(graph, 4)
+    w = np.array([0.0, 1.0, 2.0, 0.5])
+    v = np.array([0.4, 0.6, 0.3, 0.2])
+    no_limit = np.full(4, np.inf)
+
+    def flows(f3):
+        f = np.array([9.0, 1.0, 3.0, f3])
+        inflow, outflow = np.zeros(4), np.zeros(4)
+        relay_flows(f, w, v, v, no_limit, indptr, indices, np.empty(4, dtype=np.int64), inflow,
+                    outflow)  # fmt: skip
+        return inflow, outflow
+
+    eps = 1e-9
+    below, above = flows(3.0 - eps), flows(3.0 + eps)
+    np.testing.assert_allclose(below[0], above[0], rtol=0, atol=10 * eps)
+    np.testing.assert_allclose(below[1], above[1], rtol=0, atol=10 * eps)
+    # at the tie sender 1 sends to both: w_2 v_1 2 + w_3 v_1 2
+    np.testing.assert_allclose(flows(3.0)[1][1], 2.0 * 0.6 * 2.0 + 0.5 * 0.6 * 2.0)

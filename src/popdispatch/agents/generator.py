@@ -82,8 +82,8 @@ def relays(w: float, mass: float, room: float) -> bool:
 
 
 def receives(status: Status) -> bool:
-    """Whether the generator of ``status`` can be a relay group's best receiver (the
-    engine's ``relay_groups``: ``w > 0`` and room above ``RELAY_MASS``)."""
+    """Whether the generator of ``status`` can receive relayed flows (the engine's
+    ``group_flows``: ``w > 0`` and room above ``RELAY_MASS``)."""
     return status.w > 0.0 and status.room > RELAY_MASS
 
 
@@ -360,10 +360,10 @@ class GeneratorAgent(RoundAgent):
         else:
             self.send(Relayed(self.aid, content, (), tuple(hops[1:])), hops[0])
 
-    def _groups(self) -> list[tuple[str, list[tuple[str, Status]], tuple | None]]:
+    def _groups(self) -> list[list[tuple[str, Status, tuple | None]]]:
         """The relay groups this generator belongs to this round, from the flooded statuses:
-        ``(best receiver, members, hops to it)`` each (members: ``(id, status)``, itself
-        included; hops None when it is itself the best receiver)."""
+        each a list of its members ``(id, status, hops to it)`` (itself included, with hops
+        None; hops None too where no route came through the group)."""
         rnd = self.status_round
         own = self.own
         me = Status(rnd, own.f, own.w, own.v, own.mass, own.room, self.index)
@@ -413,14 +413,9 @@ class GeneratorAgent(RoundAgent):
         for c in comps:
             group = members.get(c, {})
             group[self.aid] = me
-            receivers = [(st.f, -st.index, a) for a, st in group.items() if receives(st)]
-            if not receivers:
-                continue
-            best = max(receivers)[2]
-            hops = None
-            if best != self.aid:
-                hops = (best,) if best in direct else self._hops_to(best, c, find, heard)
-            groups.append((best, sorted(group.items()), hops))
+            groups.append([(a, st, None if a == self.aid else (a,) if a in direct
+                            else self._hops_to(a, c, find, heard))
+                           for a, st in sorted(group.items())])  # fmt: skip
         return groups
 
     def _hops_to(self, target: str, comp: str, find, heard) -> tuple | None:
@@ -432,25 +427,24 @@ class GeneratorAgent(RoundAgent):
         return (*reversed(min(routes, key=len)), target)
 
     def _relay_flows(self) -> tuple[float, list[tuple[str, float, tuple]]]:
-        """This round's relayed inflow (as the best receiver of a group) and outflows (to
-        each group's best receiver: ``(receiver, rate, hops)``), shares/s, at the pairwise
-        rate ``w_b v_a [f_b - f_a]_+`` of dynamics/pairwise.py ``relay_flows``."""
+        """This round's relayed inflow (from every worse member of its groups, as a receiver)
+        and outflows (to every better member that can receive: ``(receiver, rate, hops)``),
+        shares/s, at the pairwise rate ``w_b v_a [f_b - f_a]_+`` of dynamics/pairwise.py
+        ``relay_flows``."""
         if not self.relay or self.own is None:
             return 0.0, []
         f0, w0, v0 = self.own.f, self.own.w, self.own.v
         inflow, out = 0.0, []
-        for best, group, hops in self._groups():
-            if best == self.aid:
-                for aid, st in group:
-                    gap = f0 - st.f
-                    if aid != self.aid and st.v > 0.0 and gap > 0.0:
-                        inflow += gap * w0 * st.v
-                continue
-            st = dict(group)[best]
-            gap = st.f - f0
-            if v0 > 0.0 and gap > 0.0 and hops is not None:
-                pair = min(self.own.theta, _theta(st)) if self.rule.local_step else 1.0
-                out.append((best, gap * st.w * v0 * pair, hops))
+        me = receives(self.own)
+        for group in self._groups():
+            for aid, st, hops in group:
+                if aid == self.aid:
+                    continue
+                if me and st.v > 0.0 and f0 > st.f:
+                    inflow += (f0 - st.f) * w0 * st.v
+                if v0 > 0.0 and st.f > f0 and receives(st) and hops is not None:
+                    pair = min(self.own.theta, _theta(st)) if self.rule.local_step else 1.0
+                    out.append((aid, (st.f - f0) * st.w * v0 * pair, hops))
         return inflow, out
 
     def _apply(self, decision: Decision, sender: str) -> None:

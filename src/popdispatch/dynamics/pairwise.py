@@ -177,7 +177,7 @@ def blocked(w, mass, room, k):
 @nb.njit(cache=True, inline="always")
 def relay_root(label, k):
     """Root of ``k``'s relay group in the union-find forest ``label`` (parents ``>= 0``, roots
-    negative: see :func:`relay_flows`), halving the path on the way."""
+    ``-2``: see :func:`relay_groups`), halving the path on the way."""
     while label[k] >= 0:
         parent = label[k]
         grand = label[parent]
@@ -190,21 +190,17 @@ def relay_root(label, k):
 
 
 @nb.njit(cache=True, inline="always")
-def relay_groups(f, w, mass, room, indptr, indices, label):
-    """Relay groups and their best receivers into ``label`` (int, length n); False if no
-    strategy is blocked.
-
-    A relay group is a connected set ``S`` of blocked strategies (:func:`blocked`) together
+def relay_groups(w, mass, room, indptr, indices, label):
+    """The blocked strategies' connected sets into ``label`` (int, length n), a union-find
+    forest: a parent index, ``-2`` at a root, ``-1`` for a strategy that is not blocked
+    (:func:`blocked`); False if none is blocked. A relay group is such a set ``S`` together
     with its neighbours ``N(S)``: any two members are joined by a path whose inner strategies
-    are all in ``S``. ``label`` holds a union-find forest over the blocked strategies: a
-    parent index, ``-1`` for a strategy that is not blocked, ``-2 - b`` at a root, ``b`` the
-    group's best receiver (largest ``f`` with ``w > 0``, lowest index on ties; ``n``: none).
-    """
-    n = f.shape[0]
+    are all in ``S``."""
+    n = w.shape[0]
     any_blocked = False
     for k in range(n):
         if blocked(w, mass, room, k):
-            label[k] = -2 - n
+            label[k] = -2
             any_blocked = True
         else:
             label[k] = -1
@@ -220,30 +216,84 @@ def relay_groups(f, w, mass, room, indptr, indices, label):
                 rb = relay_root(label, b)
                 if ra != rb:
                     label[rb] = ra
-    for k in range(n):
-        if label[k] == -1:
-            continue
-        r = relay_root(label, k)
-        for e in range(indptr[k], indptr[k + 1] + 1):
-            c = k if e == indptr[k + 1] else indices[e]
-            if w[c] <= 0.0 or room[c] <= RELAY_MASS:
-                continue
-            best = -2 - label[r]
-            if best == n or f[c] > f[best] or (f[c] == f[best] and c < best):
-                label[r] = -2 - c
     return True
 
 
 @nb.njit(cache=True, inline="always")
-def relay_send(f, w, v, label, a, r, inflow, outflow):
-    """``a``'s relayed flow to the best receiver of the group rooted at ``r``."""
-    i = -2 - label[r]
-    if i < f.shape[0] and i != a:
-        gap = f[i] - f[a]
-        if gap > 0.0:
-            rate = gap * w[i] * v[a]
-            inflow[i] += rate
-            outflow[a] += rate
+def group_memberships(label, indptr, indices, group, member):
+    """Every (group, member) pair into ``group``, ``member`` (int, length at least n + edges):
+    a strategy belongs to its own set's group if it is blocked and to the group of each
+    blocked neighbour's set, once each; returns the number of pairs."""
+    count = 0
+    for k in range(label.shape[0]):
+        own = relay_root(label, k) if label[k] != -1 else -1
+        if own >= 0:
+            group[count] = own
+            member[count] = k
+            count += 1
+        for e in range(indptr[k], indptr[k + 1]):
+            b = indices[e]
+            if label[b] == -1:
+                continue
+            r = relay_root(label, b)
+            seen = r == own
+            for e2 in range(indptr[k], e):  # a group reached through an earlier neighbour
+                b2 = indices[e2]
+                if not seen and label[b2] != -1 and relay_root(label, b2) == r:
+                    seen = True
+            if not seen:
+                group[count] = r
+                member[count] = k
+                count += 1
+    return count
+
+
+@nb.njit(cache=True, inline="always")
+def group_order(f, group, member, count, n):
+    """The first ``count`` memberships sorted by group, then by ascending fitness of the
+    member: a merge sort by fitness (:func:`merge_sort`, stable) followed by a stable
+    counting sort by group (groups are indexed by their root, below ``n``)."""
+    key = np.empty(count)
+    for m in range(count):
+        key[m] = f[member[m]]
+    by_fitness = np.empty(count, dtype=np.int64)
+    merge_sort(key, by_fitness)
+    start = np.zeros(n + 1, dtype=np.int64)
+    for m in range(count):
+        start[group[m] + 1] += 1
+    for r in range(n):
+        start[r + 1] += start[r]
+    ordered = np.empty(count, dtype=np.int64)
+    for m in by_fitness:
+        ordered[start[group[m]]] = member[m]
+        start[group[m]] += 1
+    return ordered, start
+
+
+@nb.njit(cache=True, inline="always")
+def group_flows(f, w, v, room, members, inflow, outflow):
+    """Add Smith's flows among ``members`` (sorted by ascending ``f``) to ``inflow``/``outflow``:
+    every member ``a`` sends to every better member ``b`` that can receive (``w_b > 0``, room
+    above :data:`RELAY_MASS`) at ``w_b v_a [f_b - f_a]_+``, by running sums as on the complete
+    graph (:func:`complete_graph_flows`)."""
+    below_v = 0.0
+    gain_in = 0.0
+    for r in range(members.shape[0]):
+        i = members[r]
+        if r > 0:
+            gain_in += (f[i] - f[members[r - 1]]) * below_v
+        if w[i] > 0.0 and room[i] > RELAY_MASS:
+            inflow[i] += w[i] * gain_in
+        below_v += v[i]
+    above_w = 0.0
+    gain_out = 0.0
+    for r in range(members.shape[0] - 1, -1, -1):
+        j = members[r]
+        if r < members.shape[0] - 1:
+            gain_out += (f[members[r + 1]] - f[j]) * above_w
+        outflow[j] += v[j] * gain_out
+        if w[j] > 0.0 and room[j] > RELAY_MASS:
+            above_w += w[j]
 
 
 @nb.njit(cache=True, inline="always")
@@ -254,32 +304,29 @@ def relay_flows(f, w, v, mass, room, indptr, indices, label, inflow, outflow):
     On a communication graph a strategy that cannot take part in a comparison (at a limit:
     :func:`blocked`) cuts its neighbours apart: a generator at ``Pmax`` receives nothing and
     passes nothing on, so two interior generators on either side of it never trade and
-    distributed Smith rests away from the dispatch (docs/agents.md). The relay: every sender
-    ``a`` (``v_a > 0``) of a relay group (:func:`relay_groups`) also sends to the group's best
-    receiver ``b`` at the pairwise rate ``w_b v_a [f_b - f_a]_+``, once per group it belongs
-    to; the blocked strategies between them pass the mass on and keep their own. Each term
-    moves mass from a worse to a better strategy, like the direct ones, so the flux limiter
-    and the rest-point argument of the pairwise flows apply unchanged: at rest no strategy
-    that can send is worse than one that can receive anywhere in the graph, the
-    box-constrained equilibrium of the complete graph (docs/agents.md, "the relay").
+    distributed Smith rests away from the dispatch (docs/agents.md). The relay: within each
+    relay group (:func:`relay_groups`) every sender ``a`` (``v_a > 0``) also sends to every
+    better member ``b`` that can receive, at the pairwise rate ``w_b v_a [f_b - f_a]_+``,
+    once per group the two share; the blocked strategies between them pass the mass on and
+    keep their own. Each term moves mass from a worse to a better strategy, like the direct
+    ones, so the flux limiter and the rest-point argument of the pairwise flows apply
+    unchanged: at rest no strategy that can send is worse than one that can receive anywhere
+    in the graph, the box-constrained equilibrium of the complete graph (docs/agents.md, "the
+    relay"). The terms are continuous in the fitness (sending to the best receiver alone
+    switched the destination where two receivers tie, a jump the error control resolved with
+    steps of 1e-7 s). The member lists (n + edges entries) are allocated when a strategy is
+    blocked.
     """
-    if not relay_groups(f, w, mass, room, indptr, indices, label):
+    if not relay_groups(w, mass, room, indptr, indices, label):
         return
-    for a in range(f.shape[0]):
-        if v[a] <= 0.0:
-            continue
-        own = relay_root(label, a) if label[a] != -1 else -1
-        if own >= 0:
-            relay_send(f, w, v, label, a, own, inflow, outflow)
-        for e in range(indptr[a], indptr[a + 1]):
-            b = indices[e]
-            if label[b] == -1:
-                continue
-            r = relay_root(label, b)
-            seen = r == own
-            for e2 in range(indptr[a], e):  # a group reached through an earlier neighbour
-                b2 = indices[e2]
-                if not seen and label[b2] != -1 and relay_root(label, b2) == r:
-                    seen = True
-            if not seen:
-                relay_send(f, w, v, label, a, r, inflow, outflow)
+    n = f.shape[0]
+    group = np.empty(n + indices.shape[0], dtype=np.int64)
+    member = np.empty(n + indices.shape[0], dtype=np.int64)
+    count = group_memberships(label, indptr, indices, group, member)
+    ordered, start = group_order(f, group, member, count, n)
+    begin = 0
+    for r in range(n):
+        end = start[r]
+        if end - begin > 1:
+            group_flows(f, w, v, room, ordered[begin:end], inflow, outflow)
+        begin = end
