@@ -68,7 +68,7 @@ class Status:
     v: float
     mass: float = 0.0
     room: float = 0.0
-    index: int = -1  # the generator's position (ties between best receivers of a relay group)
+    index: int = -1  # the generator's position among the generators
     theta: float | None = None  # its own step factor (GeneratorRule.step_factor); None: 1
 
 

@@ -312,10 +312,10 @@ def relay_flows(f, w, v, mass, room, indptr, indices, label, inflow, outflow):
     ones, so the flux limiter and the rest-point argument of the pairwise flows apply
     unchanged: at rest no strategy that can send is worse than one that can receive anywhere
     in the graph, the box-constrained equilibrium of the complete graph (docs/agents.md, "the
-    relay"). The terms are continuous in the fitness (sending to the best receiver alone
-    switched the destination where two receivers tie, a jump the error control resolved with
-    steps of 1e-7 s). The member lists (n + edges entries) are allocated when a strategy is
-    blocked.
+    relay"). The terms are continuous in the fitness: where two receivers tie, a sender's
+    relayed flow is shared between them, not switched from one to the other (a jump in the
+    field that an error-controlled step resolves only with steps of the tolerance over the
+    jump). The member lists (n + edges entries) are allocated when a strategy is blocked.
     """
     if not relay_groups(w, mass, room, indptr, indices, label):
         return
