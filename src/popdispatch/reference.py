@@ -19,7 +19,7 @@ import numpy as np
 
 from popdispatch.dynamics import Kernel, communication_graph, get_dynamics
 from popdispatch.dynamics.fields import field_tag, law_of
-from popdispatch.dynamics.pairwise import RELAY_MASS
+from popdispatch.dynamics.pairwise import RELAY_MASS, SLOW_RELAY
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
 from popdispatch.game.parameters import MinuteInputs
 from popdispatch.game.problem import DispatchProblem
@@ -114,32 +114,44 @@ def weights(field, x, f, lo, hi, active, rate=None):
     return law_of(tag).reference(tag, x, f, lo, hi, active, rate)
 
 
-def pair_flows(f, w, v, graph, mass=None, room=None, kernel=Kernel.COMPARISON):
+def pair_flows(f, w, v, graph, mass=None, room=None, kernel=Kernel.COMPARISON, slow=None):
     """``(inflow, outflow)``: ``T[i, j] = g_ij w_i v_j K(f_i, f_j)`` summed over j / over i,
     with ``K = [f_i - f_j]_+`` (a comparison ``kernel``, plus the relay:
     :func:`relay_matrix`; ``mass``, ``room``: the movable masses and rooms that say who is
-    blocked, default the sender weights and no upper limits) or ``K = 1`` (a target)."""
+    blocked, default the sender weights and no upper limits; ``slow``: who relays by rate,
+    default nobody) or ``K = 1`` (a target)."""
     if kernel == Kernel.TARGET:
         T = graph * w[:, None] * v[None, :]
         return T.sum(axis=1), T.sum(axis=0)
     T = graph * w[:, None] * v[None, :] * np.maximum(f[:, None] - f[None, :], 0.0)
     mass = v if mass is None else mass
     room = np.full(len(f), np.inf) if room is None else room
-    T = T + relay_matrix(f, w, v, graph, mass, room)
+    T = T + relay_matrix(f, w, v, graph, mass, room, slow)
     return T.sum(axis=1), T.sum(axis=0)
 
 
-def relay_matrix(f, w, v, graph, mass, room) -> np.ndarray:
+def slow_members(rate: np.ndarray, graph: np.ndarray) -> np.ndarray:
+    """Who relays by rate (dynamics/pairwise.py ``slow_relays``): a rate below ``SLOW_RELAY``
+    times the largest of its neighbours' on the dense 0/1 ``graph``."""
+    if len(rate) != len(graph):
+        return np.zeros(len(graph), dtype=bool)
+    fastest = np.where(graph > 0, rate[None, :], 0.0).max(axis=1)
+    return rate < SLOW_RELAY * fastest
+
+
+def relay_matrix(f, w, v, graph, mass, room, slow=None) -> np.ndarray:
     """The relay of distributed Smith on a graph (dynamics/pairwise.py ``relay_flows``),
-    written from its definition with networkx: each connected set of blocked strategies
-    together with its neighbours is a group; within it every member sends to every member
-    that can receive (``w > 0``, room above ``RELAY_MASS``) at ``w_b v_a [f_b - f_a]_+``.
-    Nothing on the complete graph."""
+    written from its definition with networkx: each connected set of relaying strategies
+    (blocked, or ``slow``: :func:`slow_members`) together with its neighbours is a group;
+    within it every member sends to every member that can receive (``w > 0``, room above
+    ``RELAY_MASS``) at ``w_b v_a [f_b - f_a]_+``. Nothing on the complete graph."""
     n = len(f)
     relay = np.zeros((n, n))
     if (graph + np.eye(n) > 0).all():
         return relay
     blocked = ~((w > 0) & (mass > RELAY_MASS) & (room > RELAY_MASS))
+    if slow is not None:
+        blocked = blocked | slow
     g = nx.from_numpy_array(graph)
     for members in nx.connected_components(g.subgraph(np.flatnonzero(blocked).tolist())):
         group = sorted(set(members) | {b for k in members for b in g.neighbors(k)})
@@ -173,6 +185,7 @@ class ReferenceMinute:
         )
         self.integrator = settings.stepping
         self.rate = settings.engine_revision_rates(problem)
+        self.slow = slow_members(self.rate, self.graph)
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
 
     def evaluate(self, x, z):
@@ -188,7 +201,7 @@ class ReferenceMinute:
 
     def flows(self, f, w, v, mass, room):
         """``(inflow, outflow)`` of the law's kernel on the run's graph (:func:`pair_flows`)."""
-        return pair_flows(f, w, v, self.graph, mass, room, self.law.kernel)
+        return pair_flows(f, w, v, self.graph, mass, room, self.law.kernel, self.slow)
 
     def limited_stage(self, h, x, z, point):
         f, w, v, room, mass, inflow, outflow, z_rate = point

@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy import sparse
 
-from popdispatch.dynamics.pairwise import RELAY_MASS, graph_flows, relay_flows
+from popdispatch.dynamics.pairwise import RELAY_MASS, graph_flows, relay_flows, slow_relays
 from popdispatch.online import RunSettings, run_snapshot
 from popdispatch.opf import solve_opf
 from popdispatch.scenarios import CONGESTION_PATH, PEAK_MINUTE, elv_problem
@@ -24,12 +24,19 @@ from helpers import random_limited_problem
 OPF_ATOL_KW = 1e-3
 
 
-def reference_relay(f, w, v, graph: nx.Graph):
-    """``(inflow, outflow)`` of the relay by its definition: the blocked strategies' connected
-    sets ``S`` (networkx), their groups ``S + N(S)``, and within each group
-    ``w_b v_a [f_b - f_a]_+`` from every member ``a`` to every member ``b`` with ``w_b > 0``."""
+def nobody(n: int) -> np.ndarray:
+    """No strategy relays by rate."""
+    return np.zeros(n, dtype=bool)
+
+
+def reference_relay(f, w, v, graph: nx.Graph, slow=None):
+    """``(inflow, outflow)`` of the relay by its definition: the connected sets ``S``
+    (networkx) of the blocked strategies and those that relay by rate (``slow``), their groups
+    ``S + N(S)``, and within each group ``w_b v_a [f_b - f_a]_+`` from every member ``a`` to
+    every member ``b`` with ``w_b > 0``."""
     n = len(f)
-    blocked = [k for k in range(n) if not (w[k] > 0 and v[k] > RELAY_MASS)]
+    slow = nobody(n) if slow is None else slow
+    blocked = [k for k in range(n) if slow[k] or not (w[k] > 0 and v[k] > RELAY_MASS)]
     flows = np.zeros((n, n))  # [receiver, sender]
     for members in nx.connected_components(graph.subgraph(blocked)):
         group = set(members) | {b for k in members for b in graph.neighbors(k)}
@@ -78,11 +85,13 @@ def test_compiled_relay_equals_the_reference(graph, seed):
     f = rng.normal(size=n).round(1)  # ties too
     w = np.where(rng.random(n) < 0.4, 0.0, 1.0)
     v = np.where(rng.random(n) < 0.3, rng.choice([0.0, RELAY_MASS / 2], n), rng.random(n))
+    slow = rng.random(n) < 0.2
     indptr, indices = csr(graph, n)
     inflow, outflow = np.zeros(n), np.zeros(n)
     no_limit = np.full(len(f), np.inf)
-    relay_flows(f, w, v, v, no_limit, indptr, indices, np.empty(n, dtype=np.int64), inflow, outflow)
-    ref_in, ref_out = reference_relay(f, w, v, graph)
+    relay_flows(f, w, v, v, no_limit, slow, indptr, indices, np.empty(n, dtype=np.int64), inflow,
+                outflow)  # fmt: skip
+    ref_in, ref_out = reference_relay(f, w, v, graph, slow)
     np.testing.assert_allclose(inflow, ref_in, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(outflow, ref_out, rtol=1e-12, atol=1e-15)
 
@@ -98,7 +107,8 @@ def test_no_blocked_strategy_leaves_the_graph_flows_alone():
     graph_flows(f, w, v, indptr, indices, inflow, outflow)
     before = inflow.copy(), outflow.copy()
     no_limit = np.full(len(f), np.inf)
-    relay_flows(f, w, v, v, no_limit, indptr, indices, np.empty(n, dtype=np.int64), inflow, outflow)
+    relay_flows(f, w, v, v, no_limit, nobody(n), indptr, indices, np.empty(n, dtype=np.int64),
+                inflow, outflow)  # fmt: skip
     assert np.array_equal(inflow, before[0]) and np.array_equal(outflow, before[1])
 
 
@@ -111,7 +121,8 @@ def test_a_saturated_chain_relays_between_its_ends():
     indptr, indices = csr(nx.path_graph(4), 4)
     inflow, outflow = np.zeros(4), np.zeros(4)
     no_limit = np.full(len(f), np.inf)
-    relay_flows(f, w, v, v, no_limit, indptr, indices, np.empty(4, dtype=np.int64), inflow, outflow)
+    relay_flows(f, w, v, v, no_limit, nobody(4), indptr, indices, np.empty(4, dtype=np.int64),
+                inflow, outflow)  # fmt: skip
     # group {1, 2} + {0, 3}: best receiver 3 (0 is worse); 0 sends 3 * 0.5, 1 and 2 are better
     np.testing.assert_array_equal(inflow, [0.0, 0.0, 0.0, 1.5])
     np.testing.assert_array_equal(outflow, [1.5, 0.0, 0.0, 0.0])
@@ -179,8 +190,8 @@ def test_the_relay_is_continuous_where_two_receivers_tie():
     def flows(f3):
         f = np.array([9.0, 1.0, 3.0, f3])
         inflow, outflow = np.zeros(4), np.zeros(4)
-        relay_flows(f, w, v, v, no_limit, indptr, indices, np.empty(4, dtype=np.int64), inflow,
-                    outflow)  # fmt: skip
+        relay_flows(f, w, v, v, no_limit, nobody(4), indptr, indices,
+                    np.empty(4, dtype=np.int64), inflow, outflow)  # fmt: skip
         return inflow, outflow
 
     eps = 1e-9
@@ -189,3 +200,12 @@ def test_the_relay_is_continuous_where_two_receivers_tie():
     np.testing.assert_allclose(below[1], above[1], rtol=0, atol=10 * eps)
     # at the tie sender 1 sends to both: w_2 v_1 2 + w_3 v_1 2
     np.testing.assert_allclose(flows(3.0)[1][1], 2.0 * 0.6 * 2.0 + 0.5 * 0.6 * 2.0)
+
+
+def test_a_generator_ten_times_slower_than_a_neighbour_relays_by_rate():
+    """Path 0-1-2-3 with rates 10, 0.5, 10, 0.99: 1 is below a tenth of its fastest neighbour
+    (1.0); 3 (0.99 against 10) too; 0 and 2 are not."""
+    indptr, indices = csr(nx.path_graph(4), 4)
+    np.testing.assert_array_equal(slow_relays(np.array([10.0, 0.5, 10.0, 0.99]), indptr, indices),
+                                  [False, True, False, True])  # fmt: skip
+    assert not slow_relays(np.full(4, 3.0), indptr, indices).any()

@@ -221,6 +221,7 @@ class GeneratorAgent(RoundAgent):
         self.answered: set[str] = set()  # receiver: offers accepted or refused
         self.applied: set[str] = set()  # receiver: decisions applied
         self.relay = False  # relay through blocked generators (a graph that is not complete)
+        self.slow_relays: frozenset[str] = frozenset()  # who relays by rate (set-up's roster)
         self.status_round = -1  # the round of the own latest status
         self.heard: dict[tuple[str, str], tuple[Status, tuple]] = {}  # (origin, via): route
         self.forwarded: set[str] = set()  # origins whose status this relay passed on
@@ -312,9 +313,13 @@ class GeneratorAgent(RoundAgent):
 
     @property
     def blocked(self) -> bool:
-        """Whether this generator cannot take part in a comparison this round (at a limit:
-        no room, or no movable mass): it relays."""
-        return self.own is not None and relays(self.own.w, self.own.mass, self.own.room)
+        """Whether this generator relays this round: it cannot take part in a comparison (at
+        a limit: no room, or no movable mass), or it relays by rate (``slow_relays``)."""
+        return self.own is not None and self._relays(self.aid, self.own)
+
+    def _relays(self, aid: str, status) -> bool:
+        """Whether generator ``aid`` of ``status`` relays (blocked, or by rate)."""
+        return aid in self.slow_relays or relays(status.w, status.mass, status.room)
 
     def _flood(self, origin: str, status: Status, route: tuple) -> None:
         """A blocked generator passes every status of this round on to its other
@@ -390,15 +395,15 @@ class GeneratorAgent(RoundAgent):
         for o, st, route in heard:
             for a, b in zip(route, route[1:], strict=False):
                 union(a, b)
-            if relays(st.w, st.mass, st.room):
+            if self._relays(o, st):
                 union(o, route[0])
             if self.blocked:
                 union(self.aid, route[-1])
         for a, st in direct.items():
-            if relays(st.w, st.mass, st.room) and self.blocked:
+            if self._relays(a, st) and self.blocked:
                 union(self.aid, a)
         for a, st in direct.items():
-            if relays(st.w, st.mass, st.room):
+            if self._relays(a, st):
                 comps.add(find(a))
                 members.setdefault(find(a), {})[a] = st
         for o, st, route in heard:

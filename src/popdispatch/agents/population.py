@@ -35,6 +35,7 @@ from popdispatch.agents.system import (
 from popdispatch.agents.world import WorldOptions, WorldRun, run_world
 from popdispatch.constants import KW_PER_MW
 from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.dynamics.pairwise import slow_relays
 from popdispatch.errors import OptionError
 from popdispatch.game.controllers import NodeControllers
 from popdispatch.game.parameters import MinuteInputs, PriceLaw
@@ -298,8 +299,10 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
             )  # fmt: skip
         )
     relay = not _complete(graph)
+    slow = slow_relay_ids(graph, names, rates) if relay else frozenset()
     for gen in generators:
         gen.relay = relay
+        gen.slow_relays = slow
         gen.stale_rounds = stale_rounds
     controllers, line_ends = _controllers(problem, settings, fp, step_s, network,
                                           line_scales(problem, settings, minute))
@@ -361,6 +364,18 @@ def _check_ids(generators: list[str], controllers: dict) -> None:
         if str(name) in others:
             raise OptionError(f"generator {name!r} has the agent id of {others[str(name)]}: "
                               "rename it in the fleet", "--fleet")  # fmt: skip
+
+
+def slow_relay_ids(graph: nx.Graph, names: list[str], rates: np.ndarray) -> frozenset[str]:
+    """The generators that relay by their revision rates (the engine's
+    :func:`~popdispatch.dynamics.pairwise.slow_relays` on ``graph``): a roster the set-up
+    gives every generator, like the graph."""
+    if len(rates) != len(names):
+        return frozenset()
+    csr = nx.to_scipy_sparse_array(graph, nodelist=names, format="csr")
+    slow = slow_relays(np.asarray(rates, dtype=float), csr.indptr.astype(np.int64),
+                       csr.indices.astype(np.int64))  # fmt: skip
+    return frozenset(name for name, flag in zip(names, slow, strict=True) if flag)
 
 
 def _complete(graph: nx.Graph) -> bool:

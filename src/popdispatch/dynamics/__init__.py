@@ -64,7 +64,7 @@ def field_rate(
     tag = field_tag(field, **parameters)
     complete = bool((adjacency + np.eye(n) > 0).all())
     csr = sparse.csr_matrix(adjacency)
-    graph = graph_of(complete, csr.indptr.astype(np.int64), csr.indices.astype(np.int64))
+    graph = graph_of(complete, csr.indptr.astype(np.int64), csr.indices.astype(np.int64), rate)
     w, v, room, mass, inflow, outflow = (np.empty(n) for _ in range(6))
     _field_rate(tag, graph, x, f, np.asarray(lo, float), np.asarray(hi, float), active, rate, w,
                 v, room, mass, np.arange(n, dtype=np.int64), inflow, outflow)  # fmt: skip

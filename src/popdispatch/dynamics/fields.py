@@ -197,7 +197,8 @@ def _law_flows(tag, graph, f, w, v, mass, room, order, inflow, outflow):
         def sparse(tag, graph, f, w, v, mass, room, order, inflow, outflow):
             indptr, indices = graph.indptr, graph.indices
             graph_flows(f, w, v, indptr, indices, inflow, outflow)
-            relay_flows(f, w, v, mass, room, indptr, indices, order, inflow, outflow)
+            relay_flows(f, w, v, mass, room, graph.slow, indptr, indices, order, inflow,
+                        outflow)  # fmt: skip
 
         return sparse
     if cls is SparseGraph:

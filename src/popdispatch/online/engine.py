@@ -50,10 +50,10 @@ class Engine:
             raise ValueError(f"{self.mode.name} mode cannot run {self.dynamics.name} dynamics: "
                              f"{self.dynamics.refusal}")  # fmt: skip
         tag = mode_tag(self.mode.code, settings.exact.price_law, problem.meshed)
-        self.term = Term.of(field, tag, *self._graph())
+        rates = settings.engine_revision_rates(problem)
+        self.term = Term.of(field, tag, *self._graph(), rates)
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
-        rates = settings.engine_revision_rates(problem)
         self.params = GameParameters.of(problem, self.constants, rates)
         self.z = np.zeros(self.mode.controller_states(problem))
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
