@@ -11,6 +11,7 @@ import sys
 import time
 
 import numpy as np
+import psutil
 import pytest
 from click.testing import CliRunner
 
@@ -22,11 +23,23 @@ from popdispatch.cli.agents import agents  # noqa: E402
 from popdispatch.opf import solve_opf  # noqa: E402
 
 
+def _agents() -> list[psutil.Process]:
+    """Agent processes of the launches this test process started, directly or through a
+    launcher (others on the machine, e.g. another test worker's, do not count)."""
+    found = []
+    for proc in psutil.Process().children(recursive=True):
+        try:
+            command = " ".join(proc.cmdline())
+        except (psutil.NoSuchProcess, psutil.ZombieProcess):
+            continue
+        if "popdispatch.agents.launch --id" in command:
+            found.append(proc)
+    return found
+
+
 def _children() -> int:
-    """Agent processes of a launch still running on this machine."""
-    found = subprocess.run(["pgrep", "-f", "popdispatch.agents.launch --id"],
-                           capture_output=True, text=True)  # fmt: skip
-    return len(found.stdout.split())
+    """Agent processes of this test's launches still running."""
+    return len(_agents())
 
 
 def test_launched_congestion_minute_reaches_dc_opf(congestion_problem):
@@ -75,8 +88,10 @@ def test_stopping_the_launcher_leaves_no_process(stop):
     deadline = time.time() + 120
     while _children() < 12 and time.time() < deadline:
         time.sleep(0.5)
-    assert _children() == 12
+    started = _agents()
+    assert len(started) == 12
     os.kill(launcher.pid, stop)
     launcher.wait(timeout=60)
     assert launcher.returncode != 0
-    assert _children() == 0
+    _, alive = psutil.wait_procs(started, timeout=10)  # orphans: the launcher is gone
+    assert not alive
