@@ -84,7 +84,11 @@ def test_stopping_the_launcher_leaves_no_process(stop):
         "from popdispatch.agents.launch import launch\n"
         "launch(566, [[505, 666, 28.0]], rounds=40, startup_s=60)\n"
     )
-    launcher = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE)
+    # a terminal's Ctrl-C: SIGINT at its default, whatever this process inherited (a shell
+    # that starts a job in the background without job control ignores it, and so would the
+    # launcher)
+    launcher = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.time() + 120
     while _children() < 12 and time.time() < deadline:
         time.sleep(0.5)
