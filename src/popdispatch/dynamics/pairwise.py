@@ -231,14 +231,14 @@ def relay_groups(w, mass, room, slow, indptr, indices, label):
     ``S`` together with its neighbours ``N(S)``: any two members are joined by a path whose
     inner strategies are all in ``S``."""
     n = w.shape[0]
-    any_blocked = False
+    any_relays = False
     for k in range(n):
         if slow[k] or blocked(w, mass, room, k):
             label[k] = -2
-            any_blocked = True
+            any_relays = True
         else:
             label[k] = -1
-    if not any_blocked:
+    if not any_relays:
         return False
     for a in range(n):
         if label[a] == -1:
@@ -256,8 +256,8 @@ def relay_groups(w, mass, room, slow, indptr, indices, label):
 @nb.njit(cache=True, inline="always")
 def group_memberships(label, indptr, indices, group, member):
     """Every (group, member) pair into ``group``, ``member`` (int, length at least n + edges):
-    a strategy belongs to its own set's group if it is blocked and to the group of each
-    blocked neighbour's set, once each; returns the number of pairs."""
+    a strategy belongs to its own set's group if it relays and to the group of each relaying
+    neighbour's set, once each; returns the number of pairs."""
     count = 0
     for k in range(label.shape[0]):
         own = relay_root(label, k) if label[k] != -1 else -1
