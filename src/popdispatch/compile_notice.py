@@ -2,7 +2,7 @@
 
 The engine's kernels are compiled by numba on first use and cached on disk (``cache=True``):
 the first run after installing or updating popdispatch (or with an empty ``NUMBA_CACHE_DIR``)
-compiles the kernels of its own run configuration (mode, dynamic, graph, stepper, warm start:
+compiles the kernels of its own run configuration (mode, dynamic, graph, stepper:
 :mod:`popdispatch.integrate.term`); a run of another configuration later compiles its own
 once more, and later processes load them from the cache (``benchmarks/bench_first_run.py``
 measures both; docs/performance.md).
@@ -48,7 +48,7 @@ def kernels_cached(settings: RunSettings | None = None) -> bool | None:
     one must be compiled, None if that cannot be told (then say nothing).
 
     The engine compiles its day loop once per run configuration (the record classes of the
-    mode, field, graph, stepper and warm start, :func:`run_classes`): with ``settings``, the
+    mode, field, graph and stepper, :func:`run_classes`): with ``settings``, the
     day loop's entry must be one compiled for that configuration; without, any entry will do.
     """
     try:
@@ -76,7 +76,6 @@ def run_classes(settings: RunSettings) -> set[type] | None:
     from popdispatch.dynamics.pairwise import CompleteGraph, SparseGraph
     from popdispatch.integrate.steppers import method_tag
     from popdispatch.modes import get_mode, mode_tag
-    from popdispatch.warm_start import WARM_STARTS, start_tag
 
     mode = get_mode(settings.mode)
     dynamics = get_dynamics(settings.dynamics)
@@ -84,11 +83,10 @@ def run_classes(settings: RunSettings) -> set[type] | None:
     if field is None:
         return None
     complete = not dynamics.uses_graph or settings.graph == "complete"
-    policy = WARM_STARTS[settings.warm_start_policy]
     return {
         law_of(field).tag, type(mode_tag(mode.code, settings.exact.price_law)),
         CompleteGraph if complete else SparseGraph,
-        type(method_tag(settings.stepping.method_code)), type(start_tag(policy, mode.bounded)),
+        type(method_tag(settings.stepping.method_code)),
     }  # fmt: skip
 
 

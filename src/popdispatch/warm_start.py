@@ -15,19 +15,17 @@
   ``setpoints`` is the warm start that uses no central knowledge (docs/exact-mode.md).
 
 Generators that went offline hand their mass to the online ones (in proportion to their shares).
-All functions are compiled: the day loop calls them every minute, through
-:func:`start_minute`, whose policy is a :class:`StartTag` (one record class per policy, and
-one for modes without limits): numba compiles the day loop with the run's policy only.
+All functions are compiled: the day loop calls :func:`warm_start` every minute with the
+policy and the mode's limits as plain values, so every policy runs the same compiled day loop
+(a different policy compiles nothing new).
 """
 
 from __future__ import annotations
 
 from enum import IntEnum
-from typing import NamedTuple
 
 import numba as nb
 import numpy as np
-from numba.extending import overload
 
 from popdispatch.dynamics.capacity import project_to_box
 from popdispatch.game.parameters import share_bounds
@@ -186,8 +184,11 @@ def continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight, b=None
 @nb.njit(cache=True)
 def warm_start(policy, bounded, x, old_demand, demand, pmin, pmax, active, weight, b=None,
                c=None):  # fmt: skip
-    """Shares to start a minute from (in place), after ``redistribute_offline``; ``b``, ``c``:
-    the cost coefficients (EUR/MWh, EUR/MW^2h) for a set-point step in merit order (see
+    """Shares to start a minute of ``demand`` (MW) from, in place: offline mass handed on
+    (:func:`redistribute_offline`), then, in a mode with generator limits (``bounded``), the
+    :class:`WarmStart` ``policy`` (its integer value) from the minute before's demand
+    ``old_demand`` (MW; 0 if none: the shares projected onto the limits). ``b``, ``c``: the
+    cost coefficients (EUR/MWh, EUR/MW^2h) for a set-point step in merit order (see
     :func:`continue_setpoints`)."""
     redistribute_offline(x, active)
     if not bounded:
@@ -208,80 +209,3 @@ def project_shares(x, demand, pmin, pmax, active):
     hi = np.empty(x.shape[0])
     share_bounds(pmin, pmax, active, demand, lo, hi)
     copy_into(project_to_box(x, lo, hi), x)
-
-
-class StartTag(NamedTuple):
-    """A warm start as the day loop takes it: its :class:`WarmStart` value in ``code``; the
-    *class* picks the policy when numba compiles (:func:`start_minute`)."""
-
-    code: int
-
-
-class FreeStart(StartTag):
-    """A mode without generator limits (paper): the shares continue, offline mass handed on."""
-
-    __slots__ = ()
-
-
-class SharesStart(StartTag):
-    """``shares`` with limits: the shares continue, projected onto the limits."""
-
-    __slots__ = ()
-
-
-class SetpointsStart(StartTag):
-    """``setpoints``: the step shared by the trading generators."""
-
-    __slots__ = ()
-
-
-class MeritStart(StartTag):
-    """``merit``: the step placed in merit order."""
-
-    __slots__ = ()
-
-
-_START_TAGS = {SHARES: SharesStart, SETPOINTS: SetpointsStart, MERIT: MeritStart}
-
-
-def start_tag(policy: WarmStart, bounded: bool) -> StartTag:
-    """The compile-time record of ``policy`` in a mode with (``bounded``) or without limits."""
-    return (_START_TAGS[WarmStart(policy)] if bounded else FreeStart)(int(policy))
-
-
-def start_minute(tag, x, old_demand, demand, pmin, pmax, active, weight, b, c):
-    """:func:`warm_start` with the policy and ``bounded`` of ``tag`` (a :class:`StartTag`),
-    chosen when numba compiles; compiled code only."""
-    raise TypeError("start_minute() runs in compiled code only; use warm_start")
-
-
-@overload(start_minute)
-def _start_minute(tag, x, old_demand, demand, pmin, pmax, active, weight, b, c):
-    cls = getattr(tag, "instance_class", None)
-    if cls is FreeStart:
-
-        def free(tag, x, old_demand, demand, pmin, pmax, active, weight, b, c):
-            redistribute_offline(x, active)
-
-        return free
-    if cls is SharesStart:
-
-        def shares(tag, x, old_demand, demand, pmin, pmax, active, weight, b, c):
-            redistribute_offline(x, active)
-            project_shares(x, demand, pmin, pmax, active)
-
-        return shares
-    if cls is SetpointsStart or cls is MeritStart:
-        merit = cls is MeritStart
-
-        def setpoints(tag, x, old_demand, demand, pmin, pmax, active, weight, b, c):
-            redistribute_offline(x, active)
-            if old_demand <= 0.0:
-                project_shares(x, demand, pmin, pmax, active)
-            elif merit:
-                continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight, b, c)
-            else:
-                continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight)
-
-        return setpoints
-    return None

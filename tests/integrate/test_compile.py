@@ -1,8 +1,8 @@
-"""A run compiles only the kernels it uses (issue 13, first run): the mode, field, graph,
-stepper and warm start reach the kernels as record classes and numba compiles, per class, the
-one kernel it names. Checked on a cold numba cache in a child process, with numba's own
-compile events and cache index as the yardstick; and the compile notice's check agrees with
-what the engine builds."""
+"""A run compiles only the kernels it uses (issue 13, first run): the mode, field, graph and
+stepper reach the kernels as record classes and numba compiles, per class, the one kernel it
+names; the warm start is a plain value, so every policy shares one compiled day loop.
+Checked on a cold numba cache in a child process, with numba's own compile events and cache
+index as the yardstick; and the compile notice's check agrees with what the engine builds."""
 
 from __future__ import annotations
 
@@ -17,7 +17,6 @@ import pytest
 from popdispatch.compile_notice import run_classes
 from popdispatch.online import Engine, RunSettings
 from popdispatch.scenarios import CONGESTION_PATH, elv_problem
-from popdispatch.warm_start import start_tag
 
 CONFIGURATIONS = [
     {"mode": "paper"},
@@ -37,7 +36,6 @@ def test_the_notice_checks_the_classes_the_engine_passes(options):
     passed = {
         type(engine.term.field), type(engine.term.mode), type(engine.term.graph),
         type(settings.stepping.stepper().method),
-        type(start_tag(engine.policy, engine.mode.bounded)),
     }  # fmt: skip
     assert run_classes(settings) == passed
 
@@ -66,7 +64,10 @@ CHILD = textwrap.dedent(
     exact, paper = RunSettings(mode="exact"), RunSettings(mode="paper")
     before = kernels_cached(exact)
     minute = run_snapshot(problem, PEAK_MINUTE, exact)
-    day = run_day(problem, exact, minutes=np.array([PEAK_MINUTE, PEAK_MINUTE + 1]))
+    minutes = np.array([PEAK_MINUTE, PEAK_MINUTE + 1])
+    day = run_day(problem, exact, minutes=minutes)
+    for policy in ("setpoints", "shares"):
+        run_day(problem, RunSettings(mode="exact", warm_start=policy), minutes=minutes)
     print(json.dumps({
         "before": before, "exact": kernels_cached(exact), "paper": kernels_cached(paper),
         "compiled": compiled, "status": [minute.status, day.status],
@@ -78,10 +79,11 @@ CHILD = textwrap.dedent(
 
 @pytest.mark.slow
 def test_an_exact_run_compiles_its_own_kernels_only(tmp_path):
-    """Cold cache: an exact minute and a two-minute exact day compile the day loop once
-    (a minute is a day of one row with the day's warm start), Heun but not Euler, the
-    complete graph's sums but not the sparse ones, the merit warm start but not the others;
-    afterwards the notice's check says exact is cached and paper is not."""
+    """Cold cache: an exact minute, a two-minute exact day and the same day with the
+    ``setpoints`` and ``shares`` warm starts compile the day loop once (a minute is a day of
+    one row; the policy is a plain value), Heun but not Euler, the complete graph's sums but
+    not the sparse ones; afterwards the notice's check says exact is cached and paper is
+    not."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     done = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True,
                           text=True, timeout=900, check=False)  # fmt: skip
@@ -93,9 +95,8 @@ def test_an_exact_run_compiles_its_own_kernels_only(tmp_path):
     assert report["day_loops"] == 1
     compiled = set(report["compiled"])
     assert {"advance_heun", "_order_for.<locals>.complete"} <= compiled
-    assert "_start_minute.<locals>.setpoints" in compiled
+    assert "continue_setpoints" in compiled
     unused = {"advance_euler", "_order_for.<locals>.unsorted", "_law_flows.<locals>.sparse",
-              "_law_flows.<locals>.target", "_start_minute.<locals>.free",
-              "_start_minute.<locals>.shares"}  # fmt: skip
+              "_law_flows.<locals>.target"}  # fmt: skip
     assert not compiled & unused, compiled & unused
     assert report["status"] == ["converged", "converged"]

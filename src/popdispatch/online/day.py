@@ -15,20 +15,21 @@ import numpy as np
 
 from popdispatch.game.parameters import MinuteInputs, share_bounds
 from popdispatch.integrate import Status, integrate
-from popdispatch.warm_start import StartTag, start_minute
+from popdispatch.warm_start import warm_start
 
 
 class DayInputs(NamedTuple):
     """The minutes of a day (or a chunk of it), one row each: demand (MW), loads-only flows of
-    the limited lines (MW), online generators; the warm start (a
-    :class:`~popdispatch.warm_start.StartTag`: the policy, and whether the mode keeps
-    generator limits, chosen when numba compiles) and the demand of the minute before the
-    first (MW, 0 if none)."""
+    the limited lines (MW), online generators; the warm start (the
+    :class:`~popdispatch.warm_start.WarmStart` policy as an integer, and whether the mode keeps
+    generator limits: plain values, every policy runs the same compiled loop) and the demand of
+    the minute before the first (MW, 0 if none)."""
 
     demand: np.ndarray
     load_flow: np.ndarray
     online: np.ndarray
-    warm_start: StartTag
+    warm_start: int
+    bounded: bool
     previous_demand: float
 
 
@@ -67,8 +68,8 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
         active = day.online[row]
         demand = day.demand[row]
         # the demand step in merit order (docs/exact-mode.md, "Warm start between minutes")
-        start_minute(day.warm_start, x, old_demand, demand, pmin, pmax, active, weight, params.b,
-                     params.c)  # fmt: skip
+        warm_start(day.warm_start, day.bounded, x, old_demand, demand, pmin, pmax, active, weight,
+                   params.b, params.c)  # fmt: skip
         share_bounds(pmin, pmax, active, demand, lo, hi)
         minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active)
         outcome = integrate(x, z, term, params, minute, ws, stepper, rule, h_try, out.history)

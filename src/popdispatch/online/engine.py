@@ -19,7 +19,7 @@ from popdispatch.online.certificate import Certificate, certify_minutes
 from popdispatch.online.day import DayArrays, DayInputs, integrate_day
 from popdispatch.online.kkt import KktTolerances, kkt_violations, line_prices, voltage_prices
 from popdispatch.online.settings import RunSettings
-from popdispatch.warm_start import WARM_STARTS, WarmStart, start_tag
+from popdispatch.warm_start import WARM_STARTS, WarmStart
 
 
 class MinuteRun(NamedTuple):
@@ -166,13 +166,12 @@ class Engine:
         self, x: np.ndarray, minutes: np.ndarray, out: DayArrays, integrator, policy: WarmStart
     ) -> None:
         """The compiled day loop over ``minutes`` with ``integrator`` and warm start ``policy``
-        (as its :class:`~popdispatch.warm_start.StartTag`: numba types an IntEnum member
-        slowly at every call, and the tag's class lets it compile this policy only)."""
+        (passed as a plain integer: numba types an IntEnum member slowly at every call)."""
         problem = self.problem
         rows = np.asarray(minutes) - 1
         day = DayInputs(
             problem.demand[rows], problem.load_flow[rows], problem.online[rows],
-            start_tag(policy, self.mode.bounded), out.last_demand,
+            int(policy), bool(self.mode.bounded), out.last_demand,
         )  # fmt: skip
         self.h_try, out.last_demand = integrate_day(
             x, self.z, self.term, self.params, day, self.ws, integrator.stepper(self.price_scale),
