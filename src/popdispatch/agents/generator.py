@@ -64,7 +64,7 @@ from popdispatch.agents.plant import Inverters
 from popdispatch.agents.schedule import Phase
 from popdispatch.dynamics.fields import Field, field_tag, law_of
 from popdispatch.dynamics.newton import neighbourhood_receivers
-from popdispatch.dynamics.pairwise import RELAY_MASS, blocked, graph_flows
+from popdispatch.dynamics.pairwise import RELAY_MASS, graph_flows, relays_at_limit
 from popdispatch.game.fitness import fitness_into
 from popdispatch.game.parameters import share_bounds
 
@@ -76,9 +76,9 @@ LIMIT_ULPS = 16
 
 def relays(w: float, mass: float, room: float) -> bool:
     """A generator with receiver weight ``w``, movable ``mass`` and ``room`` (shares) cannot
-    take part in a comparison both ways and relays (:func:`popdispatch.dynamics.pairwise.
-    blocked` of its one status)."""
-    return bool(blocked(np.array([w]), np.array([mass]), np.array([room]), 0))
+    take part in a comparison both ways and relays (the engine's rule,
+    :func:`popdispatch.dynamics.pairwise.relays_at_limit`)."""
+    return bool(relays_at_limit(float(w), float(mass), float(room)))
 
 
 def receives(status: Status) -> bool:

@@ -52,7 +52,7 @@ from popdispatch.algorithms.base import Algorithm, Minute, balanced_start, contr
 from popdispatch.algorithms.network import Message, Network
 from popdispatch.dynamics import communication_graph
 from popdispatch.dynamics.fields import field_tag, law_of
-from popdispatch.dynamics.pairwise import RELAY_MASS
+from popdispatch.dynamics.pairwise import RELAY_MASS, relays_at_limit
 from popdispatch.game.controllers import overflow_signal
 from popdispatch.game.fitness import generator_fitness
 from popdispatch.online import RunSettings
@@ -255,7 +255,7 @@ class PopulationDynamics(Algorithm):
         f_i = self._fitness(i, self._signal(i))
         f_view = np.concatenate(([f_i], seen[:, 0]))
         w, v, room, mass = self._weights(view, p_view, f_view)
-        blocked = not (w[0] > 0 and mass[0] > RELAY_MASS and room[0] > RELAY_MASS)
+        blocked = relays_at_limit(float(w[0]), float(mass[0]), float(room[0]))
         refunds = sum(e[1] for e in self.outstanding[i].values())
         self.own[i] = (f_i, w[0], self.p[i] + refunds, float(blocked))  # p: at most, once
         # the open transfers' refunds are back (the room partners may fill)

@@ -214,12 +214,19 @@ RELAY_MASS = 1e-7
 
 
 @nb.njit(cache=True, inline="always")
+def relays_at_limit(w, mass, room):
+    """Whether a strategy with receiver weight ``w``, movable ``mass`` and ``room`` (shares)
+    cannot take part in a comparison both ways, and relays: offline (``w = 0``), room at most
+    :data:`RELAY_MASS` (at its upper limit) or movable mass at most :data:`RELAY_MASS` (at its
+    lower limit, extinct). A generator a few nanoshares below its limit would otherwise stay
+    a receiver that passes on only what it can still absorb, and cut a path in two."""
+    return not (w > 0.0 and mass > RELAY_MASS and room > RELAY_MASS)
+
+
+@nb.njit(cache=True, inline="always")
 def blocked(w, mass, room, k):
-    """Whether strategy ``k`` cannot take part in a comparison both ways (``w_k = 0``: offline;
-    ``room_k <= RELAY_MASS``: at its upper limit; movable ``mass_k <= RELAY_MASS``: at its lower
-    limit, extinct): it relays. (A generator a few nanoshares below its limit would otherwise
-    stay a receiver that passes on only what it can still absorb, and cut a path in two.)"""
-    return not (w[k] > 0.0 and mass[k] > RELAY_MASS and room[k] > RELAY_MASS)
+    """:func:`relays_at_limit` of strategy ``k`` of the weight, mass and room arrays."""
+    return relays_at_limit(w[k], mass[k], room[k])
 
 
 @nb.njit(cache=True, inline="always")
