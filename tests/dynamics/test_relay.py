@@ -8,17 +8,24 @@ from dataclasses import replace
 
 import networkx as nx
 import numpy as np
+import pandas as pd
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy import sparse
 
 from popdispatch.dynamics.pairwise import RELAY_MASS, graph_flows, relay_flows, slow_relays
+from popdispatch.feeder.generators import make_fleet
+from popdispatch.feeder.model import Feeder
+from popdispatch.feeder.profiles import single_minute_profiles
+from popdispatch.feeder.reduction import reduce_feeder
+from popdispatch.game.problem import build_problem
 from popdispatch.online import RunSettings, run_snapshot
 from popdispatch.opf import solve_opf
 from popdispatch.scenarios import CONGESTION_PATH, PEAK_MINUTE, elv_problem
 
 from helpers import random_limited_problem
+from qp_exact import exact_dc_opf
 
 #: Set points within this of the DC-OPF (issue 15), kW.
 OPF_ATOL_KW = 1e-3
@@ -94,6 +101,46 @@ def test_compiled_relay_equals_the_reference(graph, seed):
     ref_in, ref_out = reference_relay(f, w, v, graph, slow)
     np.testing.assert_allclose(inflow, ref_in, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(outflow, ref_out, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.xfail(strict=True, reason="a receiver closing on its Pmax relays only from its "
+                   "last RELAY_MASS of room: 224 iterations (docs/exact-mode.md)")
+def test_the_only_path_to_the_source_through_a_filling_generator():
+    """A benchmark fleet (case16am's fleet of the fleet benchmark, run 205) on a path feeder:
+    the source reaches the others only through g0, a linear generator whose optimum is its
+    Pmax. g0 stays a receiver until its last 2.9 W of room, so distributed Smith takes 224
+    iterations (5.7 MW from the DC-OPF for 212), over the 200 exact mode promises."""
+    problem = only_path_fleet()
+    graph = nx.Graph([("g0", "g1"), ("g0", "g2"), ("g1", "g2"), ("g1", "g3"), ("src", "g0")])
+    run = run_snapshot(problem, 1, RunSettings(mode="exact", dynamics="distributed-smith",
+                                               graph=graph))  # fmt: skip
+    optimum_kw = exact_dc_opf(problem) * 1e3
+    assert run.status == "converged", run.stall_reason
+    assert run.iterations <= 200
+    assert np.abs(run.setpoints_kw - optimum_kw).max() <= run.accuracy_kw
+    assert optimum_kw[1] == pytest.approx(problem.pmax[1] * 1e3)  # g0 at its Pmax
+
+
+def only_path_fleet():
+    """The fleet of :func:`test_the_only_path_to_the_source_through_a_filling_generator` on
+    a six-bus path, 28.7 MW of load at its end, no line limit."""
+    rows = [(1, 0.0, 32.531470562325325, 0.9794055249247405, 0.0, 57400.0),
+            (2, 0.0, 51.140866643180416, 0.0, 0.0, 2523.5752818184137),
+            (3, 0.0, 40.36367903604952, 0.14436347967587884, 0.0, 4870.213659085953),
+            (4, 0.0, 24.398326046001586, 1007.7760321845767, 0.0, 8508.625702037469),
+            (5, 0.0, 43.62929087986328, 0.08656632872487255, 1945.3836306748651,
+             6114.087331828889)]  # fmt: skip
+    buses = pd.DataFrame({"x": np.arange(6.0), "y": 0.0},
+                         index=pd.Index(np.arange(1, 7), name="bus"))  # fmt: skip
+    lines = pd.DataFrame({"from_bus": np.arange(1, 6), "to_bus": np.arange(2, 7),
+                          "length_km": 0.01, "r_ohm": 0.01, "x_ohm": 0.001,
+                          "limit_kw": np.inf},
+                         index=pd.Index([f"L{i}" for i in range(2, 7)], name="line"))  # fmt: skip
+    loads = pd.DataFrame({"bus": [6]}, index=pd.Index(["LD6"], name="load"))
+    fleet = make_fleet(rows, names=["src", "g0", "g1", "g2", "g3"])
+    feeder = Feeder("only path", buses, lines, loads, 1, fleet)
+    load = pd.Series([28700.0], index=loads.index)
+    return build_problem(reduce_feeder(feeder), single_minute_profiles(1, load, "fleet"))
 
 
 def test_no_blocked_strategy_leaves_the_graph_flows_alone():
