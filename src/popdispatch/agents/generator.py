@@ -83,7 +83,7 @@ def relays(w: float, mass: float, room: float) -> bool:
 
 def receives(status: Status) -> bool:
     """Whether the generator of ``status`` can receive relayed flows (the engine's
-    relay's ``ranked_flows``: ``w > 0`` and room above ``RELAY_MASS``)."""
+    ``group_flows``: ``w > 0`` and room above ``RELAY_MASS``)."""
     return status.w > 0.0 and status.room > RELAY_MASS
 
 

@@ -153,39 +153,25 @@ def merge_sort(f, order):
 
 
 @nb.njit(cache=True, inline="always")
-def ranked_flows(f, w, v, room, min_room, members, inflow, outflow):
-    """Add Smith's flows among ``members`` (sorted by ascending ``f``) to ``inflow``/``outflow``:
-    every member ``a`` sends to every better member ``b`` that can receive (``w_b > 0`` and
-    ``room_b > min_room``) at ``w_b v_a [f_b - f_a]_+``, by running sums over the ranks instead
-    of the pairs: O(members) once sorted."""
-    below_v = 0.0  # sum of v over members ranked lower
-    gain_in = 0.0  # sum_j (f_i - f_j) v_j over lower-ranked j
-    for r in range(members.shape[0]):
-        i = members[r]
-        if r > 0:
-            gain_in += (f[i] - f[members[r - 1]]) * below_v
-        if w[i] > 0.0 and room[i] > min_room:
-            inflow[i] += w[i] * gain_in
-        below_v += v[i]
-    above_w = 0.0  # sum of w over higher-ranked members that can receive
-    gain_out = 0.0  # sum_i (f_i - f_j) w_i over them
-    for r in range(members.shape[0] - 1, -1, -1):
-        j = members[r]
-        if r < members.shape[0] - 1:
-            gain_out += (f[members[r + 1]] - f[j]) * above_w
-        outflow[j] += v[j] * gain_out
-        if w[j] > 0.0 and room[j] > min_room:
-            above_w += w[j]
-
-
-@nb.njit(cache=True, inline="always")
 def complete_graph_flows(f, w, v, order, inflow, outflow):
-    """``inflow``/``outflow`` (see module docstring) on the complete graph; ``order`` sorts f.
-    Every strategy with ``w > 0`` receives (the laws' receiver weight vanishes at a limit), so
-    no room floor: ``w`` stands in for the room, floored at -inf."""
-    inflow[:] = 0.0
-    outflow[:] = 0.0
-    ranked_flows(f, w, v, w, -np.inf, order, inflow, outflow)
+    """``inflow``/``outflow`` (see module docstring) on the complete graph; ``order`` sorts f."""
+    n = f.shape[0]
+    below_v = 0.0  # sum of v over strategies ranked lower
+    gain_in = 0.0  # sum_j (f_i - f_j) v_j over lower-ranked j
+    for r in range(n):
+        i = order[r]
+        if r > 0:
+            gain_in += (f[i] - f[order[r - 1]]) * below_v
+        inflow[i] = w[i] * gain_in
+        below_v += v[i]
+    above_w = 0.0
+    gain_out = 0.0
+    for r in range(n - 1, -1, -1):
+        j = order[r]
+        if r < n - 1:
+            gain_out += (f[order[r + 1]] - f[j]) * above_w
+        outflow[j] = v[j] * gain_out
+        above_w += w[j]
 
 
 @nb.njit(cache=True, inline="always")
@@ -326,6 +312,32 @@ def group_order(f, group, member, count, n):
 
 
 @nb.njit(cache=True, inline="always")
+def group_flows(f, w, v, room, members, inflow, outflow):
+    """Add Smith's flows among ``members`` (sorted by ascending ``f``) to ``inflow``/``outflow``:
+    every member ``a`` sends to every better member ``b`` that can receive (``w_b > 0``, room
+    above :data:`RELAY_MASS`) at ``w_b v_a [f_b - f_a]_+``, by running sums as on the complete
+    graph (:func:`complete_graph_flows`)."""
+    below_v = 0.0
+    gain_in = 0.0
+    for r in range(members.shape[0]):
+        i = members[r]
+        if r > 0:
+            gain_in += (f[i] - f[members[r - 1]]) * below_v
+        if w[i] > 0.0 and room[i] > RELAY_MASS:
+            inflow[i] += w[i] * gain_in
+        below_v += v[i]
+    above_w = 0.0
+    gain_out = 0.0
+    for r in range(members.shape[0] - 1, -1, -1):
+        j = members[r]
+        if r < members.shape[0] - 1:
+            gain_out += (f[members[r + 1]] - f[j]) * above_w
+        outflow[j] += v[j] * gain_out
+        if w[j] > 0.0 and room[j] > RELAY_MASS:
+            above_w += w[j]
+
+
+@nb.njit(cache=True, inline="always")
 def relay_flows(f, w, v, mass, room, slow, indptr, indices, label, inflow, outflow):
     """Add the relayed flows of distributed Smith on a graph to ``inflow``/``outflow``
     (``slow``: the strategies that relay by their rates, :func:`slow_relays`; ``label``: int
@@ -358,5 +370,5 @@ def relay_flows(f, w, v, mass, room, slow, indptr, indices, label, inflow, outfl
     for r in range(n):
         end = start[r]
         if end - begin > 1:
-            ranked_flows(f, w, v, room, RELAY_MASS, ordered[begin:end], inflow, outflow)
+            group_flows(f, w, v, room, ordered[begin:end], inflow, outflow)
         begin = end
