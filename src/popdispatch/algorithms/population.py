@@ -33,12 +33,17 @@ again); a partner silent for ``silent_rounds`` is dropped from the view and its 
 are taken back (a crashed DG: its inverter still makes the set-point changes its agent
 committed before the crash, then holds).
 
-The relay (distributed Smith's, :func:`popdispatch.reference.relay_matrix`): a DG that is
-blocked (at a limit, or without receiver weight) announces to its neighbours the best
-receiver of its group it knows (an unblocked neighbour with room, or what its own blocked
-neighbours announce, with the route); a DG sends mass to an announced receiver beyond its
-neighbours at the same rate ``w_b v_a [f_b - f_a]_+``, the transfer and its acknowledgement
-relayed hop by hop along the route (one message and one round per hop).
+The relay (distributed Smith's, :func:`popdispatch.reference.relay_matrix`): a DG relays
+when it is blocked (at a limit, or without receiver weight) or slow (its revision rate below
+a tenth of a neighbour's: :func:`popdispatch.reference.slow_members`, from the cost curves it
+holds). A relaying DG tells its neighbours every round the receivers of its relay group it
+knows, each with its last report and the route to it: its neighbours that can receive, and
+what its relaying neighbours tell it. Every member of the group (the relaying DGs and their
+neighbours) so learns every receiver of the group, and sends to each better one at the
+pairwise rate ``w_b v_a [f_b - f_a]_+``, on top of the direct flow to a neighbour: the
+engine's relay, the flow shared among the group's receivers (continuous in the fitness), not
+switched to the best one. A relayed transfer and its acknowledgement cross the route hop by
+hop (one message and one round per hop).
 """
 
 from __future__ import annotations
@@ -57,7 +62,7 @@ from popdispatch.game.controllers import overflow_signal
 from popdispatch.game.fitness import generator_fitness
 from popdispatch.online import RunSettings
 from popdispatch.online.stiffness import round_step
-from popdispatch.reference import pair_flows
+from popdispatch.reference import pair_flows, slow_members
 
 
 @dataclass(frozen=True)
@@ -133,7 +138,9 @@ class PopulationDynamics(Algorithm):
         self.accepted: list[dict] = [{} for _ in range(n)]  # key -> amount accepted
         self.debits: list[list] = [[] for _ in range(n)]  # (round, amount) due
         self.own = np.zeros((n, 4))
-        self.announced: list[dict] = [{} for _ in range(n)]  # blocked neighbour -> its best
+        # relaying neighbour -> (its receivers [(b, f, w, p, route)], round it told them)
+        self.announced: list[dict] = [{} for _ in range(n)]
+        self.slow = slow_members(self.rate, self.graph) if sparse else np.zeros(n, dtype=bool)
         self.send_cost_curves(lambda i: [minute.names[j] for j in self.neighbours[i]])
         for i in range(n):
             for j in self.neighbours[i]:
@@ -222,8 +229,10 @@ class PopulationDynamics(Algorithm):
                           key=message.key, via=message.via[::-1])  # fmt: skip
         elif message.kind == "relay":
             k = names.index(message.sender)
-            self.announced[i][k] = (message.key[0], *message.values, message.key[1],
-                                    message.sent)  # fmt: skip
+            if message.sent >= self.announced[i].get(k, ((), -1))[1]:
+                f, w, p = np.reshape(message.values, (-1, 3)).T
+                self.announced[i][k] = ([(b, f[e], w[e], p[e], via) for e, (b, via)
+                                         in enumerate(message.key)], message.sent)  # fmt: skip
         elif message.kind == "ack":
             open_ = self.outstanding[i].pop(message.key, None)
             if open_ is not None:
@@ -257,22 +266,28 @@ class PopulationDynamics(Algorithm):
         w, v, room, mass = self._weights(view, p_view, f_view)
         blocked = relays_at_limit(float(w[0]), float(mass[0]), float(room[0]))
         refunds = sum(e[1] for e in self.outstanding[i].values())
-        self.own[i] = (f_i, w[0], self.p[i] + refunds, float(blocked))  # p: at most, once
+        relays = blocked or bool(self.slow[i])
+        self.own[i] = (f_i, w[0], self.p[i] + refunds, float(relays))  # p: at most, once
         # the open transfers' refunds are back (the room partners may fill)
-        targets, routes = self._relay_targets(i, view, round_)
+        targets, relayed = self._relay_targets(i, round_)
         if len(view) == 1 and not targets:
             return
         w_view = np.concatenate(([w[0]], seen[:, 1]))
         known = (v, room, mass)  # the view's weights, unless relay targets extend it
-        if targets:
-            f_view = np.concatenate((f_view, [t[1] for t in targets]))
-            w_view = np.concatenate((w_view, [t[2] for t in targets]))
-            p_view = np.concatenate((p_view, [t[3] for t in targets]))
-            view = view + [t[0] for t in targets]
+        # each member's share of the pairwise rate: 1 for a neighbour, +1 in a relay group
+        shares = [1.0] * len(view)
+        routes = [()] * (len(view) - 1)
+        for (b, f_b, w_b, p_b), route in zip(targets, relayed, strict=True):
+            if b in view:
+                shares[view.index(b)] += 1.0
+                continue
+            f_view, w_view = np.append(f_view, f_b), np.append(w_view, w_b)
+            p_view = np.append(p_view, p_b)
+            view, shares, routes = view + [b], shares + [1.0], routes + [route]
             known = None
-        routes = [()] * (len(view) - 1 - len(targets)) + routes
         hops = np.array([1 + len(r) for r in routes])
-        out = self._limited_outflows(view, f_view, w_view, p_view, hops, known)
+        out = self._limited_outflows(view, f_view, w_view * np.array(shares), p_view, hops,
+                                     known)  # fmt: skip
         pending = sum(a for _, a in self.debits[i])
         movable = max(self.p[i] - self.lo_box[i] - pending, 0.0)
         total = out.sum()
@@ -342,40 +357,64 @@ class PopulationDynamics(Algorithm):
     def _fresh(self, round_: int) -> int:
         return 2 * (1 + self.net.faults.delay_max) + 2
 
-    def _relay_targets(self, i: int, view: list[int], round_: int) -> tuple[list, list]:
-        """The best receivers blocked neighbours announce beyond the view (the relay):
-        ``([(b, f_b, w_b, p_b), ...], [route, ...])``, the shortest route to each."""
-        best: dict[int, tuple] = {}
-        for k, (b, f, w, p, via, sent) in self.announced[i].items():
-            if self.gone[i, k] or round_ - sent > self._fresh(round_) or b == i or b in view:
+    def _relay_targets(self, i: int, round_: int) -> tuple[list, list]:
+        """The receivers of DG ``i``'s relay groups beyond itself, the shortest route to each
+        (``()``: a neighbour): ``([(b, f_b, w_b, p_b), ...], [route, ...])``. A relaying DG
+        knows its group's (:meth:`_group_receivers`); a DG that does not relay, what its
+        relaying neighbours tell it of theirs."""
+        if self.own[i, 3] and not self.complete:
+            best = self._group_receivers(i, round_)
+            best.pop(i, None)
+        else:
+            best = {}
+            for k, (told, _) in self._told(i, round_):
+                self._merge(best, told, k, i)
+        return [(b, *r[:3]) for b, r in best.items()], [r[3] for r in best.values()]
+
+    def _group_receivers(self, i: int, round_: int) -> dict[int, tuple]:
+        """The receivers of relaying DG ``i``'s group it knows, ``{b: (f_b, w_b, p_b,
+        route)}``: itself and its neighbours that can receive (receiver weight, room above
+        ``RELAY_MASS``), and the receivers its relaying neighbours tell it of."""
+        demand = self.m.demand
+        receivers: dict[int, tuple] = {}
+        if self.own[i, 1] > 0 and self.hi_box[i] - self.own[i, 2] > RELAY_MASS * demand:
+            receivers[i] = (*self.own[i, :3], ())
+        for j in self._partners(i):
+            f, w, p, _ = self.report[i, j]
+            if w > 0 and self.hi_box[j] - p > RELAY_MASS * demand:
+                receivers[j] = (f, w, p, ())
+        for k, (told, _) in self._told(i, round_):
+            self._merge(receivers, told, k, i)
+        return receivers
+
+    def _told(self, i: int, round_: int) -> list:
+        """The receiver lists DG ``i``'s relaying partners told it of lately, by partner."""
+        fresh = self._fresh(round_)
+        return [(k, entry) for k, entry in self.announced[i].items()
+                if not self.gone[i, k] and round_ - entry[1] <= fresh]  # fmt: skip
+
+    def _merge(self, receivers: dict, told: list, k: int, i: int) -> None:
+        """Add to ``receivers`` (of DG ``i``) the receivers relaying neighbour ``k`` told of,
+        by the shortest route (through ``k``; none through ``i`` itself)."""
+        names = self.m.names
+        for b, f, w, p, via in told:
+            route = () if b == k else (names[k],) + tuple(via)
+            if b == i or names[i] in route:
                 continue
-            if i in via:
-                continue
-            route = (self.m.names[k],) + tuple(via)
-            if b not in best or len(route) < len(best[b][1]):
-                best[b] = ((b, f, w, p), route)
-        return [t for t, _ in best.values()], [r for _, r in best.values()]
+            if b not in receivers or len(route) < len(receivers[b][3]):
+                receivers[b] = (f, w, p, route)
 
     def _announce(self, i: int, round_: int) -> None:
-        """A blocked DG tells its neighbours the best receiver of its group it knows: an
-        unblocked neighbour with room, or what its blocked neighbours announce (route)."""
-        names, m = self.m.names, self.m
-        candidates = []
-        for j in self._partners(i):
-            f, w, p, blocked = self.report[i, j]
-            if not blocked and w > 0 and self.hi_box[j] - p > RELAY_MASS * m.demand:
-                candidates.append((f, -j, j, w, p, ()))
-        for k, (b, f, w, p, via, sent) in self.announced[i].items():
-            if self.gone[i, k] or round_ - sent > self._fresh(round_) or i in via or b == i:
-                continue
-            candidates.append((f, -b, b, w, p, (names[k],) + tuple(via)))
-        if not candidates:
+        """A relaying DG tells its partners the receivers of its group it knows, with the
+        route to each (:meth:`_group_receivers`)."""
+        receivers = self._group_receivers(i, round_)
+        if not receivers:
             return
-        f, _, b, w, p, via = max(candidates, key=lambda c: (c[0], c[1]))
+        names = self.m.names
+        key = tuple((b, r[3]) for b, r in receivers.items())
+        values = [x for r in receivers.values() for x in r[:3]]
         for j in self._partners(i):
-            if j != b and names[j] not in via:
-                self.net.send(names[i], names[j], "relay", [f, w, p], key=(b, via),
-                              reveals="fitness")  # fmt: skip
+            self.net.send(names[i], names[j], "relay", values, key=key, reveals="fitness")
 
 
 def paper_signals(flow: float, limit: float, C: float) -> tuple[float, float]:

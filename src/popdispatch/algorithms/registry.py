@@ -22,7 +22,7 @@ class Entry:
 
 ALGORITHMS: dict[str, Entry] = {
     "smith": Entry(PopulationDynamics, SmithParams),
-    "distributed-smith": Entry(PopulationDynamics, partial(SmithParams, step=1.0, graph="ring")),
+    "distributed-smith": Entry(PopulationDynamics, partial(SmithParams, graph="ring")),
     "smith-paper": Entry(PopulationDynamics, partial(SmithParams, step=1.0, mode="paper")),
     "distributed-smith-paper": Entry(
         PopulationDynamics, partial(SmithParams, step=1.0, graph="ring", mode="paper")
