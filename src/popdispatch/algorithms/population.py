@@ -290,21 +290,11 @@ class PopulationDynamics(Algorithm):
         if len(view) == 1 and not targets:
             return
         w_view = np.concatenate(([w[0]], seen[:, 1]))
-        known = (v, room, mass)  # the view's weights, unless relay targets extend it
-        # each member's share of the pairwise rate: 1 for a neighbour, +1 in a relay group
-        shares = [1.0] * len(view)
-        routes = [()] * (len(view) - 1)
-        for (b, f_b, w_b, p_b), route in zip(targets, relayed, strict=True):
-            if b in view:
-                shares[view.index(b)] += 1.0
-                continue
-            f_view, w_view = np.append(f_view, f_b), np.append(w_view, w_b)
-            p_view = np.append(p_view, p_b)
-            view, shares, routes = view + [b], shares + [1.0], routes + [route]
-            known = None
+        members = [(b, f_view[e], w_view[e], p_view[e]) for e, b in enumerate(view)]
+        view, f_view, w_view, p_view, routes = _with_relay_targets(members, targets, relayed)
+        known = (v, room, mass) if len(view) == len(members) else None  # the view's weights
         hops = np.array([1 + len(r) for r in routes])
-        out = self._limited_outflows(view, f_view, w_view * np.array(shares), p_view, hops,
-                                     known)  # fmt: skip
+        out = self._limited_outflows(view, f_view, w_view, p_view, hops, known)
         pending = sum(a for _, a in self.debits[i])
         movable = max(self.p[i] - self.lo_box[i] - pending, 0.0)
         total = out.sum()
@@ -441,6 +431,26 @@ def paper_signals(flow: float, limit: float, C: float) -> tuple[float, float]:
     (:func:`popdispatch.modes.paper.controller_values`)."""
     parent = overflow_signal(flow, limit, C)
     return parent, (overflow_signal(-flow, limit, C) if parent != 0.0 else 0.0)
+
+
+def _with_relay_targets(members: list[tuple], targets: list[tuple], routes: list) -> tuple:
+    """A DG's view (``members``: itself first, then its partners, each ``(index, f, w, p)``)
+    extended by its relay groups' receivers ``targets`` (reached by ``routes``): ``(view, f,
+    w, p, routes)`` over the view, each receiver weight times its share of the pairwise
+    rate (1 for a neighbour, one more where a relay group shares it: the relay's flow on top
+    of the direct one), the routes of the members after the first (``()``: a neighbour)."""
+    index = {m[0]: e for e, m in enumerate(members)}
+    rows = [list(m) for m in members]
+    via = [()] * (len(members) - 1)
+    for target, route in zip(targets, routes, strict=True):
+        if target[0] in index:
+            rows[index[target[0]]][2] += members[index[target[0]]][2]
+        else:
+            rows.append(list(target))
+            via.append(route)
+    view = [int(r[0]) for r in rows]
+    f, w, p = (np.array([r[k] for r in rows], dtype=float) for k in (1, 2, 3))
+    return view, f, w, p, via
 
 
 @cache
