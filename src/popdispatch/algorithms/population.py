@@ -180,12 +180,12 @@ class PopulationDynamics(Algorithm):
             if self.net.crashed(name):
                 continue
             with np.errstate(divide="ignore", invalid="ignore"):
-                self._transfers(i, round_)
+                group = self._transfers(i, round_)
             report = self.own[i].tolist()
             for j in self._partners(i):
                 self.net.send(name, names[j], "report", report, reveals="fitness")
-            if self.own[i, 3] and not self.complete:
-                self._announce(i, round_)
+            if group:
+                self._announce(i, group)
 
     # -- node controllers ----------------------------------------------------------------
     def _controllers(self, inbox, round_: int) -> None:
@@ -271,8 +271,10 @@ class PopulationDynamics(Algorithm):
                 for key in [k for k, e in self.outstanding[i].items() if e[0] == j]:
                     self.p[i] += self.outstanding[i].pop(key)[1]  # taken back
 
-    def _transfers(self, i: int, round_: int) -> None:
-        """Compute the own report and send this round's transfers to better partners."""
+    def _transfers(self, i: int, round_: int) -> dict | None:
+        """Compute the own report and send this round's transfers to better partners; the
+        receivers of its relay group (:meth:`_group_receivers`) if it relays on a sparse
+        graph, else None."""
         m = self.m
         partners = self._partners(i)
         view = [i] + partners
@@ -286,9 +288,10 @@ class PopulationDynamics(Algorithm):
         relays = blocked or bool(self.slow[i])
         self.own[i] = (f_i, w[0], self.p[i] + refunds, float(relays))  # p: at most, once
         # the open transfers' refunds are back (the room partners may fill)
-        targets, relayed = self._relay_targets(i, round_)
+        group = self._group_receivers(i, round_) if relays and not self.complete else None
+        targets, relayed = self._relay_targets(i, round_, group)
         if len(view) == 1 and not targets:
-            return
+            return group
         w_view = np.concatenate(([w[0]], seen[:, 1]))
         members = [(b, f_view[e], w_view[e], p_view[e]) for e, b in enumerate(view)]
         view, f_view, w_view, p_view, routes = _with_relay_targets(members, targets, relayed)
@@ -303,6 +306,7 @@ class PopulationDynamics(Algorithm):
         for j, amount, via in zip(view[1:], out, routes, strict=True):
             if amount > 1e-12 * m.demand:
                 self._send_transfer(i, j, amount, round_, via)
+        return group
 
     def _weights(self, view: list[int], p: np.ndarray, f: np.ndarray) -> tuple:
         """Receiver and sender weights, rooms and movable masses of the DGs ``view`` at set
@@ -364,14 +368,13 @@ class PopulationDynamics(Algorithm):
     def _fresh(self, round_: int) -> int:
         return 2 * (1 + self.net.faults.delay_max) + 2
 
-    def _relay_targets(self, i: int, round_: int) -> tuple[list, list]:
+    def _relay_targets(self, i: int, round_: int, group: dict | None = None) -> tuple:
         """The receivers of DG ``i``'s relay groups beyond itself, the shortest route to each
         (``()``: a neighbour): ``([(b, f_b, w_b, p_b), ...], [route, ...])``. A relaying DG
-        knows its group's (:meth:`_group_receivers`); a DG that does not relay, what its
-        relaying neighbours tell it of theirs."""
-        if self.own[i, 3] and not self.complete:
-            best = self._group_receivers(i, round_)
-            best.pop(i, None)
+        knows its ``group``'s (:meth:`_group_receivers`); otherwise what its relaying
+        neighbours tell it of theirs."""
+        if group is not None:
+            best = {b: r for b, r in group.items() if b != i}
         else:
             best = {}
             for k, (told, _) in self._told(i, round_):
@@ -411,12 +414,9 @@ class PopulationDynamics(Algorithm):
             if b not in receivers or len(route) < len(receivers[b][3]):
                 receivers[b] = (f, w, p, route)
 
-    def _announce(self, i: int, round_: int) -> None:
-        """A relaying DG tells its partners the receivers of its group it knows, with the
+    def _announce(self, i: int, receivers: dict[int, tuple]) -> None:
+        """A relaying DG tells its partners the ``receivers`` of its group it knows, with the
         route to each (:meth:`_group_receivers`)."""
-        receivers = self._group_receivers(i, round_)
-        if not receivers:
-            return
         names = self.m.names
         key = tuple((b, r[3]) for b, r in receivers.items())
         values = [x for r in receivers.values() for x in r[:3]]
