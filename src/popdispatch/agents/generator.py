@@ -64,7 +64,7 @@ from popdispatch.agents.plant import Inverters
 from popdispatch.agents.schedule import Phase
 from popdispatch.dynamics.fields import Field, field_tag, law_of
 from popdispatch.dynamics.newton import neighbourhood_receivers
-from popdispatch.dynamics.pairwise import RELAY_MASS, graph_flows, relays_at_limit
+from popdispatch.dynamics.pairwise import graph_flows, receives_relayed, relays_at_limit
 from popdispatch.game.fitness import fitness_into
 from popdispatch.game.parameters import share_bounds
 
@@ -83,8 +83,8 @@ def relays(w: float, mass: float, room: float) -> bool:
 
 def receives(status: Status) -> bool:
     """Whether the generator of ``status`` can receive relayed flows (the engine's
-    ``group_flows``: ``w > 0`` and room above ``RELAY_MASS``)."""
-    return status.w > 0.0 and status.room > RELAY_MASS
+    :func:`~popdispatch.dynamics.pairwise.receives_relayed`)."""
+    return bool(receives_relayed(float(status.w), float(status.room)))
 
 
 def _theta(status: Status) -> float:

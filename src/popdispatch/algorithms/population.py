@@ -60,7 +60,7 @@ from popdispatch.algorithms.base import Algorithm, Minute, balanced_start, contr
 from popdispatch.algorithms.network import Message, Network
 from popdispatch.dynamics import communication_graph
 from popdispatch.dynamics.fields import field_tag, law_of
-from popdispatch.dynamics.pairwise import RELAY_MASS, relays_at_limit
+from popdispatch.dynamics.pairwise import receives_relayed, relays_at_limit
 from popdispatch.game.controllers import overflow_signal
 from popdispatch.game.fitness import generator_fitness
 from popdispatch.online import RunSettings
@@ -383,15 +383,14 @@ class PopulationDynamics(Algorithm):
 
     def _group_receivers(self, i: int, round_: int) -> dict[int, tuple]:
         """The receivers of relaying DG ``i``'s group it knows, ``{b: (f_b, w_b, p_b,
-        route)}``: itself and its neighbours that can receive (receiver weight, room above
-        ``RELAY_MASS``), and the receivers its relaying neighbours tell it of."""
-        demand = self.m.demand
+        route)}``: itself and its neighbours that can receive
+        (:func:`~popdispatch.dynamics.pairwise.receives_relayed`), and the receivers its
+        relaying neighbours tell it of."""
         receivers: dict[int, tuple] = {}
-        if self.own[i, 1] > 0 and self.hi_box[i] - self.own[i, 2] > RELAY_MASS * demand:
-            receivers[i] = (*self.own[i, :3], ())
-        for j in self._partners(i):
-            f, w, p, _ = self.report[i, j]
-            if w > 0 and self.hi_box[j] - p > RELAY_MASS * demand:
+        reports = [(i, *self.own[i, :3])] + [(j, *self.report[i, j, :3])
+                                             for j in self._partners(i)]  # fmt: skip
+        for j, f, w, p in reports:  # its own, and its partners' last
+            if receives_relayed(float(w), float((self.hi_box[j] - p) / self.m.demand)):
                 receivers[j] = (f, w, p, ())
         for k, (told, _) in self._told(i, round_):
             self._merge(receivers, told, k, i)

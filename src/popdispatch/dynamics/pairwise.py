@@ -210,6 +210,13 @@ def relays_at_limit(w, mass, room):
 
 
 @nb.njit(cache=True, inline="always")
+def receives_relayed(w, room):
+    """Whether a strategy with receiver weight ``w`` and ``room`` (shares) receives within a
+    relay group: ``w > 0`` and room above :data:`RELAY_MASS`."""
+    return w > 0.0 and room > RELAY_MASS
+
+
+@nb.njit(cache=True, inline="always")
 def blocked(w, mass, room, k):
     """:func:`relays_at_limit` of strategy ``k`` of the weight, mass and room arrays."""
     return relays_at_limit(w[k], mass[k], room[k])
@@ -323,7 +330,7 @@ def group_flows(f, w, v, room, members, inflow, outflow):
         i = members[r]
         if r > 0:
             gain_in += (f[i] - f[members[r - 1]]) * below_v
-        if w[i] > 0.0 and room[i] > RELAY_MASS:
+        if receives_relayed(w[i], room[i]):
             inflow[i] += w[i] * gain_in
         below_v += v[i]
     above_w = 0.0
@@ -333,7 +340,7 @@ def group_flows(f, w, v, room, members, inflow, outflow):
         if r < members.shape[0] - 1:
             gain_out += (f[members[r + 1]] - f[j]) * above_w
         outflow[j] += v[j] * gain_out
-        if w[j] > 0.0 and room[j] > RELAY_MASS:
+        if receives_relayed(w[j], room[j]):
             above_w += w[j]
 
 
