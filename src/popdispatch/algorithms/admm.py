@@ -155,20 +155,19 @@ class Admm(Algorithm):
             self._nets()
 
     def _read(self, inbox) -> None:
-        names = self.m.names
         holders = [COORDINATOR] + self.controllers
         for receiver, messages in inbox.items():
             for msg in messages:
-                if msg.kind == "terminal" and msg.sender in names:
-                    i = names.index(msg.sender)
+                if msg.kind == "terminal" and msg.sender in self.m.position:
+                    i = self.m.position[msg.sender]
                     if msg.sent > self.heard_round[i]:
                         self.heard_p[i], self.heard_round[i] = msg.values[0], msg.sent
                 elif msg.kind == "terminal":
                     k = self.controllers.index(msg.sender)
                     if msg.sent > self.heard_up_round[k]:
                         self.heard_up[k], self.heard_up_round[k] = msg.values[0], msg.sent
-                elif msg.kind == "net" and receiver in names:
-                    i = names.index(receiver)
+                elif msg.kind == "net" and receiver in self.m.position:
+                    i = self.m.position[receiver]
                     if msg.sent > self.dg_net_round[i]:
                         self.dg_net[i], self.dg_net_round[i] = msg.values, msg.sent
                 elif msg.kind == "net":

@@ -42,6 +42,11 @@ class Minute:
     def names(self) -> list[str]:
         return [str(g) for g in self.problem.generators]
 
+    @cached_property
+    def position(self) -> dict[str, int]:
+        """Each generator's index, by name."""
+        return {name: i for i, name in enumerate(self.names)}
+
     def flows(self, p: np.ndarray) -> np.ndarray:
         """Flows on the limited lines (MW, + towards the loads below) at set points ``p``."""
         return self.load_flow - self.problem.down @ p

@@ -157,14 +157,13 @@ class ConsensusAdmm(Algorithm):
 
     def _read(self, inbox) -> None:
         by_name = {h.name: h for h in (*self.dgs, self.coordinator, *self.lines)}
-        names = self.m.names
         for receiver, messages in inbox.items():
             for msg in messages:
                 if msg.kind == "consensus":  # (z_i, x_ii) from DG i to a holder
-                    holder, i = by_name[receiver], names.index(msg.sender)
+                    holder, i = by_name[receiver], self.m.position[msg.sender]
                     holder.hear(int(np.searchsorted(holder.members, i)), msg.sent, *msg.values)
                 elif msg.kind == "copy":  # x_ji + u_ji from holder j to DG i
-                    i = names.index(receiver)
+                    i = self.m.position[receiver]
                     if msg.sent > self.heard[i][msg.sender][1]:
                         self.heard[i][msg.sender] = (msg.values[0], msg.sent)
 

@@ -110,7 +110,7 @@ class Network:
         size = HEADER_BYTES + SCALAR_BYTES * len(values)
         delay = 0
         a = sender
-        for b in (*via, receiver):
+        for b in (*via, receiver) if via else (receiver,):
             c.messages += 1
             c.scalars += len(values)
             c.bytes += size
@@ -122,7 +122,7 @@ class Network:
                 return
             delay += 1 + (int(self._rng.integers(0, f.delay_max + 1)) if f.delay_max else 0)
             a = b
-        message = Message(sender, receiver, kind, values, self.round, key, tuple(via))
+        message = Message(sender, receiver, kind, values, self.round, key, via and tuple(via))
         self._queue[self.round + delay].append(message)
         if f.duplicate and self._rng.random() < f.duplicate:
             c.duplicated += 1
@@ -145,5 +145,5 @@ def _scalars(values) -> tuple[float, ...]:
     if isinstance(values, np.ndarray):
         return tuple(values.ravel().tolist())
     if isinstance(values, (list, tuple)):
-        return tuple(float(v) for v in values)
+        return tuple(map(float, values))
     return (float(values),)

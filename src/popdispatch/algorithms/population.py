@@ -128,6 +128,7 @@ class PopulationDynamics(Algorithm):
         self.factor_t = np.ascontiguousarray(problem.down.T)
         self._boxes: dict[tuple, tuple] = {}  # a view's (lo, hi, active, rate)
         self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
+        self.controller_index = {name: k for k, name in enumerate(self.controllers)}
         self.z = np.zeros((len(problem.limit), 2))
         # each DG's view: the last report of each partner (f, w, p) and its round
         self.report = np.zeros((n, n, 4))
@@ -137,7 +138,7 @@ class PopulationDynamics(Algorithm):
         self.sides = np.zeros((n, len(problem.limit), 2))  # paper: (parent, child) signals
         self.nu_round = np.full((n, len(problem.limit)), -1)
         self.seq = np.zeros(n, dtype=int)
-        self.outstanding: list[dict] = [{} for _ in range(n)]  # key -> [to, amount, sent, tries]
+        self.outstanding = [OpenTransfers() for _ in range(n)]
         self.accepted: list[dict] = [{} for _ in range(n)]  # key -> amount accepted
         self.debits: list[list] = [[] for _ in range(n)]  # (round, amount) due
         self.own = np.zeros((n, 4))
@@ -214,7 +215,7 @@ class PopulationDynamics(Algorithm):
     def _receive(self, i: int, message: Message, round_: int) -> None:
         names = self.m.names
         if message.kind == "price":
-            k = self.controllers.index(message.sender)
+            k = self.controller_index[message.sender]
             if message.sent > self.nu_round[i, k]:
                 self.nu_round[i, k] = message.sent
                 if self.paper:
@@ -222,21 +223,20 @@ class PopulationDynamics(Algorithm):
                 else:
                     self.nu[i, k] = message.values[0]
         elif message.kind == "report":
-            j = names.index(message.sender)
+            j = self.m.position[message.sender]
             if message.sent > self.heard[i, j]:
                 self.report[i, j], self.heard[i, j] = message.values, message.sent
                 self.gone[i, j] = False
         elif message.kind == "transfer":
             if message.key not in self.accepted[i]:
-                refunds = sum(e[1] for e in self.outstanding[i].values())
-                room = max(self.hi_box[i] - self.p[i] - refunds, 0.0)
+                room = max(self.hi_box[i] - self.p[i] - self.outstanding[i].total(), 0.0)
                 take = min(message.values[0], room)
                 self.accepted[i][message.key] = take
                 self.p[i] += take
             self.net.send(names[i], message.sender, "ack", [self.accepted[i][message.key]],
                           key=message.key, via=message.via[::-1])  # fmt: skip
         elif message.kind == "relay":
-            k = names.index(message.sender)
+            k = self.m.position[message.sender]
             if message.sent >= self.announced[i].get(k, ((), -1))[1]:
                 f, w, p = np.reshape(message.values, (-1, 3)).T
                 self.announced[i][k] = ([(b, f[e], w[e], p[e], via) for e, (b, via)
@@ -284,7 +284,7 @@ class PopulationDynamics(Algorithm):
         f_view = np.concatenate(([f_i], seen[:, 0]))
         w, v, room, mass = self._weights(view, p_view, f_view)
         blocked = relays_at_limit(float(w[0]), float(mass[0]), float(room[0]))
-        refunds = sum(e[1] for e in self.outstanding[i].values())
+        refunds = self.outstanding[i].total()
         relays = blocked or bool(self.slow[i])
         self.own[i] = (f_i, w[0], self.p[i] + refunds, float(relays))  # p: at most, once
         # the open transfers' refunds are back (the room partners may fill)
@@ -421,6 +421,27 @@ class PopulationDynamics(Algorithm):
         values = [x for r in receivers.values() for x in r[:3]]
         for j in self._partners(i):
             self.net.send(names[i], names[j], "relay", values, key=key, reveals="fitness")
+
+
+class OpenTransfers(dict):
+    """A DG's transfers not yet acknowledged, ``key -> [to, amount (MW), sent, tries,
+    route]``, with their total amount (summed once after each change)."""
+
+    _total: float | None = None
+
+    def __setitem__(self, key, entry) -> None:
+        self._total = None
+        super().__setitem__(key, entry)
+
+    def pop(self, key, *default):
+        self._total = None
+        return super().pop(key, *default)
+
+    def total(self) -> float:
+        """The MW the open transfers would give back if none were accepted."""
+        if self._total is None:
+            self._total = sum(e[1] for e in self.values())
+        return self._total
 
 
 def paper_signals(flow: float, limit: float, C: float) -> tuple[float, float]:
