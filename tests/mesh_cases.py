@@ -39,12 +39,18 @@ def pandapower_case(case: str, limits_mw: dict[tuple[int, int], float]):
 
 def rundcopp(net, limits_mw: dict[tuple[int, int], float]):
     """:func:`pandapower_case` of a pandapower copy ``net`` of a MATPOWER case (changed)."""
+    limited_rundcopp(net, limits_mw, pd.Series(net.bus.index + 1, index=net.bus.index))
+    return np.r_[net.res_ext_grid.p_mw.to_numpy(), net.res_gen.p_mw.to_numpy()], net.res_cost
+
+
+def limited_rundcopp(net, limits_mw: dict[tuple[int, int], float], number: pd.Series) -> None:
+    """Limit ``net``'s line between each pair of buses of ``limits_mw`` (MW; ``number``: each
+    pandapower bus's MATPOWER number) and solve it by pandapower's ``rundcopp``."""
     import pandapower as pp
 
+    ends = number[net.line.from_bus].to_numpy(), number[net.line.to_bus].to_numpy()
     for (a, b), mw in limits_mw.items():
-        pair = ((net.line.from_bus == a - 1) & (net.line.to_bus == b - 1)) | (
-            (net.line.from_bus == b - 1) & (net.line.to_bus == a - 1)
-        )
+        pair = ((ends[0] == a) & (ends[1] == b)) | ((ends[0] == b) & (ends[1] == a))
         assert pair.sum() == 1
         k = net.line.index[pair][0]
         rating = net.line.max_i_ka[k] * net.bus.vn_kv[net.line.from_bus[k]] * np.sqrt(3)
@@ -53,7 +59,6 @@ def rundcopp(net, limits_mw: dict[tuple[int, int], float]):
         warnings.simplefilter("ignore")
         pp.rundcopp(net)
     assert net.OPF_converged
-    return np.r_[net.res_ext_grid.p_mw.to_numpy(), net.res_gen.p_mw.to_numpy()], net.res_cost
 
 
 def rundcopp_at_buses(case: str, limits_mw: dict[tuple[int, int], float]) -> pd.Series:
@@ -61,26 +66,11 @@ def rundcopp_at_buses(case: str, limits_mw: dict[tuple[int, int], float]) -> pd.
     between the given buses limited (MW; buses numbered as the case numbers them, which
     pandapower keeps as the buses' names): the output of each generator bus, MW, indexed by
     its MATPOWER number."""
-    import pandapower as pp
     import pandapower.networks as pn
 
     net = getattr(pn, case)()
     number = net.bus.name.astype(int)
-    ends = set(zip(number[net.line.from_bus].to_numpy(), number[net.line.to_bus].to_numpy(),
-                   strict=True))  # fmt: skip
-    for (a, b), mw in limits_mw.items():
-        pair = ((number[net.line.from_bus].to_numpy() == a)
-                & (number[net.line.to_bus].to_numpy() == b)) | (
-            (number[net.line.from_bus].to_numpy() == b)
-            & (number[net.line.to_bus].to_numpy() == a))  # fmt: skip
-        assert pair.sum() == 1 and ((a, b) in ends or (b, a) in ends)
-        k = net.line.index[pair][0]
-        rating = net.line.max_i_ka[k] * net.bus.vn_kv[net.line.from_bus[k]] * np.sqrt(3)
-        net.line.loc[k, "max_loading_percent"] = min(100.0, 100.0 * mw / rating)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        pp.rundcopp(net)
-    assert net.OPF_converged
+    limited_rundcopp(net, limits_mw, number)
     out = pd.concat([pd.Series(net.res_ext_grid.p_mw.to_numpy(), number[net.ext_grid.bus]),
                      pd.Series(net.res_gen.p_mw.to_numpy(), number[net.gen.bus])])  # fmt: skip
     return out.groupby(level=0).sum()
