@@ -19,7 +19,7 @@ import numpy as np
 
 from popdispatch.dynamics import Kernel, communication_graph, get_dynamics
 from popdispatch.dynamics.fields import field_tag, law_of
-from popdispatch.dynamics.pairwise import RELAY_MASS, SLOW_RELAY
+from popdispatch.dynamics.pairwise import NEAR_LIMIT, RELAY_MASS, SLOW_RELAY
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
 from popdispatch.game.parameters import MinuteInputs
 from popdispatch.game.problem import DispatchProblem
@@ -142,14 +142,18 @@ def slow_members(rate: np.ndarray, graph: np.ndarray) -> np.ndarray:
 def relay_matrix(f, w, v, graph, mass, room, slow=None) -> np.ndarray:
     """The relay of distributed Smith on a graph (dynamics/pairwise.py ``relay_flows``),
     written from its definition with networkx: each connected set of relaying strategies
-    (blocked, or ``slow``: :func:`slow_members`) together with its neighbours is a group;
-    within it every member sends to every member that can receive (``w > 0``, room above
-    ``RELAY_MASS``) at ``w_b v_a [f_b - f_a]_+``. Nothing on the complete graph."""
+    (offline, room or movable mass within ``NEAR_LIMIT`` of its range, at least
+    ``RELAY_MASS``; or ``slow``: :func:`slow_members`) together with its neighbours is a
+    group; within it every member sends to every member that can receive (``w > 0``, room
+    above ``RELAY_MASS``) at ``w_b v_a [f_b - f_a]_+``. Nothing on the complete graph."""
     n = len(f)
     relay = np.zeros((n, n))
     if (graph + np.eye(n) > 0).all():
         return relay
-    blocked = ~((w > 0) & (mass > RELAY_MASS) & (room > RELAY_MASS))
+    with np.errstate(invalid="ignore"):
+        span = np.where(np.isinf(room), 0.0, mass + room)  # unbounded room: no range
+    margin = np.maximum(RELAY_MASS, NEAR_LIMIT * span)
+    blocked = ~((w > 0) & (mass > margin) & (room > margin))
     if slow is not None:
         blocked = blocked | slow
     g = nx.from_numpy_array(graph)

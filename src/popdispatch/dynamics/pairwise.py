@@ -198,15 +198,34 @@ def graph_flows(f, w, v, indptr, indices, inflow, outflow):
 #: which the KKT check counts a generator as at its limit anyway.
 RELAY_MASS = 1e-7
 
+#: Share of its own range (``Pmax - Pmin``) within which a generator of bounded room relays
+#: as if at that limit (it also keeps trading on its own). A receiver on the only path to the
+#: others fills its last room geometrically, and until its room fell below
+#: :data:`RELAY_MASS` the mass behind it waited: a linear generator optimal at ``Pmax``
+#: between the source and the rest held a random fleet 224 iterations. Relaying from 1e-3 of
+#: the range opens the path while the room closes (docs/exact-mode.md).
+NEAR_LIMIT = 1e-3
+
+
+@nb.njit(cache=True, inline="always")
+def relay_margin(mass, room):
+    """Movable ``mass`` or ``room`` (shares) at or below which a strategy relays: the larger
+    of :data:`RELAY_MASS` and :data:`NEAR_LIMIT` of its range ``mass + room``, where the room
+    is bounded (the box dynamics of exact mode; the paper's fields have unbounded room)."""
+    if room == np.inf:
+        return RELAY_MASS
+    return max(RELAY_MASS, NEAR_LIMIT * (mass + room))
+
 
 @nb.njit(cache=True, inline="always")
 def relays_at_limit(w, mass, room):
     """Whether a strategy with receiver weight ``w``, movable ``mass`` and ``room`` (shares)
-    cannot take part in a comparison both ways, and relays: offline (``w = 0``), room at most
-    :data:`RELAY_MASS` (at its upper limit) or movable mass at most :data:`RELAY_MASS` (at its
-    lower limit, extinct). A generator a few nanoshares below its limit would otherwise stay
-    a receiver that passes on only what it can still absorb, and cut a path in two."""
-    return not (w > 0.0 and mass > RELAY_MASS and room > RELAY_MASS)
+    relays: offline (``w = 0``), or room or movable mass at most :func:`relay_margin` (at or
+    near its upper limit, or its lower limit). A generator just below its limit would
+    otherwise stay a receiver that passes on only what it can still absorb, and cut a path in
+    two."""
+    margin = relay_margin(mass, room)
+    return not (w > 0.0 and mass > margin and room > margin)
 
 
 @nb.njit(cache=True, inline="always")
