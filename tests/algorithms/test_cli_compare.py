@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
@@ -30,6 +31,8 @@ def test_the_command_knows_the_registry():
     (["--crash", "G999@5"], ["--crash", "G999"]),
     (["--loss", "1.5"], ["--loss"]),
     (["--seeds", "0"], ["--seeds"]),
+    (["--graph", "tree"], ["--graph", "tree"]),
+    (["--algorithms", "smith,admm", "--graph", "circulant"], ["--graph", "distributed-smith"]),
 ])  # fmt: skip
 def test_bad_input_is_one_line_and_exit_2(args, words):
     result = run("compare", "--minute", "566", *args)
@@ -78,3 +81,23 @@ def test_dual_decomposition_refuses_a_linear_cost_in_one_line(tmp_path):
     alone = run("compare", "--minute", "566", "--fleet", str(fleet), "--algorithms", "smith",
                 "--json", "-q")  # fmt: skip
     assert alone.returncode == 0, alone.stderr
+
+
+def test_distributed_smith_runs_on_the_graph_given():
+    """``--graph circulant``: distributed Smith's agents talk to four partners each (plus the
+    controllers), and the run equals the library's on that graph."""
+    result = run("compare", "--minute", "566", "--limit", "505:666=28", "--algorithms",
+                 "distributed-smith", "--graph", "circulant", "--max-rounds", "40", "--json",
+                 "--quiet")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    payload = json.loads(result.stdout)
+    assert payload["graph"] == "circulant"
+    params = replace(ALGORITHMS["distributed-smith"].params(), graph="circulant")
+    lib = run_algorithm("distributed-smith", elv_problem(limits=[CONGESTION_PATH]), 566,
+                        Faults(), params, RunOptions(max_rounds=40))  # fmt: skip
+    row = payload["runs"][0]
+    assert row["messages_total"] == lib.messages[-1]
+    assert row["final_distance_kw"] == pytest.approx(lib.distance_kw[-1], rel=1e-9)
+    ring = run_algorithm("distributed-smith", elv_problem(limits=[CONGESTION_PATH]), 566,
+                         Faults(), options=RunOptions(max_rounds=40))  # fmt: skip
+    assert row["partners_max"] == ring.summary()["partners_max"] + 2  # 4 DG partners, not 2

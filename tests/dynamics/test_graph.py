@@ -14,11 +14,12 @@ NETWORKX = {
     "ring": nx.cycle_graph,
     "path": nx.path_graph,
     "star": lambda n: nx.star_graph(n - 1),
+    "circulant": lambda n: nx.circulant_graph(n, [1, round(n**0.5)]),
 }
 
 
 @pytest.mark.parametrize("kind", sorted(NETWORKX))
-@pytest.mark.parametrize("n", [1, 2, 3, 6, 11])
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 6, 11, 69])
 def test_named_graphs_equal_networkx(kind, n):
     names = [f"G{i}" for i in range(n)]
     expected = nx.to_numpy_array(NETWORKX[kind](n), nodelist=range(n), weight=None)
@@ -37,3 +38,11 @@ def test_unknown_and_disconnected_graphs_are_named():
         communication_graph("tree", ["G0", "G1"])
     with pytest.raises(ValueError, match="disconnected: generator 'G2'"):
         communication_graph(nx.Graph([("G0", "G1")]), ["G0", "G1", "G2"])
+
+
+@pytest.mark.parametrize("n", [9, 69, 300])
+def test_the_circulant_graph_is_short_across(n):
+    """Four partners each and a diameter of about sqrt(n), where the ring's is n / 2."""
+    graph = nx.from_numpy_array(communication_graph("circulant", [f"G{i}" for i in range(n)]))
+    assert max(d for _, d in graph.degree) == 4
+    assert nx.diameter(graph) <= round(n**0.5) < nx.diameter(nx.cycle_graph(n))

@@ -40,6 +40,19 @@ def runnable(problem: DispatchProblem, names: Sequence[str]) -> tuple[list[str],
     return kept, notes
 
 
+def on_graph(names: Sequence[str], graph: str) -> dict:
+    """The parameters (by name) of the algorithms of ``names`` that run on a sparse
+    communication graph (distributed Smith, paper or exact), on the named ``graph``
+    (:data:`popdispatch.dynamics.GRAPHS`) instead of their default ring; an
+    :class:`~popdispatch.errors.OptionError` (``--graph``) if none of them does."""
+    sparse = {n: ALGORITHMS[n].params() for n in names
+              if getattr(ALGORITHMS[n].params(), "graph", "complete") != "complete"}  # fmt: skip
+    if not sparse:
+        raise OptionError("it applies to distributed-smith and distributed-smith-paper only, "
+                          "and --algorithms names neither", "--graph")  # fmt: skip
+    return {name: replace(params, graph=graph) for name, params in sparse.items()}
+
+
 def compare_algorithms(problem: DispatchProblem, minute: int, names: Sequence[str],
                        faults: Faults, seeds: int = 1, options: RunOptions | None = None,
                        params: dict | None = None) -> dict[str, list[AlgorithmRun]]:  # fmt: skip

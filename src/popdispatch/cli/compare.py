@@ -17,6 +17,7 @@ import click
 
 from popdispatch.cli.clock import Failure, stamp
 from popdispatch.cli.options import (
+    GRAPH_CHOICE,
     Series,
     build,
     check_out,
@@ -87,6 +88,14 @@ class CrashType(click.ParamType):
     default=None,
     help="DG GEN's agent stops at ROUND for good; its inverter holds its set point.",
 )
+@option(
+    "--graph",
+    type=GRAPH_CHOICE,
+    default="ring",
+    show_default=True,
+    help="Communication graph of distributed Smith (distributed-smith, "
+    "distributed-smith-paper); circulant: four partners each, short across.",
+)
 @option("--seeds", type=click.IntRange(1), default=1, show_default=True,
         help="Runs per algorithm, seeds --seed, --seed + 1, ...")  # fmt: skip
 @option("--seed", type=int, default=0, show_default=True, help="First seed.")
@@ -98,11 +107,11 @@ class CrashType(click.ParamType):
 @json_option
 @quiet_option
 @click.pass_context
-def compare(ctx, algorithms, minute, limits, loss, delay_max, duplicate, crash, seeds, seed,
-            max_rounds, profiles, source, out, as_json, quiet) -> int:  # fmt: skip
-    """Population dynamics (Smith, distributed Smith on a ring), dual decomposition (plain and
-    fast) and ADMM (proximal message passing; consensus ADMM, which runs on meshes too) on one
-    minute, by messages through one simulated network with the same
+def compare(ctx, algorithms, minute, limits, loss, delay_max, duplicate, crash, graph, seeds,
+            seed, max_rounds, profiles, source, out, as_json, quiet) -> int:  # fmt: skip
+    """Population dynamics (Smith, distributed Smith on a ring or the --graph given), dual
+    decomposition (plain and fast) and ADMM (proximal message passing; consensus ADMM, which
+    runs on meshes too) on one minute, by messages through one simulated network with the same
     faults and counter, each measured every round against the DC-OPF. A run is converged only
     when its applied set points are within max(1e-3 kW, 1e-6 x demand) of the DC-OPF,
     balanced and within the line limits for 10 rounds in a row. smith-paper and
@@ -111,6 +120,10 @@ def compare(ctx, algorithms, minute, limits, loss, delay_max, duplicate, crash, 
     with a note, what cannot run the network (ADMM by proximal message passing on a mesh, dual
     decomposition on a linear cost); a list given is refused instead."""
     check_out(out)
+    from popdispatch.algorithms.comparison import on_graph
+
+    graphed = ctx.get_parameter_source("graph") != click.core.ParameterSource.DEFAULT
+    params = on_graph(algorithms, graph) if graphed else {}
     progress = Progress(quiet)
     problem, _ = build(source, Series(profiles), minute, limits, progress)
     if crash is not None and crash[0] not in [str(g) for g in problem.generators]:
@@ -140,12 +153,12 @@ def compare(ctx, algorithms, minute, limits, loss, delay_max, duplicate, crash, 
     with progress.step(f"minute {minute}: {len(algorithms)} algorithms x {seeds} seeds"):
         try:
             runs = compare_algorithms(problem, minute, algorithms, faults, seeds,
-                                      RunOptions(max_rounds=max_rounds))  # fmt: skip
+                                      RunOptions(max_rounds=max_rounds), params)  # fmt: skip
         except ValueError as exc:  # the DC-OPF with a crashed DG held is infeasible
             raise Failure(str(exc)) from None
     table = runs_table(runs, seed)
     summary = summary_table(table)
-    payload = {"minute": minute, "faults": faults.label(), "seeds": seeds,
+    payload = {"minute": minute, "faults": faults.label(), "graph": graph, "seeds": seeds,
                "max_rounds": max_rounds, "demand_kw": float(problem.demand[minute - 1] * 1e3),
                "algorithms": summary.to_dict(orient="records"), "left_out": left_out,
                "reveals": {n: g[0].reveals for n, g in runs.items()},
@@ -170,8 +183,9 @@ def _write(out, table, payload, runs, progress) -> None:
 
 def _text(payload: dict, summary) -> str:
     lines = [f"minute {payload['minute']}, {payload['faults']}, {payload['seeds']} seed(s), "
-             f"horizon {payload['max_rounds']} rounds; converged = within max(1e-3 kW, "
-             "1e-6 x demand) of the DC-OPF for 10 rounds"]  # fmt: skip
+             f"horizon {payload['max_rounds']} rounds, distributed Smith on a "
+             f"{payload['graph']} graph; converged = within max(1e-3 kW, 1e-6 x demand) of "
+             "the DC-OPF for 10 rounds"]  # fmt: skip
     head = ("algorithm", "converged", "rounds", "messages", "bytes", "msg/agent/round",
             "partners", "distance kW", "|imbalance| kW")  # fmt: skip
     width = max(18, *(len(name) for name in summary.algorithm))

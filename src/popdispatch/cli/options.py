@@ -102,7 +102,7 @@ DYNAMICS_CHOICE = EngineChoice(
 )
 MODE_CHOICE = EngineChoice("popdispatch.modes:MODES", shown=("paper", "exact", "voltage"))
 GRAPH_CHOICE = EngineChoice(
-    "popdispatch.dynamics.graph:GRAPHS", shown=("complete", "ring", "path", "star")
+    "popdispatch.dynamics.graph:GRAPHS", shown=("complete", "ring", "path", "star", "circulant")
 )
 WARM_START_CHOICE = EngineChoice(
     "popdispatch.warm_start:WARM_STARTS", shown=("shares", "setpoints", "merit")

@@ -13,7 +13,7 @@ import numpy as np
 if TYPE_CHECKING:
     import networkx as nx
 
-GRAPHS = ("complete", "ring", "path", "star")
+GRAPHS = ("complete", "ring", "path", "star", "circulant")
 
 
 def communication_graph(kind: str | nx.Graph, generators: list[str]) -> np.ndarray:
@@ -42,7 +42,10 @@ def communication_graph(kind: str | nx.Graph, generators: list[str]) -> np.ndarr
 
 def named_graph(kind: str, n: int) -> np.ndarray:
     """The adjacency of the named graph ``kind`` (:data:`GRAPHS`) on ``n`` nodes: complete,
-    ring (``i ~ i + 1 mod n``), path (``i ~ i + 1``) or star (node 0 the hub)."""
+    ring (``i ~ i + 1 mod n``), path (``i ~ i + 1``), star (node 0 the hub) or circulant (the
+    ring with chords ``i ~ i + s mod n``, ``s = round(sqrt(n))``: four partners each and a
+    diameter of about ``sqrt(n)`` instead of the ring's ``n / 2``; mass crosses a sparse
+    graph hop by hop, so a large fleet on a ring converges slowly)."""
     adjacency = np.zeros((n, n))
     nodes = np.arange(n)
     if kind == "complete":
@@ -52,6 +55,9 @@ def named_graph(kind: str, n: int) -> np.ndarray:
         adjacency[nodes[:last], (nodes[:last] + 1) % n] = 1.0
     elif kind == "star":
         adjacency[:1, 1:] = 1.0
+    elif kind == "circulant":
+        for offset in (1, round(np.sqrt(n))):
+            adjacency[nodes, (nodes + offset) % n] = 1.0
     else:
         raise ValueError(f"unknown communication graph {kind!r} (known: {', '.join(GRAPHS)})")
     adjacency = np.maximum(adjacency, adjacency.T)
