@@ -150,8 +150,7 @@ def relay_matrix(f, w, v, graph, mass, room, slow=None) -> np.ndarray:
     relay = np.zeros((n, n))
     if (graph + np.eye(n) > 0).all():
         return relay
-    with np.errstate(invalid="ignore"):
-        span = np.where(np.isinf(room), 0.0, mass + room)  # unbounded room: no range
+    span = np.where(np.isinf(room), 0.0, mass + room)  # unbounded room: no range
     margin = np.maximum(RELAY_MASS, NEAR_LIMIT * span)
     blocked = ~((w > 0) & (mass > margin) & (room > margin))
     if slow is not None:

@@ -45,8 +45,8 @@ def on_graph(names: Sequence[str], graph: str) -> dict:
     communication graph (distributed Smith, paper or exact), on the named ``graph``
     (:data:`popdispatch.dynamics.GRAPHS`) instead of their default ring; an
     :class:`~popdispatch.errors.OptionError` (``--graph``) if none of them does."""
-    sparse = {n: ALGORITHMS[n].params() for n in names
-              if getattr(ALGORITHMS[n].params(), "graph", "complete") != "complete"}  # fmt: skip
+    defaults = {n: ALGORITHMS[n].params() for n in names}
+    sparse = {n: p for n, p in defaults.items() if getattr(p, "graph", "complete") != "complete"}
     if not sparse:
         raise OptionError("it applies to distributed-smith and distributed-smith-paper only, "
                           "and --algorithms names neither", "--graph")  # fmt: skip
