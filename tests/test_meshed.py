@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 from mesh_cases import congested, pandapower_case
 
@@ -343,6 +343,9 @@ def random_mesh(seed: int, n_buses: int, n_chords: int, n_gens: int, n_limits: i
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(0, 2**32 - 1), st.integers(3, 6), st.integers(1, 3), st.integers(2, 4),
        st.integers(0, 2))  # fmt: skip
+# two DGs whose distribution factors on the limited line differ by 0.03: its optimal price is
+# 4,372 EUR/MWh, above ten times the spread of marginal costs (1,948)
+@example(3960396, 6, 2, 2, 1)
 def test_exact_mode_on_random_meshes_lands_on_the_exact_dc_opf(seed, n_buses, chords, gens, limits):
     """Random meshes against the DC-OPF found by enumerating active sets (tests/qp_exact.py,
     no solver tolerance): converged, within the run's accuracy, in at most 200 iterations,
@@ -356,6 +359,28 @@ def test_exact_mode_on_random_meshes_lands_on_the_exact_dc_opf(seed, n_buses, ch
     distance_kw = np.abs(run.setpoints_kw - optimum * 1e3).max()
     assert distance_kw <= run.accuracy_kw
     assert run.distance_bound_kw >= distance_kw - roundoff_kw(problem)
+
+
+def test_a_line_that_dispatch_barely_moves_is_priced_within_the_cap_and_quickly():
+    """Two DGs whose distribution factors on the one limited line differ by 0.03 (MW per MW):
+    the line's optimal price (Clarabel's dual) is far above the spread of marginal costs, yet
+    below the price cap beyond which exact mode calls the congestion impossible to relieve;
+    and the lever scale (the line's C and price rate over 0.03) brings the run to the DC-OPF
+    in at most 200 iterations."""
+    from popdispatch.game.mesh import lever_scale, smallest_factor_gap
+    from popdispatch.modes import get_mode
+
+    problem = build_mesh_problem(random_mesh(3960396, 6, 2, 2, 1), check=False)
+    lever = float(np.ptp(problem.factor))
+    assert 0.02 < lever < 0.05
+    assert smallest_factor_gap(problem.factor) == pytest.approx(lever)
+    np.testing.assert_allclose(lever_scale(problem.factor), [1.0 / lever])
+    opf = solve_opf(problem, 1)
+    spread = float((problem.b + 2.0 * problem.c * problem.pmax).max() - problem.b.min())
+    assert np.abs(opf.line_price).max() > 10.0 * spread  # the radial bound does not hold here
+    assert np.abs(opf.line_price).max() < get_mode("exact").price_cap(problem)
+    run = run_exact(problem)
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= run.accuracy_kw + 1e-6 * opf.demand_kw
 
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])

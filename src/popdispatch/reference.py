@@ -21,6 +21,7 @@ from popdispatch.dynamics import Kernel, communication_graph, get_dynamics
 from popdispatch.dynamics.fields import field_tag, law_of
 from popdispatch.dynamics.pairwise import NEAR_LIMIT, RELAY_MASS, SLOW_RELAY
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
+from popdispatch.game.mesh import lever_scale
 from popdispatch.game.parameters import MinuteInputs
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import ROUND_OFF, Status
@@ -71,9 +72,10 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
 
     Exact and voltage modes: every row ``r`` (a limited line's direction, a monitored bus's
     bound) has an excess ``e_r`` (MW or MW equivalents) and a price ``mu_r = max(0, z_r + C
-    e_r)`` that integrates at ``price_rate e_r``; generator ``i``'s signal is ``-sum_r mu_r
-    de_r/dp_i`` weighed as the paper splits a line's (half to each side, eq. 8's sides) and in
-    full for a bus (the Lagrangian's gradient of the voltage rows)."""
+    e_r)`` that integrates at ``price_rate e_r`` (a mesh line's ``C`` and ``price_rate`` times
+    its lever scale, :func:`popdispatch.game.mesh.lever_scale`); generator ``i``'s signal is
+    ``-sum_r mu_r de_r/dp_i`` weighed as the paper splits a line's (half to each side, eq. 8's
+    sides) and in full for a bus (the Lagrangian's gradient of the voltage rows)."""
     down = problem.down
     flow = problem.line_load_flow[minute - 1] - down @ p
     if mode == ModeCode.PAPER:
@@ -86,10 +88,13 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
     if mode == ModeCode.VOLTAGE:
         v_excess, v_gradient = voltage_rows(problem, p, minute)
         excess = np.concatenate([excess, v_excess])
-    z_rate = fp.price_rate * excess
-    slack = np.where(z > 0.0, np.abs(excess), np.maximum(excess, 0.0))
-    mu = np.maximum(0.0, z + fp.C * excess)
     lines = len(flow)
+    scale = np.ones(len(excess))  # a mesh line's lever scale multiplies its C and rate
+    if problem.meshed:
+        scale[: 2 * lines] = np.tile(lever_scale(problem.factor), 2)
+    z_rate = fp.price_rate * scale * excess
+    slack = np.where(z > 0.0, np.abs(excess), np.maximum(excess, 0.0))
+    mu = np.maximum(0.0, z + fp.C * scale * excess)
     nu = mu[:lines] - mu[lines : 2 * lines]
     signal = down.T @ (0.5 * nu) - (1.0 - down).T @ (0.5 * nu)
     prices = np.abs(nu)

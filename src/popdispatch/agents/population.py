@@ -42,7 +42,7 @@ from popdispatch.game.parameters import MinuteInputs, PriceLaw
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import STABLE_STEP
 from popdispatch.modes import get_mode
-from popdispatch.modes.exact import scaled_weights, scales
+from popdispatch.modes.exact import price_rates, price_weights, scales
 from popdispatch.online.settings import RunSettings, initial_shares
 from popdispatch.online.stiffness import price_loop_rate, stiffness_rate
 from popdispatch.warm_start import SHARES, warm_start
@@ -305,7 +305,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
         gen.slow_relays = slow
         gen.stale_rounds = stale_rounds
     controllers, line_ends = _controllers(problem, settings, fp, step_s, network,
-                                          line_scales(problem, settings, minute))
+                                          *line_constants(problem, settings, fp, minute))
     for controller in controllers.values():  # the generators report a silence first
         controller.stale_rounds = 2 * stale_rounds
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
@@ -344,7 +344,7 @@ def check_settings(settings: RunSettings) -> None:
     """Refuse run settings the agents cannot honour: a mode other than paper and exact (their
     node controllers price limited lines only), the tree price law (each controller hears only
     its own lines; the tree law needs its neighbours' excesses). The scaled law needs only two
-    counts per line, which each controller has from configuration (:func:`line_scales`)."""
+    counts per line, which each controller has from configuration (:func:`line_constants`)."""
     if get_mode(settings.mode).code not in PAYOFFS:
         raise OptionError(f"the agents run paper and exact mode, not {settings.mode}", "--mode")
     if settings.exact.price_law == PriceLaw.TREE:
@@ -404,23 +404,29 @@ def controller_id(bus) -> str:
     return f"C{bus_name(bus)}"
 
 
-def line_scales(problem: DispatchProblem, settings: RunSettings, minute: int) -> np.ndarray:
-    """Each limited line's factor ``s_k`` of the price law in force at ``minute``
-    (dimensionless): the scaled law's ``N / N_k``, the fleet's online tradable generators over
-    those below the line (:func:`popdispatch.modes.exact.scaled_weights`: configuration, the
-    two counts each controller is told), 1 under the plain law and in paper mode."""
-    scaled = get_mode(settings.mode).bounded and settings.exact.price_law == PriceLaw.SCALED
-    if not scaled or not len(problem.limit):
-        return np.ones(len(problem.limit))
-    return scaled_weights(problem, np.array([minute - 1]), 1.0)[0] ** 2
+def line_constants(
+    problem: DispatchProblem, settings: RunSettings, fp, minute: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each limited line's proportional weight ``C_k`` (EUR/MW per MW) and price rate
+    ``alpha_k`` at ``minute``, as the engine's kernels have them
+    (:func:`popdispatch.modes.exact.price_weights` and ``price_rates``: under the scaled law
+    from the fleet's online tradable generators and those below the line, two counts each
+    controller is told; on a mesh from the line's distribution factors, its configuration);
+    ``fp``'s ``C`` and ``price_rate`` on every line in paper mode."""
+    n_lines = len(problem.limit)
+    if not get_mode(settings.mode).bounded or not n_lines:
+        return np.full(n_lines, float(fp.C)), np.full(n_lines, float(fp.price_rate))
+    row, law = np.array([minute - 1]), settings.exact.price_law
+    weight = np.broadcast_to(price_weights(problem, law, float(fp.C), row), (1, n_lines))
+    return weight[0].copy(), price_rates(problem, law, float(fp.price_rate), row)[0]
 
 
-def _controllers(problem, settings: RunSettings, fp, step_s: float, network, scale):
+def _controllers(problem, settings: RunSettings, fp, step_s: float, network, weight, rate):
     """``({id: controller}, line_ends)`` from the problem's controller table; each line priced
     by the mode's own payoff map (:class:`~popdispatch.agents.controller.LinePrice`) with the
-    problem's limit of the line; under the scaled law line ``k``'s price rate times ``s_k``
-    and its proportional weight ``C`` times ``sqrt(s_k)`` (``scale``, :func:`line_scales`:
-    the scaled law is the plain law with these per-line constants)."""
+    problem's limit of the line, its proportional weight ``weight[k]`` and price rate
+    ``rate[k]`` (:func:`line_constants`: the scaled law and a mesh's lever scale are the plain
+    law with per-line constants)."""
     table = NodeControllers.from_problem(problem).table
     position = {line: k for k, line in enumerate(problem.lines)}
     payoff = PAYOFFS[get_mode(settings.mode).code]
@@ -430,8 +436,8 @@ def _controllers(problem, settings: RunSettings, fp, step_s: float, network, sca
     for row in table.itertuples():
         aid = controller_id(row.bus)
         k = position[row.line]
-        price = LinePrice(payoff, float(problem.limit[k]), float(fp.C) * np.sqrt(scale[k]),
-                          float(fp.price_rate) * scale[k], n_states)  # fmt: skip
+        price = LinePrice(payoff, float(problem.limit[k]), float(weight[k]), float(rate[k]),
+                          n_states)  # fmt: skip
         weights = None
         if problem.meshed:  # each generator's factor to the line
             weights = dict(zip(problem.generators, problem.factor[k].tolist(), strict=True))

@@ -97,7 +97,7 @@ class PopulationDynamics(Algorithm):
     def __init__(self, minute: Minute, network: Network, params: SmithParams):
         super().__init__(minute, network, params)
         problem, n = minute.problem, len(minute.names)
-        from popdispatch.modes.exact import ExactConstants
+        from popdispatch.modes.exact import ExactConstants, price_rates, price_weights
 
         exact = ExactConstants() if params.price_rate is None else \
             ExactConstants(price_rate=params.price_rate)  # fmt: skip
@@ -130,6 +130,11 @@ class PopulationDynamics(Algorithm):
         self.controllers = [controller_name(problem, k) for k in range(len(problem.limit))]
         self.controller_index = {name: k for k, name in enumerate(self.controllers)}
         self.z = np.zeros((len(problem.limit), 2))
+        # each line's proportional weight and price rate, as the engine's (a mesh's lever scale)
+        row, lines = np.array([minute.minute - 1]), len(problem.limit)
+        self.line_C = np.broadcast_to(price_weights(problem, exact.price_law, self.fp.C, row),
+                                      (1, lines))[0]  # fmt: skip
+        self.line_rate = price_rates(problem, exact.price_law, self.fp.price_rate, row)[0]
         # each DG's view: the last report of each partner (f, w, p) and its round
         self.report = np.zeros((n, n, 4))
         self.heard = np.zeros((n, n), dtype=int)
@@ -202,8 +207,8 @@ class PopulationDynamics(Algorithm):
                                   reveals="line price")  # fmt: skip
                 continue
             excess = np.array([flows[k] - limit[k], -flows[k] - limit[k]])
-            mu = np.maximum(0.0, self.z[k] + fp.C * excess)
-            self.z[k] = np.maximum(self.z[k] + h * fp.price_rate * excess, 0.0)
+            mu = np.maximum(0.0, self.z[k] + self.line_C[k] * excess)
+            self.z[k] = np.maximum(self.z[k] + h * self.line_rate[k] * excess, 0.0)
             for dg in self.m.names:
                 self.net.send(name, dg, "price", [mu[0] - mu[1]], reveals="line price")
 

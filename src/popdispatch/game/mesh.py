@@ -25,6 +25,14 @@ from popdispatch.game.problem import DispatchProblem, check_capacity, fleet_colu
 #: with no influence on a line hears no price from it.
 FACTOR_FLOOR = 1e-12
 
+#: Two generators' distribution factors on a line closer than this (MW per MW) count as equal
+#: in :func:`smallest_factor_gap`: round-off, not a lever on the line.
+GAP_FLOOR = 1e-9
+
+#: The smallest lever (MW per MW) :func:`lever_scale` divides by: a line that dispatch moves
+#: less than this has its price constants raised a thousandfold, no more.
+LEVER_FLOOR = 1e-3
+
 
 def build_mesh_problem(
     net: DcNetwork, bus_demand_mw: np.ndarray | None = None, source: str = "", check: bool = True
@@ -66,3 +74,37 @@ def build_mesh_problem(
     if check:
         check_capacity(problem)
     return problem
+
+
+def smallest_factor_gap(factor: np.ndarray) -> float:
+    """The smallest difference (MW per MW) between two generators' coefficients on one limited
+    line, over the rows of ``factor`` ``(limited lines, generators)``, differences below
+    :data:`GAP_FLOOR` ignored; infinite when no line has two different coefficients. Shifting
+    output between two generators whose coefficients differ by ``g`` moves the line's flow by
+    ``g`` MW per MW, so a line price ``z`` (EUR/MWh) is worth ``g z`` to them: the price that
+    balances a marginal-cost gap is that gap over ``g`` (1 on a radial feeder, whose
+    coefficients are 0 and 1)."""
+    gap = np.inf
+    for row in np.asarray(factor, float):
+        steps = np.diff(np.sort(row))
+        steps = steps[steps > GAP_FLOOR]
+        if len(steps):
+            gap = min(gap, float(steps.min()))
+    return gap
+
+
+def lever_scale(factor: np.ndarray) -> np.ndarray:
+    """Per limited line (rows of ``factor``, ``(limited lines, generators)``), the multiplier of
+    its price constants in exact mode (the price rate and the proportional weight ``C``,
+    :mod:`popdispatch.modes.exact`): 1 over the line's *lever* ``sigma_k = max_i D_ki - min_i
+    D_ki``, the most one MW moved between two generators moves its flow, within
+    [:data:`LEVER_FLOOR`, 1]. A price ``z`` on the line changes two generators' fitness
+    difference by at most ``sigma_k z`` and their exchange moves the flow by at most
+    ``sigma_k`` per MW, so the loop from overflow to price to dispatch to flow has gain
+    ``sigma_k^2`` times the radial feeder's (``sigma_k = 1``); the multiplier gives one factor
+    back (both factors: the price loop stiffens), keeping rest points and prices unchanged."""
+    factor = np.asarray(factor, float)
+    if not factor.size:
+        return np.ones(len(factor))
+    lever = factor.max(axis=1) - factor.min(axis=1)
+    return 1.0 / np.clip(lever, LEVER_FLOOR, 1.0)

@@ -13,6 +13,7 @@ import numba as nb
 import numpy as np
 
 from popdispatch.game.fitness import FitnessParameters
+from popdispatch.game.mesh import lever_scale
 from popdispatch.game.problem import DispatchProblem
 
 NO_VOLTAGE_ROWS = np.zeros((0, 0))  # empty: nothing in it to change
@@ -77,6 +78,9 @@ class GameParameters(NamedTuple):
     # on a meshed network, per limited line and generator the distribution factor D_ki
     # (game/mesh.py; the mesh kernels read it instead of the tree); (0, 0) on a radial feeder
     factor: np.ndarray = NO_FACTORS
+    # on a meshed network, per limited line the multiplier of price_rate and C (game/mesh.py
+    # lever_scale, dimensionless); empty on a radial feeder
+    line_scale: np.ndarray = NO_RATES
 
     @classmethod
     def of(
@@ -92,6 +96,7 @@ class GameParameters(NamedTuple):
             np.ascontiguousarray(revision_rate, dtype=float),
             NO_FACTORS if problem.factor is None
             else np.ascontiguousarray(problem.factor, dtype=float),
+            NO_RATES if problem.factor is None else lever_scale(problem.factor),
         )  # fmt: skip
 
 

@@ -25,6 +25,7 @@ from popdispatch.game.flows import (
     mesh_broadcast,
     mesh_line_flows,
 )
+from popdispatch.game.mesh import lever_scale
 from popdispatch.game.parameters import PriceLaw
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.modes.mechanism import Mode, ModeCode, ModeTag
@@ -130,11 +131,30 @@ def price_weights(
 ) -> float | np.ndarray:
     """The augmented-Lagrangian weight the controllers broadcast their prices with, EUR/MW per
     MW: ``C`` under the plain and tree laws, one per minute (``rows``, 0-based) and limited
-    line under the scaled law (:func:`scaled_weights`). For reading a run's prices back (its
-    KKT check, the reported prices)."""
+    line under the scaled law (:func:`scaled_weights`), on a mesh ``C`` times each line's
+    lever scale (:func:`popdispatch.game.mesh.lever_scale`, one per minute and line). For
+    reading a run's prices back (its KKT check, the reported prices)."""
     if PriceLaw(price_law) == PriceLaw.SCALED:
         return scaled_weights(problem, rows, C)
+    if problem.meshed:
+        return np.tile(C * lever_scale(problem.factor), (len(np.atleast_1d(rows)), 1))
     return C
+
+
+def price_rates(
+    problem: DispatchProblem, price_law: PriceLaw, price_rate: float, rows: np.ndarray
+) -> np.ndarray:
+    """Each limited line's price rate at the minutes ``rows`` (0-based; minutes x lines), 1/s
+    in the units of ``price_rate``: ``price_rate`` under the plain and tree laws, times the
+    scaled law's ``s_k`` (:func:`scaled_weights` squared over ``C^2``), on a mesh times the
+    line's lever scale (:func:`popdispatch.game.mesh.lever_scale`): the controllers' own
+    constants, for the agents and the message runtime."""
+    shape = (len(np.atleast_1d(rows)), len(problem.limit))
+    if PriceLaw(price_law) == PriceLaw.SCALED:
+        return price_rate * scaled_weights(problem, rows, 1.0) ** 2
+    if problem.meshed:
+        return np.broadcast_to(price_rate * lever_scale(problem.factor), shape).copy()
+    return np.full(shape, float(price_rate))
 
 
 @nb.njit(cache=True, inline="always")
@@ -196,14 +216,16 @@ def broadcast_prices(z, params, work, signal):
 def price_sides(z, params, work):
     """Each line's :func:`line_price` ``nu`` at the flows in ``work.flow``, as the values its
     controllers send: ``+nu / 2`` to the child side (``work.child_side``) and ``-nu / 2`` to
-    the parent side (``work.parent_side``). Returns the largest ``|nu|`` (EUR/MW) and the
-    largest distance from complementary slackness (MW)."""
+    the parent side (``work.parent_side``), each line's ``C`` times its ``params.line_scale``
+    on a mesh. Returns the largest ``|nu|`` (EUR/MW) and the largest distance from
+    complementary slackness (MW)."""
     flow, parent_side, child_side = work.flow, work.parent_side, work.child_side
-    limit, C = params.limit, params.C
+    limit, scale = params.limit, params.line_scale
     n_lines = limit.shape[0]
     congestion = 0.0
     residual = 0.0
     for k in range(n_lines):
+        C = params.C * scale[k] if scale.shape[0] else params.C
         excess_up = flow[k] - limit[k]
         excess_down = -flow[k] - limit[k]
         residual = max(residual, dual_residual(excess_up, z[k]))
@@ -220,9 +242,14 @@ def mesh_line_signals(p, z, params, minute, work, signal, z_rate):
     """:func:`line_signals` on a meshed network: flows ``load_flow - D p`` and each line's
     price weighed by every generator's own distribution factor, ``signal_i = sum_k nu_k (D_ki
     - 1/2)`` (:func:`~popdispatch.game.flows.mesh_broadcast`; ``params.factor`` = ``D``),
-    prices moving by the plain law."""
+    prices moving by the plain law with each line's rate and ``C`` times its lever scale
+    (``params.line_scale``, :func:`popdispatch.game.mesh.lever_scale`)."""
     mesh_line_flows(minute.load_flow, p, params.factor, work.flow)
     plain_rates(work.flow, params.limit, params.price_rate, z_rate)
+    n_lines = params.limit.shape[0]
+    for k in range(n_lines):
+        z_rate[k] *= params.line_scale[k]
+        z_rate[n_lines + k] *= params.line_scale[k]
     congestion, residual = price_sides(z, params, work)
     mesh_broadcast(work.parent_side, work.child_side, params.factor, signal)
     return congestion, residual

@@ -18,6 +18,7 @@ from enum import IntEnum
 from typing import TYPE_CHECKING, NamedTuple
 
 from popdispatch.game.fitness import FitnessParameters
+from popdispatch.game.mesh import smallest_factor_gap
 from popdispatch.game.problem import DispatchProblem
 
 if TYPE_CHECKING:
@@ -82,6 +83,12 @@ class Mode:
 
     def price_cap(self, problem: DispatchProblem) -> float:
         """Price (EUR/MW) beyond which congestion is deemed impossible to relieve: ten times
-        the spread of marginal costs; an optimal line price never exceeds that spread."""
+        the spread of marginal costs over the smallest difference two generators'
+        coefficients make on a limited line (:func:`~popdispatch.game.mesh.smallest_factor_gap`;
+        1 on a radial feeder, where an optimal line price never exceeds the spread). On a mesh
+        a line price balances a marginal-cost gap through a difference of distribution
+        factors that can be far below 1, and is larger by as much (docs/meshed.md)."""
         marginal = problem.b + 2.0 * problem.c * problem.pmax
-        return 10.0 * float(marginal.max() - problem.b.min()) + 10.0
+        spread = float(marginal.max() - problem.b.min())
+        gap = smallest_factor_gap(problem.factor) if problem.meshed else 1.0
+        return 10.0 * spread / min(gap, 1.0) + 10.0

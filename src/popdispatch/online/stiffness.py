@@ -7,10 +7,11 @@ from __future__ import annotations
 import numpy as np
 
 from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.game.mesh import lever_scale
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import STABLE_STEP
 from popdispatch.modes import get_mode
-from popdispatch.modes.exact import price_weights, scales
+from popdispatch.modes.exact import price_rates, price_weights, scales
 from popdispatch.online.settings import RunSettings
 
 
@@ -44,7 +45,10 @@ def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int)
     limited = problem.generator_line >= 0
     below[limited] = weight[problem.generator_line[limited]]
     if problem.meshed and len(problem.limit):  # the line its output moves most, as one line
-        below = (np.abs(problem.factor) * weight[:, None]).max(axis=0)
+        # a line's C is raised by its lever scale where an exchange moves its flow by as much
+        # less (game/mesh.py lever_scale): the unscaled C bounds the exchange's relaxation
+        unscaled = weight / lever_scale(problem.factor)
+        below = (np.abs(problem.factor) * unscaled[:, None]).max(axis=0)
     demand = float(problem.demand[minute - 1])
     spread, reference = scales(problem)
     rates = settings.revision_rates(problem)
@@ -58,16 +62,18 @@ def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int)
 
 
 def price_loop_rate(problem: DispatchProblem, settings: RunSettings, minute: int = 1) -> float:
-    """The line prices' part of :func:`stiffness_rate`, 1/s: ``2 STABLE_STEP alpha / C``
-    where a line is limited (``alpha`` the price rate, ``C`` the proportional weight), else 0;
-    under the scaled law each line's ``alpha s_k / (C sqrt(s_k))``, so the largest ``sqrt(s_k)``
-    times the plain law's (``s_k = (weight / C)^2`` at ``minute``,
-    :func:`popdispatch.modes.exact.price_weights`)."""
+    """The line prices' part of :func:`stiffness_rate`, 1/s: ``2 STABLE_STEP alpha_k / C_k``
+    at its largest over the limited lines (``alpha_k`` a line's price rate, ``C_k`` its
+    proportional weight, :func:`popdispatch.modes.exact.price_rates` and ``price_weights``),
+    else 0: ``alpha / C`` under the plain law and on a mesh (whose lever scale multiplies
+    both), ``alpha s_k / (C sqrt(s_k))`` under the scaled law."""
     if not len(problem.limit):
         return 0.0
     fp = settings.game_constants(problem)
-    weight = price_weights(problem, settings.exact.price_law, 1.0, np.array([minute - 1]))
-    return 2.0 * STABLE_STEP * float(fp.price_rate) / float(fp.C) * float(np.max(weight))
+    row, law = np.array([minute - 1]), settings.exact.price_law
+    rates = price_rates(problem, law, float(fp.price_rate), row)
+    weight = np.broadcast_to(price_weights(problem, law, float(fp.C), row), rates.shape)
+    return 2.0 * STABLE_STEP * float(np.max(rates / weight))
 
 
 def round_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> float:
