@@ -170,11 +170,21 @@ def main(argv: list[str] | None = None) -> None:
         "numba": numba.__version__,
         "source": str(Path(sys.modules["popdispatch"].__file__).resolve().parent),
         "machine": platform.machine(),
+        "cpu": host_cpu(),
         "official_data": official is not None,
         "files": files,
         "synthetic": {**SYNTHETIC, "profile_seed": SYNTHETIC_PROFILE_SEED},
     }
     (args.out / "metadata.json").write_text(json.dumps(metadata, indent=2) + "\n")
+
+
+def host_cpu() -> str:
+    """The CPU numba compiles the kernels for (LLVM's name of the host, ``znver4``): the same
+    code can round differently on another, whose instructions (fused multiply-adds, vector
+    widths) LLVM picks."""
+    import llvmlite.binding
+
+    return llvmlite.binding.get_host_cpu_name()
 
 
 if __name__ == "__main__":

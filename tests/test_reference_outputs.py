@@ -7,8 +7,9 @@ replicator in paper mode: whole trajectories), the online ELV day with the offic
 in both modes, and a small seeded synthetic feeder's day in both modes (a guard that needs
 no data). This test recomputes them with the current code and requires set points within
 1e-12 MW (1e-9 kW) and equal iteration counts, converged/first-congestion iterations and
-statuses. The saved outputs were bitwise identical across separate processes, so any
-difference is the code's.
+statuses. The saved outputs were bitwise identical across separate processes on one CPU, so
+any difference there is the code's; on another CPU (``metadata.json``'s ``cpu``) the round-off
+differs, and the set points are compared within 1e-3 kW, the counters not at all.
 
 This is **not** a correctness yardstick: the saved numbers are only what the code did before
 (a stalled minute of the synthetic day is saved as stalled). Correctness is checked against
@@ -42,6 +43,10 @@ OFFICIAL = find_official_folder()
 
 #: Set points may differ by at most 1e-12 MW, kW.
 SETPOINT_ATOL_KW = 1e-9
+#: On another CPU than the one the outputs were saved on, kW: the default accuracy floor.
+OTHER_CPU_ATOL_KW = 1e-3
+#: Counters an other CPU's round-off can move (a minute ends an iteration sooner or later).
+COUNTERS = ("iterations", "converged_at", "first_congestion")
 
 
 def _load_script():
@@ -53,6 +58,7 @@ def _load_script():
 
 
 script = _load_script()
+SAME_CPU = json.loads((REFERENCE / "metadata.json").read_text()).get("cpu") == script.host_cpu()
 
 
 def _saved(stem: str) -> dict:
@@ -61,16 +67,21 @@ def _saved(stem: str) -> dict:
 
 
 def _assert_same(stem: str, now: dict) -> None:
+    """Equal to the saved outputs: set points within 1e-9 kW and every counter and flag equal
+    on the CPU they were saved on; on another CPU (numba compiles for the host, and LLVM's
+    choice of instructions changes the round-off, which a day's warm starts carry on) set
+    points within the default accuracy floor, flags and statuses equal, counters not
+    compared."""
     saved = _saved(stem)
     assert sorted(now) == sorted(saved), stem
+    atol = SETPOINT_ATOL_KW if SAME_CPU else OTHER_CPU_ATOL_KW
     for key, expected in saved.items():
         actual = np.asarray(now[key])
         if expected.dtype.kind == "f":
             assert actual.shape == expected.shape, (stem, key)
-            np.testing.assert_allclose(
-                actual, expected, rtol=0, atol=SETPOINT_ATOL_KW, err_msg=f"{stem}: {key}"
-            )
-        else:
+            np.testing.assert_allclose(actual, expected, rtol=0, atol=atol,
+                                       err_msg=f"{stem}: {key}")  # fmt: skip
+        elif SAME_CPU or key not in COUNTERS:
             np.testing.assert_array_equal(actual, expected, err_msg=f"{stem}: {key}")
 
 
