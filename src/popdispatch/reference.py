@@ -270,7 +270,7 @@ class ReferenceMinute:
             rate = self.stiffness(h, x, z, point, second)
             if err <= 1.0:
                 x, z, remaining, point = x2, z2, remaining - h, None
-            h_try, switches = next_step(h, err, rate, switches)
+            h_try, switches = next_step(h, err, rate, switches, it.dt)
         return x, z, congested, residual, min(h_try, it.dt)
 
     def stiffness(self, h, x, z, one, two) -> float:

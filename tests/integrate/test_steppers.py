@@ -12,7 +12,15 @@ from hypothesis import strategies as st
 from popdispatch.dynamics.fields import Field
 from popdispatch.game.parameters import GameParameters, MinuteInputs
 from popdispatch.integrate import Term, workspace
-from popdispatch.integrate.steppers import euler_steps, heun_combination
+from popdispatch.integrate.steppers import (
+    HEUN_STEP,
+    STEP_FLOOR,
+    SWITCH_CAPS,
+    SWITCH_TURN,
+    euler_steps,
+    heun_combination,
+    next_step,
+)
 from popdispatch.modes import ModeCode, mode_tag
 
 EMPTY = np.zeros(0, dtype=np.int64)
@@ -167,3 +175,26 @@ def test_heun_combination_matches_numpy_and_stays_in_the_domain(n, seed, h):
     scale = half * np.abs(np.concatenate([s_in1, s_out1, s_in2, s_out2])).max() + 1.0
     np.testing.assert_allclose(x_out, expected, rtol=0, atol=64 * n * np.finfo(float).eps * scale)
     _check_domain(x_out, x, lo, hi)
+
+
+def test_a_rate_measured_across_a_small_jump_does_not_shrink_the_steps_without_end():
+    """Across a jump of the field the measured rate grows as ``1 / h``: with a jump below
+    :data:`SWITCH_TURN` times the field, each stiffness cap shrank the next step by the same
+    factor (a random star on which distributed Smith slid along a relay's switch: steps of
+    1e-20 s that no longer advanced the clock). Capping below the step floor counts as a
+    switch, so the steps stop at the floor, as the Heun iteration applies it."""
+    dt, h, switches = 0.01, 1e-3, 0
+    assert SWITCH_TURN > 2.8
+    for _ in range(20_000):
+        h, switches = next_step(h, 1e-6, 2.8 / h, switches, dt)
+        h = max(h, STEP_FLOOR * dt) if switches > SWITCH_CAPS else h
+    assert h >= STEP_FLOOR * dt
+    assert switches > SWITCH_CAPS
+
+
+def test_a_steady_linear_rate_is_capped_and_counts_no_switch():
+    dt, h, switches = 0.01, 1e-5, 0
+    for _ in range(1_000):
+        h, switches = next_step(h, 1e-6, 5e4, switches, dt)
+    assert h == HEUN_STEP / 5e4
+    assert switches == 0

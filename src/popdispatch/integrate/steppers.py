@@ -379,15 +379,19 @@ def stiffness(h, x, z, mass1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,
 
 
 @nb.njit(cache=True)
-def next_step(h, err, rate, switches):
+def next_step(h, err, rate, switches, dt):
     """``(next h, switches)`` after a Heun step of ``h`` (s) with error norm ``err`` and
-    measured rate ``rate`` (1/s, :func:`stiffness`), ``switches`` seen so far this iteration:
-    the error control's step, capped at ``HEUN_STEP / rate`` (:data:`HEUN_STEP`) where that is
-    smaller, except for a switch (:data:`SWITCH_TURN`) seen more than :data:`SWITCH_CAPS`
-    times, which only holds the step (a state sliding along it)."""
+    measured rate ``rate`` (1/s, :func:`stiffness`), ``switches`` seen so far this iteration
+    of ``dt`` (s): the error control's step, capped at ``HEUN_STEP / rate`` (:data:`HEUN_STEP`)
+    where that is smaller, except for a switch seen more than :data:`SWITCH_CAPS` times, which
+    only holds the step (a state sliding along it). A switch is a measured ``h * rate`` beyond
+    :data:`SWITCH_TURN`, or a cap below the step floor (:data:`STEP_FLOOR` of ``dt``): a rate
+    measured across a jump of the field grows as the step shrinks, so each cap shrinks the
+    next step by the same factor, and a jump smaller than :data:`SWITCH_TURN` times the
+    field drove the steps to 1e-20 s, an iteration that never ended."""
     h_try = h * min(5.0, max(0.2, 0.9 / np.sqrt(err))) if err > 0.0 else 5.0 * h
     if rate * h_try > HEUN_STEP:
-        switch = rate * h > SWITCH_TURN
+        switch = rate * h > SWITCH_TURN or rate * STEP_FLOOR * dt > HEUN_STEP
         switches += 1 if switch else 0
         h_try = min(h_try, h) if switch and switches > SWITCH_CAPS else HEUN_STEP / rate
     return h_try, switches
@@ -440,7 +444,7 @@ def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
             fresh = False
         else:
             counters.rejected[0] += 1
-        h_try, switches = next_step(h, err, rate, switches)
+        h_try, switches = next_step(h, err, rate, switches, dt)
     return congested, residual, min(h_try, dt)
 
 
