@@ -108,6 +108,16 @@ SLIDING = ("case33bw", "L10-11", 397.4262743762491, [
 SLIDING_GRAPH = [("g0", "g1"), ("g0", "g2"), ("g0", "g3"), ("g1", "g3"), ("src", "g0"),
                  ("src", "g1"), ("src", "g2")]  # fmt: skip
 
+#: Run 211 (distributed Smith): the mass the linear g0 owes the source crosses g1 (at its Pmin)
+#: and g2, whose output the limited line 4-15 holds; 275 iterations before g2 relayed.
+HELD = ("case15nbr", "L4-15", 62.13303788361973, [
+    (1, 0.0, 44.27322938931004, 1.6073196806505519, 0.0, 2452.8),
+    (8, 0.0, 46.45771417517773, 0.0, 0.0, 346.9889998847134),
+    (5, 0.0, 33.215470844425326, 1271.635264336609, 60.38603139683721, 279.4989977024465),
+    (15, 0.0, 13.952895550706275, 0.02596215022828409, 107.94454127301823, 303.88248351865036),
+])  # fmt: skip
+HELD_GRAPH = [("g0", "g1"), ("g1", "g2"), ("src", "g2")]
+
 
 #: ``(case, limited line or None, limit kW, fleet rows, communication graph)``: the runs of
 #: ``bench_fleets.py --runs 500 --distributed`` whose distributed Smith did not converge in
@@ -172,6 +182,14 @@ def test_distributed_smith_sliding_along_its_relay_converges_in_200_iterations()
     problem = _drawn_problem(*SLIDING)
     graph = nx.Graph(SLIDING_GRAPH)
     _check(problem, "plain", dynamics="distributed-smith", graph=graph)
+
+
+def test_distributed_smith_across_a_generator_a_line_holds_converges_in_200_iterations():
+    """The generator below the limited line (g2) relays always in exact mode
+    (``Mode.held_relays``): the mass crosses it without waiting for the line's price."""
+    problem = _drawn_problem(*HELD)
+    assert problem.generator_line.tolist() == [-1, -1, -1, 0]  # g2 alone below the line
+    _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(HELD_GRAPH))
 
 
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -266,3 +266,20 @@ def test_a_generator_ten_times_slower_than_a_neighbour_relays_by_rate():
     np.testing.assert_array_equal(slow_relays(np.array([10.0, 0.5, 10.0, 0.99]), indptr, indices),
                                   [False, True, False, True])  # fmt: skip
     assert not slow_relays(np.full(4, 3.0), indptr, indices).any()
+
+
+def test_the_generators_a_line_holds_relay_in_exact_mode_on_a_sparse_graph():
+    """Exact mode's engine relays, besides the generators slow by rate, every generator below
+    a limited line (its ``generator_line``); paper mode none; the complete graph has no relay."""
+    from popdispatch.modes import get_mode
+    from popdispatch.online.engine import Engine
+
+    problem = random_limited_problem(np.random.default_rng(7), 12, 6, 2)
+    below = problem.generator_line >= 0
+    assert below.any() and not below.all()
+    np.testing.assert_array_equal(get_mode("exact").held_relays(problem), below)
+    assert not get_mode("paper").held_relays(problem).any()
+    ring = Engine(problem, RunSettings(mode="exact", dynamics="distributed-smith", graph="ring"))
+    assert np.all(ring.term.graph.slow[below])
+    paper = Engine(problem, RunSettings(mode="paper", dynamics="distributed-smith", graph="ring"))
+    assert not paper.term.graph.slow.any()  # the paper's fields take no rates either

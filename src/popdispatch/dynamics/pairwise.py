@@ -52,15 +52,18 @@ class SparseGraph(Graph):
 
 
 def graph_of(complete: bool, indptr: np.ndarray, indices: np.ndarray,
-             rate: np.ndarray | None = None) -> Graph:  # fmt: skip
+             rate: np.ndarray | None = None, held: np.ndarray | None = None) -> Graph:  # fmt: skip
     """The graph record: complete, else the CSR adjacency ``indptr``, ``indices`` (int64) with
-    the strategies that relay by their revision rates ``rate`` (:func:`slow_relays`; none
-    without rates)."""
+    the strategies that relay always: by their revision rates ``rate`` (:func:`slow_relays`;
+    none without rates) and those of ``held`` (bool; the mode's choice,
+    :meth:`popdispatch.modes.mechanism.Mode.held_relays`)."""
     if complete:
         return CompleteGraph(indptr, indices, np.zeros(0, dtype=np.bool_))
     n = len(indptr) - 1
     slow = np.zeros(n, dtype=np.bool_) if rate is None or len(rate) != n else \
         slow_relays(np.asarray(rate, dtype=float), indptr, indices)  # fmt: skip
+    if held is not None and len(held) == n:
+        slow = slow | np.asarray(held, dtype=np.bool_)
     return SparseGraph(indptr, indices, slow)
 
 

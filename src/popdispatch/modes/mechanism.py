@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import TYPE_CHECKING, NamedTuple
 
+import numpy as np
+
 from popdispatch.game.fitness import FitnessParameters
 from popdispatch.game.mesh import smallest_factor_gap
 from popdispatch.game.problem import DispatchProblem
@@ -80,6 +82,18 @@ class Mode:
     claims_dc_opf: bool = False
     game_constants: Callable[[DispatchProblem, RunSettings], FitnessParameters] = _paper_constants
     price_scale: Callable[[DispatchProblem], float] = _unit_price_scale
+
+    def held_relays(self, problem: DispatchProblem) -> np.ndarray:
+        """Which generators relay always on a sparse communication graph (bool, one per
+        generator; :func:`popdispatch.dynamics.pairwise.relay_flows`): in a mode that prices
+        its lines (``bounded``) the generators below a limited line of a radial feeder. A line's
+        price holds such a generator's output where the line binds, and mass crosses it only
+        through its own trades, as fast as the price moves: relaying (while it also trades on
+        its own) lets the others' mass pass it. None in paper mode and on a mesh (its
+        generators are below no line)."""
+        if not self.bounded:
+            return np.zeros(problem.n_generators, dtype=np.bool_)
+        return np.asarray(problem.generator_line) >= 0
 
     def price_cap(self, problem: DispatchProblem) -> float:
         """Price (EUR/MW) beyond which congestion is deemed impossible to relieve: ten times
