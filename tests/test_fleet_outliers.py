@@ -40,6 +40,7 @@ from popdispatch.game.problem import build_problem
 from popdispatch.modes.exact import ExactConstants
 from popdispatch.online import RunSettings, run_snapshot
 
+from helpers import random_fleet_problem
 from qp_exact import exact_dc_opf, roundoff_kw
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -118,6 +119,13 @@ HELD = ("case15nbr", "L4-15", 62.13303788361973, [
 ])  # fmt: skip
 HELD_GRAPH = [("g0", "g1"), ("g1", "g2"), ("src", "g2")]
 
+#: A random fleet of the property test (``tests/test_fleets.py``: 4 generators, one limited
+#: line) on a star whose hub G5 (linear) fills to the edge of its relay margin while G12, below
+#: the line, relays always: the state slid along G5's switch and the Heun steps shrank to 1e-20
+#: s, an iteration that never ended (integrate/steppers.py, ``next_step``).
+STAR_SEED = 2751
+STAR_GRAPH = [("G1", "G5"), ("G12", "G5"), ("G5", "G3")]
+
 
 #: ``(case, limited line or None, limit kW, fleet rows, communication graph)``: the runs of
 #: ``bench_fleets.py --runs 500 --distributed`` whose distributed Smith did not converge in
@@ -190,6 +198,12 @@ def test_distributed_smith_across_a_generator_a_line_holds_converges_in_200_iter
     problem = _drawn_problem(*HELD)
     assert problem.generator_line.tolist() == [-1, -1, -1, 0]  # g2 alone below the line
     _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(HELD_GRAPH))
+
+
+def test_distributed_smith_sliding_along_a_relay_margin_ends_its_iterations():
+    problem = random_fleet_problem(STAR_SEED, 4, 1)
+    assert sorted(problem.generators) == sorted({n for edge in STAR_GRAPH for n in edge})
+    _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(STAR_GRAPH))
 
 
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
