@@ -42,7 +42,7 @@ from popdispatch.game.parameters import MinuteInputs, PriceLaw
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import STABLE_STEP
 from popdispatch.modes import get_mode
-from popdispatch.modes.exact import price_rates, price_weights, scales
+from popdispatch.modes.exact import controller_constants, scales
 from popdispatch.online.settings import RunSettings, initial_shares
 from popdispatch.online.stiffness import price_loop_rate, stiffness_rate
 from popdispatch.warm_start import SHARES, warm_start
@@ -413,16 +413,14 @@ def line_constants(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each limited line's proportional weight ``C_k`` (EUR/MW per MW) and price rate
     ``alpha_k`` at ``minute``, as the engine's kernels have them
-    (:func:`popdispatch.modes.exact.price_weights` and ``price_rates``: under the scaled law
-    from the fleet's online tradable generators and those below the line, two counts each
-    controller is told; on a mesh from the line's distribution factors, its configuration);
-    ``fp``'s ``C`` and ``price_rate`` on every line in paper mode."""
+    (:func:`popdispatch.modes.exact.controller_constants`: under the scaled law from the
+    fleet's online tradable generators and those below the line, two counts each controller
+    is told; on a mesh from the line's distribution factors, its configuration); ``fp``'s
+    ``C`` and ``price_rate`` on every line in paper mode."""
     n_lines = len(problem.limit)
     if not get_mode(settings.mode).bounded or not n_lines:
         return np.full(n_lines, float(fp.C)), np.full(n_lines, float(fp.price_rate))
-    row, law = np.array([minute - 1]), settings.exact.price_law
-    weight = np.broadcast_to(price_weights(problem, law, float(fp.C), row), (1, n_lines))
-    return weight[0].copy(), price_rates(problem, law, float(fp.price_rate), row)[0]
+    return controller_constants(problem, settings.exact.price_law, fp.C, fp.price_rate, minute)
 
 
 def _controllers(problem, settings: RunSettings, fp, step_s: float, network, weight, rate):

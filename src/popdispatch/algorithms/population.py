@@ -97,7 +97,7 @@ class PopulationDynamics(Algorithm):
     def __init__(self, minute: Minute, network: Network, params: SmithParams):
         super().__init__(minute, network, params)
         problem, n = minute.problem, len(minute.names)
-        from popdispatch.modes.exact import ExactConstants, price_rates, price_weights
+        from popdispatch.modes.exact import ExactConstants, controller_constants
 
         exact = ExactConstants() if params.price_rate is None else \
             ExactConstants(price_rate=params.price_rate)  # fmt: skip
@@ -131,10 +131,9 @@ class PopulationDynamics(Algorithm):
         self.controller_index = {name: k for k, name in enumerate(self.controllers)}
         self.z = np.zeros((len(problem.limit), 2))
         # each line's proportional weight and price rate, as the engine's (a mesh's lever scale)
-        row, lines = np.array([minute.minute - 1]), len(problem.limit)
-        self.line_C = np.broadcast_to(price_weights(problem, exact.price_law, self.fp.C, row),
-                                      (1, lines))[0]  # fmt: skip
-        self.line_rate = price_rates(problem, exact.price_law, self.fp.price_rate, row)[0]
+        self.line_C, self.line_rate = controller_constants(
+            problem, exact.price_law, self.fp.C, self.fp.price_rate, minute.minute
+        )
         # each DG's view: the last report of each partner (f, w, p) and its round
         self.report = np.zeros((n, n, 4))
         self.heard = np.zeros((n, n), dtype=int)

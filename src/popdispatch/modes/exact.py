@@ -157,6 +157,20 @@ def price_rates(
     return np.full(shape, float(price_rate))
 
 
+def controller_constants(
+    problem: DispatchProblem, price_law: PriceLaw, C: float, price_rate: float, minute: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each limited line's proportional weight ``C_k`` (EUR/MW per MW) and price rate
+    ``alpha_k`` (1/s in the units of ``price_rate``) at ``minute`` (1-based), as the engine's
+    kernels have them (:func:`price_weights`, :func:`price_rates`): what each node controller
+    is configured with in the agents and the message runtime, and what bounds the price loop's
+    stiffness."""
+    row = np.array([minute - 1])
+    rates = price_rates(problem, price_law, float(price_rate), row)[0]
+    weight = np.broadcast_to(price_weights(problem, price_law, float(C), row), (1, rates.size))
+    return weight[0].copy(), rates
+
+
 @nb.njit(cache=True, inline="always")
 def dual_residual(excess, price):
     """How far a line-direction is from complementary slackness, MW: any overflow, and any

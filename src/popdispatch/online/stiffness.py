@@ -7,11 +7,10 @@ from __future__ import annotations
 import numpy as np
 
 from popdispatch.dynamics import communication_graph, get_dynamics
-from popdispatch.game.mesh import lever_scale
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import STABLE_STEP
 from popdispatch.modes import get_mode
-from popdispatch.modes.exact import price_rates, price_weights, scales
+from popdispatch.modes.exact import controller_constants, scales
 from popdispatch.online.settings import RunSettings
 
 
@@ -23,12 +22,11 @@ def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int)
     - ``kappa D g max_i r_i (2 c_i + C_i)``: a generator's own relaxation rate (``kappa`` the
       revision gain per EUR/MW, ``D`` the minute's demand, MW, ``r_i`` its revision rate,
       ``C_i`` the price weight of the nearest limited line above it,
-      :func:`popdispatch.modes.exact.price_weights`, 0 below none; on a meshed network the
-      largest of each limited line's weight times the generator's distribution factor to it,
-      in size), at least ``kappa D g S /
-      P``, the rate at which every interior marginal cost relaxes; ``g`` the most receivers a
-      sender's weights can sum over: 1 on the complete graph, the largest degree plus one on
-      a sparse graph;
+      :func:`popdispatch.modes.exact.controller_constants`, 0 below none; on a meshed network
+      ``C`` times the generator's largest distribution factor to a limited line, in size),
+      at least ``kappa D g S / P``, the rate at which every interior marginal cost relaxes;
+      ``g`` the most receivers a sender's weights can sum over: 1 on the complete graph, the
+      largest degree plus one on a sparse graph;
     - ``2 STABLE_STEP alpha / C`` where a line is limited: a line's price and the set points
       below it, in their proportional and integral regime, move as ``s^2 + a s + b = 0``
       with ``b / a = alpha / C``; Euler's factor ``1 + h s`` of a complex pair has ``|1 + h
@@ -38,17 +36,15 @@ def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int)
     Capacity-constrained Smith (``ExactConstants(revision="capacity")``): ``kappa max(S, D
     max_i (2 c_i + C_i))``. Dimensionless constants, so the same on a feeder scaled by 100."""
     fp = settings.game_constants(problem)
-    row = np.array([minute - 1])
-    weight = np.broadcast_to(price_weights(problem, settings.exact.price_law, fp.C, row),
-                             (1, len(problem.limit)))[0]  # fmt: skip
+    weight, _ = controller_constants(problem, settings.exact.price_law, fp.C, fp.price_rate,
+                                     minute)  # fmt: skip
     below = np.zeros(problem.n_generators)
     limited = problem.generator_line >= 0
     below[limited] = weight[problem.generator_line[limited]]
     if problem.meshed and len(problem.limit):  # the line its output moves most, as one line
-        # a line's C is raised by its lever scale where an exchange moves its flow by as much
-        # less (game/mesh.py lever_scale): the unscaled C bounds the exchange's relaxation
-        unscaled = weight / lever_scale(problem.factor)
-        below = (np.abs(problem.factor) * unscaled[:, None]).max(axis=0)
+        # a mesh runs the plain law: C on every line before its lever scale (game/mesh.py
+        # lever_scale), which an exchange's own relaxation does not see
+        below = float(fp.C) * np.abs(problem.factor).max(axis=0)
     demand = float(problem.demand[minute - 1])
     spread, reference = scales(problem)
     rates = settings.revision_rates(problem)
@@ -64,15 +60,14 @@ def stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute: int)
 def price_loop_rate(problem: DispatchProblem, settings: RunSettings, minute: int = 1) -> float:
     """The line prices' part of :func:`stiffness_rate`, 1/s: ``2 STABLE_STEP alpha_k / C_k``
     at its largest over the limited lines (``alpha_k`` a line's price rate, ``C_k`` its
-    proportional weight, :func:`popdispatch.modes.exact.price_rates` and ``price_weights``),
+    proportional weight, :func:`popdispatch.modes.exact.controller_constants`),
     else 0: ``alpha / C`` under the plain law and on a mesh (whose lever scale multiplies
     both), ``alpha s_k / (C sqrt(s_k))`` under the scaled law."""
     if not len(problem.limit):
         return 0.0
     fp = settings.game_constants(problem)
-    row, law = np.array([minute - 1]), settings.exact.price_law
-    rates = price_rates(problem, law, float(fp.price_rate), row)
-    weight = np.broadcast_to(price_weights(problem, law, float(fp.C), row), rates.shape)
+    weight, rates = controller_constants(problem, settings.exact.price_law, fp.C,
+                                         fp.price_rate, minute)  # fmt: skip
     return 2.0 * STABLE_STEP * float(np.max(rates / weight))
 
 
