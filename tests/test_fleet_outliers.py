@@ -126,6 +126,13 @@ HELD_GRAPH = [("g0", "g1"), ("g1", "g2"), ("src", "g2")]
 STAR_SEED = 2751
 STAR_GRAPH = [("G1", "G5"), ("G12", "G5"), ("G5", "G3")]
 
+#: A random fleet of the same space (4 generators, no limit) on the path G1-G9-G6-G2: the flat
+#: neighbours G1 and G9 (c 0.068 and 0.24 EUR/MW^2h, beside G6 at 1437, which makes the spread
+#: large) met at a few % per iteration at the capped revision rate (2,246 iterations), the
+#: unpriced quadratic generators' free cap applying on the complete graph only.
+FLAT_PATH_SEED = 3660296928
+FLAT_PATH_GRAPH = [("G1", "G9"), ("G9", "G6"), ("G6", "G2")]
+
 
 #: ``(case, limited line or None, limit kW, fleet rows, communication graph)``: the runs of
 #: ``bench_fleets.py --runs 500 --distributed`` whose distributed Smith did not converge in
@@ -204,6 +211,12 @@ def test_distributed_smith_sliding_along_a_relay_margin_ends_its_iterations():
     problem = random_fleet_problem(STAR_SEED, 4, 1)
     assert sorted(problem.generators) == sorted({n for edge in STAR_GRAPH for n in edge})
     _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(STAR_GRAPH))
+
+
+def test_distributed_smith_on_a_flat_pair_of_neighbours_converges_in_200_iterations():
+    problem = random_fleet_problem(FLAT_PATH_SEED, 4, 0)
+    assert sorted(problem.generators) == sorted({n for edge in FLAT_PATH_GRAPH for n in edge})
+    _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(FLAT_PATH_GRAPH))
 
 
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -234,17 +234,17 @@ class RunSettings:
         return revision_rates(problem.c, *scales(problem), self.exact.rate_cap)
 
     def engine_revision_rates(self, problem: DispatchProblem) -> np.ndarray:
-        """The revision rates the engine integrates with: with adaptive Heun steps on the
-        complete graph, capped at ``rate_cap`` only for the generators whose output moves a
-        priced row and the linear ones, the others at ``free_rate_cap``
-        (:func:`priced_generators`, dynamics/newton.py); else
-        :meth:`revision_rates`. The uncapped rates' stiffness bound holds near a rest point
-        and needs one normalisation ``R`` for every receiver (the complete graph); far from
-        rest a flat generator's fast moves are resolved by the adaptive steps, not by fixed
-        ones."""
+        """The revision rates the engine integrates with: with adaptive Heun steps capped at
+        ``rate_cap`` only for the generators whose output moves a priced row and the linear
+        ones, the others at ``free_rate_cap`` (:func:`priced_generators`,
+        dynamics/newton.py); else :meth:`revision_rates`. Near a rest point an unpriced
+        quadratic generator adds at most ``S / P`` to the field's fastest rate whatever its
+        rate; far from rest a flat generator's fast moves are resolved by the adaptive steps,
+        not by fixed ones. On a communication graph as on the complete graph: capped at
+        ``rate_cap``, two flat neighbours on a path met at a few % per iteration (2,246
+        iterations on a random fleet, 20 at ``free_rate_cap``)."""
         capped = self.revision_rates(problem)
-        complete = not get_dynamics(self.dynamics).uses_graph or self.graph == "complete"
-        if not (complete and self.stepping.method == "heun" and len(capped)):
+        if not (self.stepping.method == "heun" and len(capped)):
             return capped
         from popdispatch.dynamics.newton import revision_rates
         from popdispatch.modes.exact import scales
