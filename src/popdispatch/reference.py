@@ -193,7 +193,7 @@ class ReferenceMinute:
         )
         self.integrator = settings.stepping
         self.rate = settings.engine_revision_rates(problem)
-        self.slow = slow_members(self.rate, self.graph) | self.mode.held_relays(problem)
+        self.slow = slow_members(self.rate, self.graph) | settings.engine_held_relays(problem)
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
 
     def evaluate(self, x, z):

@@ -299,7 +299,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
             )  # fmt: skip
         )
     relay = not _complete(graph)
-    slow = slow_relay_ids(graph, names, rates, mode.held_relays(problem)) if relay else frozenset()
+    slow = slow_relay_ids(graph, names, rates) if relay else frozenset()
     for gen in generators:
         gen.relay = relay
         gen.slow_relays = slow
@@ -366,19 +366,15 @@ def _check_ids(generators: list[str], controllers: dict) -> None:
                               "rename it in the fleet", "--fleet")  # fmt: skip
 
 
-def slow_relay_ids(
-    graph: nx.Graph, names: list[str], rates: np.ndarray, held: np.ndarray
-) -> frozenset[str]:
-    """The generators that relay always, as the engine's graph record has them: by their
-    revision rates (:func:`~popdispatch.dynamics.pairwise.slow_relays` on ``graph``) and the
-    mode's ``held`` ones (bool per generator,
-    :meth:`popdispatch.modes.mechanism.Mode.held_relays`): a roster the set-up gives every
-    generator, like the graph."""
-    slow = np.asarray(held, dtype=bool).copy()
-    if len(rates) == len(names):
-        csr = nx.to_scipy_sparse_array(graph, nodelist=names, format="csr")
-        slow |= slow_relays(np.asarray(rates, dtype=float), csr.indptr.astype(np.int64),
-                            csr.indices.astype(np.int64))  # fmt: skip
+def slow_relay_ids(graph: nx.Graph, names: list[str], rates: np.ndarray) -> frozenset[str]:
+    """The generators that relay by their revision rates (the engine's
+    :func:`~popdispatch.dynamics.pairwise.slow_relays` on ``graph``): a roster the set-up
+    gives every generator, like the graph."""
+    if len(rates) != len(names):
+        return frozenset()
+    csr = nx.to_scipy_sparse_array(graph, nodelist=names, format="csr")
+    slow = slow_relays(np.asarray(rates, dtype=float), csr.indptr.astype(np.int64),
+                       csr.indices.astype(np.int64))  # fmt: skip
     return frozenset(name for name, flag in zip(names, slow, strict=True) if flag)
 
 

@@ -90,7 +90,8 @@ class Mode:
         price holds such a generator's output where the line binds, and mass crosses it only
         through its own trades, as fast as the price moves: relaying (while it also trades on
         its own) lets the others' mass pass it. None in paper mode and on a mesh (its
-        generators are below no line)."""
+        generators are below no line). The engine relays them with adaptive steps only
+        (:meth:`popdispatch.online.RunSettings.engine_held_relays`)."""
         if not self.bounded:
             return np.zeros(problem.n_generators, dtype=np.bool_)
         return np.asarray(problem.generator_line) >= 0

@@ -51,7 +51,7 @@ class Engine:
                              f"{self.dynamics.refusal}")  # fmt: skip
         tag = mode_tag(self.mode.code, settings.exact.price_law, problem.meshed)
         rates = settings.engine_revision_rates(problem)
-        self.term = Term.of(field, tag, *self._graph(), rates, self.mode.held_relays(problem))
+        self.term = Term.of(field, tag, *self._graph(), rates, settings.engine_held_relays(problem))
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
         self.params = GameParameters.of(problem, self.constants, rates)

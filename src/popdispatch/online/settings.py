@@ -252,6 +252,17 @@ class RunSettings:
         return revision_rates(problem.c, *scales(problem), self.exact.rate_cap,
                               priced_generators(problem), self.exact.free_rate_cap)  # fmt: skip
 
+    def engine_held_relays(self, problem: DispatchProblem) -> np.ndarray:
+        """Which generators the engine relays always besides those slow by rate (bool, one
+        per generator): with adaptive Heun steps the mode's own
+        (:meth:`popdispatch.modes.mechanism.Mode.held_relays`), with fixed steps none. A
+        relayed transfer is one more term of the field: the adaptive steps gain iterations by
+        it, fixed steps (the engine's Euler steps, the agents' rounds, which follow them)
+        lose rounds (the ELV congestion minute's ring took 61 instead of 31)."""
+        if self.stepping.method != "heun":
+            return np.zeros(problem.n_generators, dtype=np.bool_)
+        return get_mode(self.mode).held_relays(problem)
+
     @property
     def stepping(self) -> Integrator:
         """The integrator in force: the given one, else the mode's default, with
