@@ -23,6 +23,7 @@ the first family on small random feeders.
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import networkx as nx
@@ -37,6 +38,7 @@ from popdispatch.feeder.generators import make_fleet
 from popdispatch.feeder.profiles import single_minute_profiles
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.game.problem import build_problem
+from popdispatch.integrate import Integrator
 from popdispatch.modes.exact import ExactConstants
 from popdispatch.online import RunSettings, run_snapshot
 
@@ -205,6 +207,19 @@ def test_distributed_smith_across_a_generator_a_line_holds_converges_in_200_iter
     problem = _drawn_problem(*HELD)
     assert problem.generator_line.tolist() == [-1, -1, -1, 0]  # g2 alone below the line
     _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(HELD_GRAPH))
+
+
+def test_the_generators_a_line_holds_relay_with_adaptive_steps_only():
+    """The engine relays the held generators with its adaptive Heun steps; with fixed Euler
+    steps (which the agents follow round by round) it keeps the roster by rate."""
+    problem = random_fleet_problem(STAR_SEED, 4, 1)
+    heun = RunSettings(mode="exact", dynamics="distributed-smith", graph=nx.Graph(STAR_GRAPH))
+    euler = replace(heun, integrator=Integrator(method="euler", dt=1e-4, substeps=1))
+    held = problem.generator_line >= 0
+    assert held.any() and not held.all()
+    assert heun.engine_held_relays(problem).tolist() == held.tolist()
+    assert not euler.engine_held_relays(problem).any()
+    assert not replace(heun, mode="paper").engine_held_relays(problem).any()
 
 
 def test_distributed_smith_sliding_along_a_relay_margin_ends_its_iterations():
