@@ -377,7 +377,7 @@ def test_a_feeder_scaled_by_100_takes_the_same_iterations(law):
         assert np.abs(p_kw - opf.p_kw).max() <= max(1e-6 * opf.demand_kw, 1e-3)
         runs.append((iterations, evaluations))
     (it1, ev1), (it100, ev100) = runs
-    assert abs(it100 - it1) <= 0.1 * it1
+    assert abs(it100 - it1) <= max(1, 0.1 * it1)  # (iterations are whole: at least one)
     assert 0.5 <= ev100 / ev1 <= 2.0
 
 

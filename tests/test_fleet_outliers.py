@@ -135,6 +135,21 @@ STAR_GRAPH = [("G1", "G5"), ("G12", "G5"), ("G5", "G3")]
 FLAT_PATH_SEED = 3660296928
 FLAT_PATH_GRAPH = [("G1", "G9"), ("G9", "G6"), ("G6", "G2")]
 
+#: Random fleets of the property test (``tests/test_fleets.py``, distributed Smith: seed,
+#: generators, limits, communication graph) whose runs crawled: a line overflowed by 2-11 W
+#: with no generator below it inside its limits, so nothing answered its price until it had
+#: climbed tens of EUR/MWh at its rate times the overflow (632, 248, 216 and 341 iterations).
+#: With adaptive steps such a line's prices move at least at ``pinned_speed`` under the plain
+#: and tree laws (modes/exact.py ``hasten_pinned``).
+PRICE_CRAWL = {
+    "4195038496": (4195038496, 5, 2, [("G1", "G10"), ("G1", "G6"), ("G1", "G8"), ("G10", "G11"),
+                                      ("G10", "G6"), ("G10", "G8"), ("G11", "G6"),
+                                      ("G11", "G8")]),
+    "2340231653": (2340231653, 5, 2, [("G1", "G5"), ("G12", "G2"), ("G2", "G4"), ("G2", "G5")]),
+    "42855": (42855, 3, 1, [("G1", "G12"), ("G1", "G7")]),
+    "2511794195": (2511794195, 5, 2, [("G1", "G11"), ("G1", "G4"), ("G1", "G6"), ("G11", "G9")]),
+}  # fmt: skip
+
 
 #: ``(case, limited line or None, limit kW, fleet rows, communication graph)``: the runs of
 #: ``bench_fleets.py --runs 500 --distributed`` whose distributed Smith did not converge in
@@ -220,6 +235,35 @@ def test_the_generators_a_line_holds_relay_with_adaptive_steps_only():
     assert heun.engine_held_relays(problem).tolist() == held.tolist()
     assert not euler.engine_held_relays(problem).any()
     assert not replace(heun, mode="paper").engine_held_relays(problem).any()
+
+
+@pytest.mark.parametrize("crawl", sorted(PRICE_CRAWL))
+def test_a_pinned_line_prices_its_overflow_in_200_iterations(crawl):
+    seed, n_gens, n_limits, edges = PRICE_CRAWL[crawl]
+    problem = random_fleet_problem(seed, n_gens, n_limits)
+    assert sorted(problem.generators) == sorted({n for edge in edges for n in edge})
+    _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(edges))
+
+
+@pytest.mark.parametrize("law", ["plain", "tree"])  # the scaled law's rates are not hastened
+@pytest.mark.parametrize("crawl", sorted(PRICE_CRAWL))
+def test_a_pinned_line_on_the_complete_graph_converges_in_200_iterations(crawl, law):
+    seed, n_gens, n_limits, _ = PRICE_CRAWL[crawl]
+    _check(random_fleet_problem(seed, n_gens, n_limits), law)
+
+
+def test_pinned_lines_are_hastened_with_adaptive_steps_on_a_radial_feeder_only():
+    """The engine's least speed of a pinned line's prices is ``pinned_speed`` times the spread
+    with its adaptive Heun steps in exact mode; none with fixed Euler steps (which the agents
+    follow round by round) or in paper mode."""
+    problem = random_fleet_problem(4195038496, 5, 2)
+    heun = RunSettings(mode="exact", exact=ExactConstants(pinned_speed=250.0))
+    spread = float((problem.b + 2 * problem.c * problem.pmax).max()
+                   - (problem.b + 2 * problem.c * problem.pmin).min())  # fmt: skip
+    assert heun.engine_pinned_speed(problem) == pytest.approx(250.0 * spread, rel=1e-12)
+    euler = replace(heun, integrator=Integrator(method="euler", dt=1e-4, substeps=1))
+    assert euler.engine_pinned_speed(problem) == 0.0
+    assert replace(heun, mode="paper").engine_pinned_speed(problem) == 0.0
 
 
 def test_distributed_smith_sliding_along_a_relay_margin_ends_its_iterations():

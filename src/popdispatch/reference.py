@@ -27,6 +27,7 @@ from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import ROUND_OFF, Status
 from popdispatch.integrate.steppers import next_step
 from popdispatch.modes import ModeCode, get_mode
+from popdispatch.modes.exact import PINNED_BOOST, PINNED_MARGIN
 
 
 def at_rest(x, last_x, z, last_z) -> bool:
@@ -67,13 +68,15 @@ def voltage_rows(problem: DispatchProblem, p, minute: int) -> tuple[np.ndarray, 
     return excess, np.concatenate([-S / scale[:, None], S / scale[:, None]])
 
 
-def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: FitnessParameters):
+def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: FitnessParameters,
+         pinned_speed: float = 0.0):  # fmt: skip
     """``(fitness, z_rate, congestion, residual)`` of a mode at set points ``p`` (MW).
 
     Exact and voltage modes: every row ``r`` (a limited line's direction, a monitored bus's
     bound) has an excess ``e_r`` (MW or MW equivalents) and a price ``mu_r = max(0, z_r + C
     e_r)`` that integrates at ``price_rate e_r`` (a mesh line's ``C`` and ``price_rate`` times
-    its lever scale, :func:`popdispatch.game.mesh.lever_scale`); generator ``i``'s signal is
+    its lever scale, :func:`popdispatch.game.mesh.lever_scale`; a pinned line's raised to
+    ``pinned_speed``, EUR/MW per s, :func:`pinned_rates`); generator ``i``'s signal is
     ``-sum_r mu_r de_r/dp_i`` weighed as the paper splits a line's (half to each side, eq. 8's
     sides) and in full for a bus (the Lagrangian's gradient of the voltage rows)."""
     down = problem.down
@@ -93,6 +96,9 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
     if problem.meshed:
         scale[: 2 * lines] = np.tile(lever_scale(problem.factor), 2)
     z_rate = fp.price_rate * scale * excess
+    if pinned_speed > 0.0 and lines:
+        z_rate[: 2 * lines] = pinned_rates(problem, minute, p, excess[: 2 * lines],
+                                           z_rate[: 2 * lines], fp.price_rate, pinned_speed)
     slack = np.where(z > 0.0, np.abs(excess), np.maximum(excess, 0.0))
     mu = np.maximum(0.0, z + fp.C * scale * excess)
     nu = mu[:lines] - mu[lines : 2 * lines]
@@ -106,6 +112,24 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
     congestion = prices.max() if len(prices) else 0.0
     residual = slack.max() if len(slack) else 0.0
     return fitness(problem, p, signal, fp, fp.gain, False), z_rate, congestion, residual
+
+
+def pinned_rates(problem: DispatchProblem, minute: int, p, excess, z_rate, price_rate: float,
+                 speed: float):  # fmt: skip
+    """The line prices' rates ``z_rate`` (both directions, EUR/MW per s) plus, on each pinned
+    line (generators below it that can trade, none more than ``PINNED_MARGIN`` of its range
+    inside its limits), what raises its own plain rate ``price_rate * excess`` to ``speed``
+    in magnitude, by at most ``PINNED_BOOST`` times."""
+    inputs = MinuteInputs.of(problem, minute)
+    low, high = inputs.lo * inputs.demand, inputs.hi * inputs.demand
+    margin = PINNED_MARGIN * (high - low)
+    inside = (p > low + margin) & (p < high - margin)
+    pinned = np.tile((problem.down @ inside == 0) & (problem.down @ (high > low) > 0), 2)
+    own = price_rate * excess
+    size = np.abs(own)
+    with np.errstate(divide="ignore"):
+        factor = np.where((size > 0) & (size < speed), np.minimum(PINNED_BOOST, speed / size), 1.0)
+    return np.where(pinned, z_rate + own * (factor - 1.0), z_rate)
 
 
 def weights(field, x, f, lo, hi, active, rate=None):
@@ -195,10 +219,12 @@ class ReferenceMinute:
         self.rate = settings.engine_revision_rates(problem)
         self.slow = slow_members(self.rate, self.graph) | settings.engine_held_relays(problem)
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
+        self.pinned_speed = settings.engine_pinned_speed(problem)
 
     def evaluate(self, x, z):
         f, z_rate, congestion, residual = game(
-            self.mode.code, x * self.demand, z, self.problem, self.minute, self.fp
+            self.mode.code, x * self.demand, z, self.problem, self.minute, self.fp,
+            self.pinned_speed,
         )
         law = self.law
         w, v, room, mass = law.reference(self.tag, x, f, self.lo, self.hi, self.active, self.rate)

@@ -81,13 +81,18 @@ class GameParameters(NamedTuple):
     # on a meshed network, per limited line the multiplier of price_rate and C (game/mesh.py
     # lever_scale, dimensionless); empty on a radial feeder
     line_scale: np.ndarray = NO_RATES
+    # exact mode on a radial feeder: the least speed of a pinned line's prices, EUR/MW per s
+    # (modes/exact.py hasten_pinned); 0: none
+    pinned_speed: float = 0.0
 
     @classmethod
     def of(
-        cls, problem: DispatchProblem, fp: FitnessParameters, revision_rate: np.ndarray = NO_RATES
+        cls, problem: DispatchProblem, fp: FitnessParameters, revision_rate: np.ndarray = NO_RATES,
+        pinned_speed: float = 0.0,
     ) -> GameParameters:
-        """The parameters of ``problem`` with the constants ``fp`` (EUR/MW) and the dynamic's
-        per-generator ``revision_rate`` (dimensionless; empty when it takes none)."""
+        """The parameters of ``problem`` with the constants ``fp`` (EUR/MW), the dynamic's
+        per-generator ``revision_rate`` (dimensionless; empty when it takes none) and exact
+        mode's least speed of a pinned line's prices (EUR/MW per s; 0: none)."""
         return cls(
             problem.b, problem.c, problem.pmin, problem.pmax, float(fp.B), float(fp.m),
             float(fp.C), float(fp.gain), float(fp.price_rate), problem.limit,
@@ -97,6 +102,7 @@ class GameParameters(NamedTuple):
             NO_FACTORS if problem.factor is None
             else np.ascontiguousarray(problem.factor, dtype=float),
             NO_RATES if problem.factor is None else lever_scale(problem.factor),
+            float(pinned_speed),
         )  # fmt: skip
 
 

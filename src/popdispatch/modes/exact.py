@@ -42,6 +42,15 @@ NEWTON_GAIN, NEWTON_PRICE_RATE, NEWTON_RATE_CAP = 300.0, 3000.0, 10.0
 #: the adaptive engine on the complete graph (dynamics/newton.py): measured on the random
 #: fleets and the ELV congestion minute (docs/exact-mode.md, "Revision").
 NEWTON_FREE_RATE_CAP = 1000.0
+#: Pinned lines (docs/exact-mode.md, "Pinned lines"): with adaptive steps, under the plain
+#: and tree laws, a line with no generator below it inside its limits moves its prices at
+#: least at ``pinned_speed`` (the marginal-cost spread ``S`` per s, :class:`ExactConstants`),
+#: by at most ``PINNED_BOOST`` times their plain rate; a generator within ``PINNED_MARGIN`` of
+#: its range from a limit is at it.
+PINNED_SPEED, PINNED_BOOST, PINNED_MARGIN = 1000.0, 1000.0, 1e-12
+#: What a generator at its limit adds to its line's tally of free generators
+#: (:func:`free_below`): the integer part counts those inside, a positive rest those at a limit.
+AT_LIMIT_TALLY = 2.0**-30
 #: Exact mode's revision protocols: each generator's revision scaled by its own curvature
 #: (dynamics/newton.py), or capacity-constrained Smith (dynamics/capacity.py).
 REVISIONS = ("newton", "capacity")
@@ -64,6 +73,12 @@ class ExactConstants:
         its name): ``PLAIN`` (each line its own overflow), ``TREE`` (preconditioned by the
         tree of active lines; docs/exact-mode.md, "Nested limits") or ``SCALED`` (each line's
         rate and weight scaled by its share of the tradable generators, "Per-line scaling").
+    revision : ``"newton"`` (each generator's revision scaled by its own curvature) or
+        ``"capacity"`` (:data:`REVISIONS`).
+    rate_cap, free_rate_cap : the largest revision rate of a flat generator, and of an
+        unpriced quadratic one with adaptive steps (dimensionless, dynamics/newton.py).
+    pinned_speed : with adaptive steps, the least speed of a pinned line's prices (no
+        generator below it inside its limits), ``S`` per s (docs/exact-mode.md, "Pinned lines").
     """
 
     gain: float | None = None
@@ -73,6 +88,7 @@ class ExactConstants:
     revision: str = "newton"
     rate_cap: float = NEWTON_RATE_CAP
     free_rate_cap: float = NEWTON_FREE_RATE_CAP
+    pinned_speed: float = PINNED_SPEED
 
     def __post_init__(self) -> None:
         if self.revision not in REVISIONS:
@@ -82,7 +98,7 @@ class ExactConstants:
             object.__setattr__(self, "gain", NEWTON_GAIN if newton else GAIN)
         if self.price_rate is None:
             object.__setattr__(self, "price_rate", NEWTON_PRICE_RATE if newton else PRICE_RATE)
-        for name in ("gain", "C", "price_rate", "rate_cap", "free_rate_cap"):
+        for name in ("gain", "C", "price_rate", "rate_cap", "free_rate_cap", "pinned_speed"):
             value = getattr(self, name)
             if not (value > 0 and value < float("inf")):
                 raise ValueError(f"exact-mode constant {name} must be finite and > 0, got {value}")
@@ -201,7 +217,9 @@ def line_signals(p, z, params, minute, work, signal, z_rate):
     limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
                        params.line_preorder, work.flow)  # fmt: skip
     plain_rates(work.flow, params.limit, params.price_rate, z_rate)
+    hasten_pinned(p, params, minute, work, z_rate)
     return broadcast_prices(z, params, work, signal)
+
 
 
 @nb.njit(cache=True, inline="always")
@@ -210,6 +228,7 @@ def tree_line_signals(p, z, params, minute, work, signal, z_rate):
     limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
                        params.line_preorder, work.flow)  # fmt: skip
     tree_rates(z, params, minute, work, z_rate)
+    hasten_pinned(p, params, minute, work, z_rate)
     return broadcast_prices(z, params, work, signal)
 
 
@@ -298,6 +317,77 @@ def active_direction(z_up, z_down, excess_up, excess_down):
     if down and not up:
         return -1.0
     return 0.0
+
+
+@nb.njit(cache=True, inline="always")
+def free_below(p, generator_line, line_up, preorder, lo, hi, demand, free):
+    """Per limited line, the generators below it strictly inside their limits (more than
+    :data:`PINNED_MARGIN` of their range from either), into ``free``, or -1 for a line with
+    none below that can trade (``hi > lo``); ``p`` MW, ``lo``/``hi`` shares of the ``demand``
+    (MW). Returns whether any generator below a line is at a limit (if none, no line is
+    pinned and ``free`` is left as it was)."""
+    pinned = False
+    for i in range(generator_line.shape[0]):
+        low, high = lo[i] * demand, hi[i] * demand
+        margin = PINNED_MARGIN * (high - low)
+        if generator_line[i] >= 0 and high > low and not (low + margin < p[i] < high - margin):
+            pinned = True
+            break
+    if not pinned:
+        return False
+    free[:] = 0.0
+    for i in range(generator_line.shape[0]):  # inside: 1; at a limit: a tally far below 1
+        k = generator_line[i]
+        low, high = lo[i] * demand, hi[i] * demand
+        margin = PINNED_MARGIN * (high - low)
+        if k >= 0 and p[i] > low + margin and p[i] < high - margin:
+            free[k] += 1.0
+        elif k >= 0 and high > low:
+            free[k] += AT_LIMIT_TALLY
+    for r in range(preorder.shape[0] - 1, -1, -1):
+        k = preorder[r]
+        if line_up[k] >= 0:
+            free[line_up[k]] += free[k]
+    for k in range(free.shape[0]):
+        free[k] = -1.0 if free[k] == 0.0 else np.floor(free[k])
+    return True
+
+
+@nb.njit(cache=True, inline="always")
+def hastened(rate, speed):
+    """``rate`` (EUR/MW per s) raised to ``speed`` in magnitude, by at most
+    :data:`PINNED_BOOST` times (unchanged if already faster, or zero)."""
+    size = abs(rate)
+    if size == 0.0 or size >= speed:
+        return rate
+    return rate * min(PINNED_BOOST, speed / size)
+
+
+@nb.njit(cache=True, inline="always")
+def hasten_pinned(p, params, minute, work, z_rate):
+    """The pinned lines' prices hastened (docs/exact-mode.md, "Pinned lines"): where no
+    generator below a limited line is inside its limits (and some can trade), its overflow
+    cannot fall until its price crosses one's marginal cost, so each of its prices gains what
+    raises its own plain rate ``alpha e`` (``e`` its excess in ``work.flow``) to
+    ``params.pinned_speed`` (EUR/MW per s; 0: never), by at most :data:`PINNED_BOOST` times
+    (:func:`hastened`), on top of its law's rate. ``z_rate`` in place; scratch
+    ``work.path``. The gain has the sign of the line's own excess and is zero with it, so the
+    rest points are unchanged; the tree law's rates from the other lines' excesses are not
+    hastened."""
+    speed = params.pinned_speed
+    n_lines = params.limit.shape[0]
+    if speed == 0.0 or n_lines == 0:
+        return
+    free = work.path
+    if not free_below(p, params.generator_line, params.line_up, params.line_preorder,
+                      minute.lo, minute.hi, minute.demand, free):  # fmt: skip
+        return
+    for k in range(n_lines):
+        if free[k] == 0.0:
+            for j, excess in ((k, work.flow[k] - params.limit[k]),
+                              (n_lines + k, -work.flow[k] - params.limit[k])):  # fmt: skip
+                own = params.price_rate * excess
+                z_rate[j] += hastened(own, speed) - own
 
 
 @nb.njit(cache=True, inline="always")

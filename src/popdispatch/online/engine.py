@@ -54,7 +54,8 @@ class Engine:
         self.term = Term.of(field, tag, *self._graph(), rates, settings.engine_held_relays(problem))
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
-        self.params = GameParameters.of(problem, self.constants, rates)
+        self.params = GameParameters.of(problem, self.constants, rates,
+                                        settings.engine_pinned_speed(problem))  # fmt: skip
         self.z = np.zeros(self.mode.controller_states(problem))
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         integrator = settings.stepping

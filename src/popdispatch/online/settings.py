@@ -244,7 +244,7 @@ class RunSettings:
         ``rate_cap``, two flat neighbours on a path met at a few % per iteration (2,246
         iterations on a random fleet, 20 at ``free_rate_cap``)."""
         capped = self.revision_rates(problem)
-        if not (self.stepping.method == "heun" and len(capped)):
+        if not (self.adaptive and len(capped)):
             return capped
         from popdispatch.dynamics.newton import revision_rates
         from popdispatch.modes.exact import scales
@@ -259,9 +259,28 @@ class RunSettings:
         relayed transfer is one more term of the field: the adaptive steps gain iterations by
         it, fixed steps (the engine's Euler steps, the agents' rounds, which follow them)
         lose rounds (the ELV congestion minute's ring took 61 instead of 31)."""
-        if self.stepping.method != "heun":
+        if not self.adaptive:
             return np.zeros(problem.n_generators, dtype=np.bool_)
         return get_mode(self.mode).held_relays(problem)
+
+    def engine_pinned_speed(self, problem: DispatchProblem) -> float:
+        """The least speed of a pinned line's prices the engine integrates with, EUR/MWh per s
+        (0: none): with adaptive Heun steps, in a mode that claims the DC-OPF on a radial
+        feeder, ``pinned_speed`` times the marginal-cost spread ``S``, which the plain and tree
+        price laws apply (:func:`popdispatch.modes.exact.hasten_pinned`, docs/exact-mode.md
+        "Pinned lines"). Fixed steps (the engine's Euler steps, the agents' rounds, which
+        follow them) keep each price at its rate."""
+        if not (self.adaptive and get_mode(self.mode).claims_dc_opf) or problem.meshed:
+            return 0.0
+        from popdispatch.modes.exact import scales
+
+        return float(self.exact.pinned_speed * scales(problem)[0])
+
+    @property
+    def adaptive(self) -> bool:
+        """Does the engine take adaptive (Heun) steps? Its extras (the free rate cap, the
+        held relays, the pinned lines' speed) apply only then."""
+        return self.stepping.method == "heun"
 
     @property
     def stepping(self) -> Integrator:
