@@ -39,8 +39,8 @@ from popdispatch.feeder.profiles import single_minute_profiles
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.game.problem import build_problem
 from popdispatch.integrate import Integrator
-from popdispatch.modes.exact import ExactConstants
-from popdispatch.online import RunSettings, run_snapshot
+from popdispatch.modes.exact import ExactConstants, ExactPinnedTag, ExactTag
+from popdispatch.online import Engine, RunSettings, run_snapshot
 
 from helpers import random_fleet_problem
 from qp_exact import exact_dc_opf, roundoff_kw
@@ -254,8 +254,9 @@ def test_a_pinned_line_on_the_complete_graph_converges_in_200_iterations(crawl, 
 
 def test_pinned_lines_are_hastened_with_adaptive_steps_on_a_radial_feeder_only():
     """The engine's least speed of a pinned line's prices is ``pinned_speed`` times the spread
-    with its adaptive Heun steps in exact mode; none with fixed Euler steps (which the agents
-    follow round by round) or in paper mode."""
+    with its adaptive Heun steps in exact mode under the plain law; none with fixed Euler
+    steps (which the agents follow round by round), in paper mode, under the scaled law or
+    without limited lines (then the engine compiles the kernel without it)."""
     problem = random_fleet_problem(4195038496, 5, 2)
     heun = RunSettings(mode="exact", exact=ExactConstants(pinned_speed=250.0))
     spread = float((problem.b + 2 * problem.c * problem.pmax).max()
@@ -264,6 +265,13 @@ def test_pinned_lines_are_hastened_with_adaptive_steps_on_a_radial_feeder_only()
     euler = replace(heun, integrator=Integrator(method="euler", dt=1e-4, substeps=1))
     assert euler.engine_pinned_speed(problem) == 0.0
     assert replace(heun, mode="paper").engine_pinned_speed(problem) == 0.0
+    scaled = replace(heun, exact=ExactConstants(price_law="scaled", pinned_speed=250.0))
+    assert scaled.engine_pinned_speed(problem) == 0.0
+    unlimited = random_fleet_problem(4195038496, 5, 0)
+    assert unlimited.limit.size == 0 and heun.engine_pinned_speed(unlimited) == 0.0
+    # the engine's kernel: the pinned one with limited lines, the plain one without
+    assert type(Engine(problem, heun).term.mode) is ExactPinnedTag
+    assert type(Engine(unlimited, heun).term.mode) is ExactTag
 
 
 def test_distributed_smith_sliding_along_a_relay_margin_ends_its_iterations():

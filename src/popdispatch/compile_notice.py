@@ -49,28 +49,31 @@ def kernels_cached(settings: RunSettings | None = None) -> bool | None:
 
     The engine compiles its day loop once per run configuration (the record classes of the
     mode, field, graph and stepper, :func:`run_classes`): with ``settings``, the
-    day loop's entry must be one compiled for that configuration; without, any entry will do.
+    day loop's entry must be one compiled for that configuration, with or without limited
+    lines (exact mode's kernel differs; the feeder is read after the notice, so either
+    counts, and a run of the other kind compiles without a notice); without, any entry will
+    do.
     """
     try:
         for entry in ENTRY_POINTS:
             index = _dispatcher(entry)._cache._cache_file._load_index()
             if not index:
                 return False
-        if settings is not None:
-            wanted = run_classes(settings)
-            if wanted is None:
+        if settings is not None:  # the feeder, not read yet, may or may not limit lines
+            wanted = [run_classes(settings, limited) for limited in (True, False)]
+            if wanted[0] is None:
                 return None
             index = _dispatcher(DAY_LOOP)._cache._cache_file._load_index()
-            return any(wanted <= _classes(key[0]) for key in index)
+            return any(w <= _classes(key[0]) for w in wanted for key in index)
     except Exception:  # numba internals differ: no notice rather than a wrong one
         return None
     return True
 
 
-def run_classes(settings: RunSettings) -> set[type] | None:
+def run_classes(settings: RunSettings, limited: bool = True) -> set[type] | None:
     """The record classes that select the compiled kernels of a run with ``settings`` (as
-    :class:`~popdispatch.online.engine.Engine` builds them), None for settings that cannot
-    run."""
+    :class:`~popdispatch.online.engine.Engine` builds them) on a radial feeder with
+    (``limited``) or without limited lines, None for settings that cannot run."""
     from popdispatch.dynamics import get_dynamics
     from popdispatch.dynamics.fields import law_of
     from popdispatch.dynamics.pairwise import CompleteGraph, SparseGraph
@@ -84,7 +87,9 @@ def run_classes(settings: RunSettings) -> set[type] | None:
         return None
     complete = not dynamics.uses_graph or settings.graph == "complete"
     return {
-        law_of(field).tag, type(mode_tag(mode.code, settings.exact.price_law)),
+        law_of(field).tag,
+        type(mode_tag(mode.code, settings.exact.price_law,
+                      pinned=limited and settings.hastens_pinned_lines)),
         CompleteGraph if complete else SparseGraph,
         type(method_tag(settings.stepping.method_code)),
     }  # fmt: skip

@@ -38,15 +38,24 @@ TAGS: dict[ModeCode, dict[PriceLaw, type]] = {
 }  # fmt: skip
 
 
+#: Exact mode's tag classes with the pinned lines' prices hastened, by price law (the plain
+#: and tree laws; modes/exact.py ``hasten_pinned``): the engine's kernels with adaptive steps
+#: on a radial feeder with limited lines.
+PINNED_TAGS: dict[PriceLaw, type] = {PriceLaw.PLAIN: exact.ExactPinnedTag,
+                                     PriceLaw.TREE: exact.ExactTreePinnedTag}  # fmt: skip
+
 #: Each mode's tag class on a meshed network (the plain law only: the tree and scaled laws
 #: read the tree of limited lines).
 MESH_TAGS: dict[ModeCode, type] = {ModeCode.PAPER: paper.PaperMeshTag,
                                    ModeCode.EXACT: exact.ExactMeshTag}  # fmt: skip
 
 
-def mode_tag(code: ModeCode, price_law: PriceLaw = PriceLaw.PLAIN, meshed: bool = False) -> ModeTag:
+def mode_tag(code: ModeCode, price_law: PriceLaw = PriceLaw.PLAIN, meshed: bool = False,
+             pinned: bool = False) -> ModeTag:  # fmt: skip
     """The compile-time record of the mode ``code`` with exact mode's line-price law (a
     choice of kernel, so a run compiles only its own law; paper mode has no line prices).
+    ``pinned``: exact mode's kernel that hastens the pinned lines' prices, where its law has
+    one (:data:`PINNED_TAGS`).
     The scaled law exists for exact mode only: voltage mode with it raises
     :class:`~popdispatch.errors.OptionError`. ``meshed``: the kernel of a meshed network
     (distribution factors, :mod:`popdispatch.game.mesh`), paper or exact mode with the plain
@@ -67,6 +76,8 @@ def mode_tag(code: ModeCode, price_law: PriceLaw = PriceLaw.PLAIN, meshed: bool 
 
         raise OptionError("the scaled price law is for exact mode only (voltage mode: plain or "
                           "tree)", "--price-law")  # fmt: skip
+    if pinned and code == ModeCode.EXACT and law in PINNED_TAGS:
+        return PINNED_TAGS[law](int(code))
     tags = TAGS[code]
     return tags.get(law, tags[PriceLaw.PLAIN])(int(code))
 
@@ -78,4 +89,5 @@ def get_mode(name: str) -> Mode:
         raise ValueError(f"unknown mode {name!r} (known: {', '.join(MODES)})") from None
 
 
-__all__ = ["MESH_TAGS", "MODES", "TAGS", "Mode", "ModeCode", "ModeTag", "get_mode", "mode_tag"]
+__all__ = ["MESH_TAGS", "MODES", "PINNED_TAGS", "TAGS", "Mode", "ModeCode", "ModeTag", "get_mode",
+           "mode_tag"]

@@ -217,7 +217,6 @@ def line_signals(p, z, params, minute, work, signal, z_rate):
     limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
                        params.line_preorder, work.flow)  # fmt: skip
     plain_rates(work.flow, params.limit, params.price_rate, z_rate)
-    hasten_pinned(p, params, minute, work, z_rate)
     return broadcast_prices(z, params, work, signal)
 
 
@@ -228,7 +227,6 @@ def tree_line_signals(p, z, params, minute, work, signal, z_rate):
     limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
                        params.line_preorder, work.flow)  # fmt: skip
     tree_rates(z, params, minute, work, z_rate)
-    hasten_pinned(p, params, minute, work, z_rate)
     return broadcast_prices(z, params, work, signal)
 
 
@@ -320,17 +318,25 @@ def active_direction(z_up, z_down, excess_up, excess_down):
 
 
 @nb.njit(cache=True, inline="always")
+def inside_limits(p, low, high):
+    """Is ``p`` strictly inside ``[low, high]``, more than :data:`PINNED_MARGIN` of the range
+    from either end?"""
+    margin = PINNED_MARGIN * (high - low)
+    return low + margin < p < high - margin
+
+
+@nb.njit(cache=True, inline="always")
 def free_below(p, generator_line, line_up, preorder, lo, hi, demand, free):
-    """Per limited line, the generators below it strictly inside their limits (more than
-    :data:`PINNED_MARGIN` of their range from either), into ``free``, or -1 for a line with
-    none below that can trade (``hi > lo``); ``p`` MW, ``lo``/``hi`` shares of the ``demand``
-    (MW). Returns whether any generator below a line is at a limit (if none, no line is
-    pinned and ``free`` is left as it was)."""
+    """Per limited line, the generators below it strictly inside their limits
+    (:func:`inside_limits`), into ``free``, or -1 for a line with none below that can trade
+    (``hi > lo``); ``p`` MW, ``lo``/``hi`` shares of the ``demand`` (MW). Returns whether any
+    generator below a line is at a limit (if none, no line is pinned and ``free`` is left as
+    it was)."""
     pinned = False
     for i in range(generator_line.shape[0]):
-        low, high = lo[i] * demand, hi[i] * demand
-        margin = PINNED_MARGIN * (high - low)
-        if generator_line[i] >= 0 and high > low and not (low + margin < p[i] < high - margin):
+        if generator_line[i] < 0 or not hi[i] > lo[i]:
+            continue
+        if not inside_limits(p[i], lo[i] * demand, hi[i] * demand):
             pinned = True
             break
     if not pinned:
@@ -338,12 +344,10 @@ def free_below(p, generator_line, line_up, preorder, lo, hi, demand, free):
     free[:] = 0.0
     for i in range(generator_line.shape[0]):  # inside: 1; at a limit: a tally far below 1
         k = generator_line[i]
-        low, high = lo[i] * demand, hi[i] * demand
-        margin = PINNED_MARGIN * (high - low)
-        if k >= 0 and p[i] > low + margin and p[i] < high - margin:
-            free[k] += 1.0
-        elif k >= 0 and high > low:
-            free[k] += AT_LIMIT_TALLY
+        if k < 0 or not hi[i] > lo[i]:
+            continue
+        inside = inside_limits(p[i], lo[i] * demand, hi[i] * demand)
+        free[k] += 1.0 if inside else AT_LIMIT_TALLY
     for r in range(preorder.shape[0] - 1, -1, -1):
         k = preorder[r]
         if line_up[k] >= 0:
@@ -370,10 +374,10 @@ def hasten_pinned(p, params, minute, work, z_rate):
     cannot fall until its price crosses one's marginal cost, so each of its prices gains what
     raises its own plain rate ``alpha e`` (``e`` its excess in ``work.flow``) to
     ``params.pinned_speed`` (EUR/MW per s; 0: never), by at most :data:`PINNED_BOOST` times
-    (:func:`hastened`), on top of its law's rate. ``z_rate`` in place; scratch
-    ``work.path``. The gain has the sign of the line's own excess and is zero with it, so the
-    rest points are unchanged; the tree law's rates from the other lines' excesses are not
-    hastened."""
+    (:func:`hastened`), on top of its law's rate. ``z_rate`` in place; reads the flows in
+    ``work.flow``; scratch ``work.path``. The gain has the sign of the line's own excess and
+    is zero with it, so the rest points are unchanged; the tree law's rates from the other
+    lines' excesses are not hastened."""
     speed = params.pinned_speed
     n_lines = params.limit.shape[0]
     if speed == 0.0 or n_lines == 0:
@@ -533,6 +537,25 @@ def tree_payoff(p, z, params, minute, work, fitness, z_rate):
     return congestion, residual
 
 
+@nb.njit(cache=True)
+def pinned_payoff(p, z, params, minute, work, fitness, z_rate):
+    """:func:`payoff` with the pinned lines' prices hastened (:func:`hasten_pinned`): the
+    engine's kernel with adaptive steps on a feeder with limited lines."""
+    congestion, residual = line_signals(p, z, params, minute, work, fitness, z_rate)
+    marginal_costs_into(p, params, fitness)
+    hasten_pinned(p, params, minute, work, z_rate)
+    return congestion, residual
+
+
+@nb.njit(cache=True)
+def pinned_tree_payoff(p, z, params, minute, work, fitness, z_rate):
+    """:func:`tree_payoff` with the pinned lines' prices hastened (:func:`hasten_pinned`)."""
+    congestion, residual = tree_line_signals(p, z, params, minute, work, fitness, z_rate)
+    marginal_costs_into(p, params, fitness)
+    hasten_pinned(p, params, minute, work, z_rate)
+    return congestion, residual
+
+
 @nb.njit(cache=True, inline="always")
 def marginal_costs_into(p, params, fitness):
     """Exact mode's fitness from the signals already in ``fitness`` (EUR/MW): paper eqs. 5-6
@@ -590,3 +613,18 @@ class ExactMeshTag(ModeTag):
 
     __slots__ = ()
     kernel = staticmethod(mesh_payoff)
+
+
+class ExactPinnedTag(ModeTag):
+    """Exact mode's payoff, plain price law, pinned lines hastened (:func:`pinned_payoff`)."""
+
+    __slots__ = ()
+    kernel = staticmethod(pinned_payoff)
+
+
+class ExactTreePinnedTag(ModeTag):
+    """Exact mode's payoff, tree price law, pinned lines hastened
+    (:func:`pinned_tree_payoff`)."""
+
+    __slots__ = ()
+    kernel = staticmethod(pinned_tree_payoff)

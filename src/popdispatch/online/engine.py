@@ -49,13 +49,13 @@ class Engine:
         if field is None:
             raise ValueError(f"{self.mode.name} mode cannot run {self.dynamics.name} dynamics: "
                              f"{self.dynamics.refusal}")  # fmt: skip
-        tag = mode_tag(self.mode.code, settings.exact.price_law, problem.meshed)
+        pinned_speed = settings.engine_pinned_speed(problem)
+        tag = mode_tag(self.mode.code, settings.exact.price_law, problem.meshed, pinned_speed > 0)
         rates = settings.engine_revision_rates(problem)
         self.term = Term.of(field, tag, *self._graph(), rates, settings.engine_held_relays(problem))
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
-        self.params = GameParameters.of(problem, self.constants, rates,
-                                        settings.engine_pinned_speed(problem))  # fmt: skip
+        self.params = GameParameters.of(problem, self.constants, rates, pinned_speed)
         self.z = np.zeros(self.mode.controller_states(problem))
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         integrator = settings.stepping

@@ -265,16 +265,23 @@ class RunSettings:
 
     def engine_pinned_speed(self, problem: DispatchProblem) -> float:
         """The least speed of a pinned line's prices the engine integrates with, EUR/MWh per s
-        (0: none): with adaptive Heun steps, in a mode that claims the DC-OPF on a radial
-        feeder, ``pinned_speed`` times the marginal-cost spread ``S``, which the plain and tree
-        price laws apply (:func:`popdispatch.modes.exact.hasten_pinned`, docs/exact-mode.md
-        "Pinned lines"). Fixed steps (the engine's Euler steps, the agents' rounds, which
-        follow them) keep each price at its rate."""
-        if not (self.adaptive and get_mode(self.mode).claims_dc_opf) or problem.meshed:
+        (0: none): :attr:`hastens_pinned_lines` on a radial feeder with limited lines,
+        ``pinned_speed`` times the marginal-cost spread ``S``
+        (:func:`popdispatch.modes.exact.hasten_pinned`, docs/exact-mode.md "Pinned lines")."""
+        if not self.hastens_pinned_lines or problem.meshed or not len(problem.limit):
             return 0.0
         from popdispatch.modes.exact import scales
 
         return float(self.exact.pinned_speed * scales(problem)[0])
+
+    @property
+    def hastens_pinned_lines(self) -> bool:
+        """Does the engine hasten the pinned lines' prices (on a radial feeder with limited
+        lines)? In exact mode with adaptive Heun steps and the plain or tree price law. Fixed
+        steps (the engine's Euler steps, the agents' rounds, which follow them), the scaled
+        law and voltage mode keep each price at its rate."""
+        return (self.adaptive and self.mode == "exact"
+                and self.exact.price_law in (PriceLaw.PLAIN, PriceLaw.TREE))  # fmt: skip
 
     @property
     def adaptive(self) -> bool:
