@@ -220,7 +220,6 @@ def line_signals(p, z, params, minute, work, signal, z_rate):
     return broadcast_prices(z, params, work, signal)
 
 
-
 @nb.njit(cache=True, inline="always")
 def tree_line_signals(p, z, params, minute, work, signal, z_rate):
     """:func:`line_signals` with the prices moving by the tree law (:func:`tree_rates`)."""
