@@ -151,6 +151,18 @@ PRICE_CRAWL = {
 }  # fmt: skip
 
 
+#: A random fleet of tests/test_fleets.py (seed, generators, limits) with two nested limited
+#: lines, 9.08 kW above G11 and G7 and 8.08 kW above G11 only, and G7 at its Pmin: G11
+#: answers only the sum of the two lines' prices, so their difference (the optimum puts it
+#: all on the upper line, 23.5 EUR/MWh) moved at the rate times half the 0.46 W gap of the
+#: lines' excesses: 4711 iterations under the plain law, 1636 under the tree law, 5481 with
+#: distributed Smith on its tree graph (one in 10,000 draws of the property test's space). With
+#: adaptive steps the pair's difference moves at least at ``pinned_speed`` under the plain and
+#: tree laws (modes/exact.py ``hasten_pinned``), with the graph's edges below.
+NESTED_PAIR = (3376343775, 5, 2)
+NESTED_PAIR_GRAPH = [("G1", "G4"), ("G10", "G7"), ("G11", "G4"), ("G4", "G7")]
+
+
 #: ``(case, limited line or None, limit kW, fleet rows, communication graph)``: the runs of
 #: ``bench_fleets.py --runs 500 --distributed`` whose distributed Smith did not converge in
 #: 1000 iterations (39 and 94 kW away): a steep generator (``c`` 1888, 823 EUR/MW^2h) between
@@ -250,6 +262,17 @@ def test_a_pinned_line_prices_its_overflow_in_200_iterations(crawl):
 def test_a_pinned_line_on_the_complete_graph_converges_in_200_iterations(crawl, law):
     seed, n_gens, n_limits, _ = PRICE_CRAWL[crawl]
     _check(random_fleet_problem(seed, n_gens, n_limits), law)
+
+
+@pytest.mark.parametrize("law", ["plain", "tree"])  # the scaled law's rates are not hastened
+def test_a_pinned_pair_of_nested_lines_converges_in_200_iterations(law):
+    _check(random_fleet_problem(*NESTED_PAIR), law)
+
+
+def test_a_pinned_pair_with_distributed_smith_converges_in_200_iterations():
+    problem = random_fleet_problem(*NESTED_PAIR)
+    assert sorted(problem.generators) == sorted({n for e in NESTED_PAIR_GRAPH for n in e})
+    _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(NESTED_PAIR_GRAPH))
 
 
 def test_pinned_lines_are_hastened_with_adaptive_steps_on_a_radial_feeder_only():

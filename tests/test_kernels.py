@@ -221,19 +221,39 @@ def test_reference_agrees_on_random_limited_feeders(seed, dynamics, eta):
     compare(problem, settings, 1, 200, atol=1e-6, min_rows=3, stop_slack=2)
 
 
-def test_a_pinned_lines_prices_equal_the_numpy_reference():
-    """A line overflowed by 2.4 W with both generators below it at 0 (a random fleet of
-    tests/test_fleets.py): its price climbs to 21.8 EUR/MWh at the pinned lines' least speed
-    in a few iterations (at its rate times the overflow: over 600), the same in both."""
-    problem = random_fleet_problem(4195038496, 5, 2)
+def pinned_prices(seed: int, iterations: int) -> tuple[np.ndarray, np.ndarray]:
+    """The line prices after ``iterations`` of exact mode on random fleet ``seed`` (5
+    generators, 2 limits; tests/test_fleets.py), the engine's and the plain-numpy reference's
+    from the engine's first state, after comparing their trajectories."""
+    problem = random_fleet_problem(seed, 5, 2)
     settings = RunSettings(mode="exact")
     compare(problem, settings, 1, 8, atol=1e-6, min_rows=4, stop_slack=2)
     engine = Engine(problem, settings)
-    run = engine.run_minute(initial_shares(problem, settings.x0, 1), 1, max_iterations=4)
+    run = engine.run_minute(initial_shares(problem, settings.x0, 1), 1,
+                            max_iterations=iterations)  # fmt: skip
     reference = ReferenceMinute(problem, settings, 1)
-    _, _, z_ref, _, _ = reference.run(run.trajectory[0] / reference.demand, max_iterations=4)
-    assert engine.z[0] > 20.0
-    np.testing.assert_allclose(engine.z, z_ref, rtol=1e-6, atol=1e-6)
+    _, _, z_ref, _, _ = reference.run(run.trajectory[0] / reference.demand,
+                                      max_iterations=iterations)  # fmt: skip
+    return engine.z, z_ref
+
+
+def test_a_pinned_lines_prices_equal_the_numpy_reference():
+    """A line overflowed by 2.4 W with both generators below it at 0: its price climbs to
+    21.8 EUR/MWh at the pinned lines' least speed in a few iterations (at its rate times the
+    overflow: over 600), the same in both."""
+    z, z_ref = pinned_prices(4195038496, 4)
+    assert z[0] > 20.0
+    np.testing.assert_allclose(z, z_ref, rtol=1e-6, atol=1e-6)
+
+
+def test_a_pinned_pairs_prices_equal_the_numpy_reference():
+    """Two nested lines with the only generator between them at its Pmin: the generator below
+    both answers the sum of their prices, so their difference moves at the pinned speed (at
+    its rate times half the 0.46 W gap of the lines' excesses it took over 4000 iterations);
+    the lower line's price reaches 0 and the upper one's 23.5 EUR/MWh, the same in both."""
+    z, z_ref = pinned_prices(3376343775, 6)
+    assert z[2] > 23.0 and z[3] < 1.0  # the lines' prices of the down direction
+    np.testing.assert_allclose(z, z_ref, rtol=1e-6, atol=1e-6)
 
 
 @pytest.mark.parametrize("method", ["euler", "heun"])

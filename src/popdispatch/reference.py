@@ -75,10 +75,11 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
     Exact and voltage modes: every row ``r`` (a limited line's direction, a monitored bus's
     bound) has an excess ``e_r`` (MW or MW equivalents) and a price ``mu_r = max(0, z_r + C
     e_r)`` that integrates at ``price_rate e_r`` (a mesh line's ``C`` and ``price_rate`` times
-    its lever scale, :func:`popdispatch.game.mesh.lever_scale`; a pinned line's raised to
-    ``pinned_speed``, EUR/MW per s, :func:`pinned_rates`); generator ``i``'s signal is
-    ``-sum_r mu_r de_r/dp_i`` weighed as the paper splits a line's (half to each side, eq. 8's
-    sides) and in full for a bus (the Lagrangian's gradient of the voltage rows)."""
+    its lever scale, :func:`popdispatch.game.mesh.lever_scale`; a pinned line's, and a pinned
+    pair's gap, raised to ``pinned_speed``, EUR/MW per s, :func:`pinned_rates`); generator
+    ``i``'s signal is ``-sum_r mu_r de_r/dp_i`` weighed as the paper splits a line's (half to
+    each side, eq. 8's sides) and in full for a bus (the Lagrangian's gradient of the voltage
+    rows)."""
     down = problem.down
     flow = problem.line_load_flow[minute - 1] - down @ p
     if mode == ModeCode.PAPER:
@@ -97,8 +98,9 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
         scale[: 2 * lines] = np.tile(lever_scale(problem.factor), 2)
     z_rate = fp.price_rate * scale * excess
     if pinned_speed > 0.0 and lines:
-        z_rate[: 2 * lines] = pinned_rates(problem, minute, p, excess[: 2 * lines],
-                                           z_rate[: 2 * lines], fp.price_rate, pinned_speed)
+        z_rate[: 2 * lines] = pinned_rates(problem, minute, p, z[: 2 * lines],
+                                           excess[: 2 * lines], z_rate[: 2 * lines],
+                                           fp.price_rate, pinned_speed)  # fmt: skip
     slack = np.where(z > 0.0, np.abs(excess), np.maximum(excess, 0.0))
     mu = np.maximum(0.0, z + fp.C * scale * excess)
     nu = mu[:lines] - mu[lines : 2 * lines]
@@ -114,22 +116,50 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
     return fitness(problem, p, signal, fp, fp.gain, False), z_rate, congestion, residual
 
 
-def pinned_rates(problem: DispatchProblem, minute: int, p, excess, z_rate, price_rate: float,
+def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, price_rate: float,
                  speed: float):  # fmt: skip
-    """The line prices' rates ``z_rate`` (both directions, EUR/MW per s) plus, on each pinned
-    line (generators below it that can trade, none more than ``PINNED_MARGIN`` of its range
-    inside its limits), what raises its own plain rate ``price_rate * excess`` to ``speed``
-    in magnitude, by at most ``PINNED_BOOST`` times."""
+    """The line prices' rates ``z_rate`` (both directions, EUR/MW per s, at prices ``z``) plus
+    the gains of the pinned lines and pairs: a line with generators below it that can trade,
+    none more than ``PINNED_MARGIN`` of its range inside its limits, gains on each price what
+    raises its own plain rate ``price_rate * excess`` to ``speed`` in magnitude; a line and the
+    nearest limited line above it, with some generators below the lower one inside and those
+    between able to trade, none inside, each at the limit the gain pushes it into (an up
+    price's gain raises their fitness, a down price's lowers it), gain the same on half the
+    gap of their excesses, added to the upper price and taken from the lower while the price
+    it lowers is positive; each gain by at most ``PINNED_BOOST`` times."""
     inputs = MinuteInputs.of(problem, minute)
     low, high = inputs.lo * inputs.demand, inputs.hi * inputs.demand
     margin = PINNED_MARGIN * (high - low)
-    inside = (p > low + margin) & (p < high - margin)
-    pinned = np.tile((problem.down @ inside == 0) & (problem.down @ (high > low) > 0), 2)
-    own = price_rate * excess
-    size = np.abs(own)
-    with np.errstate(divide="ignore"):
-        factor = np.where((size > 0) & (size < speed), np.minimum(PINNED_BOOST, speed / size), 1.0)
-    return np.where(pinned, z_rate + own * (factor - 1.0), z_rate)
+    tradable = high > low
+    is_inside = (p > low + margin) & (p < high - margin)
+    at_limit = tradable & ~is_inside
+    inside = problem.down @ is_inside
+    at_low = problem.down @ (at_limit & (p - low < high - p))
+    at_high = problem.down @ (at_limit & ~(p - low < high - p))
+    lines = len(inside)
+
+    def gain(rate):
+        size = np.abs(rate)
+        with np.errstate(divide="ignore"):
+            factor = np.where((size > 0) & (size < speed), np.minimum(PINNED_BOOST, speed / size),
+                              1.0)  # fmt: skip
+        return rate * (factor - 1.0)
+
+    pinned = np.tile((inside == 0) & (at_low + at_high > 0), 2)
+    z_rate = z_rate + np.where(pinned, gain(price_rate * excess), 0.0)
+    lower = np.flatnonzero(problem.line_up >= 0)
+    upper = problem.line_up[lower]
+    pair = (inside[lower] >= 1) & (inside[upper] == inside[lower])
+    lows, highs = (at_low[upper] - at_low[lower])[pair], (at_high[upper] - at_high[lower])[pair]
+    for side, sign in ((0, 1.0), (lines, -1.0)):
+        low_row, up_row = side + lower[pair], side + upper[pair]
+        gap = 0.5 * price_rate * (excess[up_row] - excess[low_row])
+        held = (lows + highs > 0) & np.where(gap * sign > 0, lows == 0, highs == 0)
+        moving = held & (((gap > 0) & (z[low_row] > 0)) | ((gap < 0) & (z[up_row] > 0)))
+        pair_gain = np.where(moving, gain(gap), 0.0)
+        np.add.at(z_rate, up_row, pair_gain)
+        np.add.at(z_rate, low_row, -pair_gain)
+    return z_rate
 
 
 def weights(field, x, f, lo, hi, active, rate=None):

@@ -43,14 +43,15 @@ NEWTON_GAIN, NEWTON_PRICE_RATE, NEWTON_RATE_CAP = 300.0, 3000.0, 10.0
 #: fleets and the ELV congestion minute (docs/exact-mode.md, "Revision").
 NEWTON_FREE_RATE_CAP = 1000.0
 #: Pinned lines (docs/exact-mode.md, "Pinned lines"): with adaptive steps, under the plain
-#: and tree laws, a line with no generator below it inside its limits moves its prices at
-#: least at ``pinned_speed`` (the marginal-cost spread ``S`` per s, :class:`ExactConstants`),
-#: by at most ``PINNED_BOOST`` times their plain rate; a generator within ``PINNED_MARGIN`` of
-#: its range from a limit is at it.
+#: and tree laws, a line with no generator below it inside its limits (and a nested pair of
+#: lines with none between them inside) moves its prices at least at ``pinned_speed`` (the
+#: marginal-cost spread ``S`` per s, :class:`ExactConstants`), by at most ``PINNED_BOOST``
+#: times their plain rate; a generator within ``PINNED_MARGIN`` of its range from a limit is
+#: at it.
 PINNED_SPEED, PINNED_BOOST, PINNED_MARGIN = 1000.0, 1000.0, 1e-12
-#: What a generator at its limit adds to its line's tally of free generators
-#: (:func:`free_below`): the integer part counts those inside, a positive rest those at a limit.
-AT_LIMIT_TALLY = 2.0**-30
+#: A pinned pair's gain empties the price it lowers no faster than with this time constant
+#: (s): the gain fades with that price instead of stopping where it reaches zero.
+PINNED_SETTLE = 1e-3
 #: Exact mode's revision protocols: each generator's revision scaled by its own curvature
 #: (dynamics/newton.py), or capacity-constrained Smith (dynamics/capacity.py).
 REVISIONS = ("newton", "capacity")
@@ -325,12 +326,12 @@ def inside_limits(p, low, high):
 
 
 @nb.njit(cache=True, inline="always")
-def free_below(p, generator_line, line_up, preorder, lo, hi, demand, free):
-    """Per limited line, the generators below it strictly inside their limits
-    (:func:`inside_limits`), into ``free``, or -1 for a line with none below that can trade
-    (``hi > lo``); ``p`` MW, ``lo``/``hi`` shares of the ``demand`` (MW). Returns whether any
-    generator below a line is at a limit (if none, no line is pinned and ``free`` is left as
-    it was)."""
+def count_below(p, generator_line, line_up, preorder, lo, hi, demand, inside, at_low, at_high):
+    """Per limited line, its generators below that can trade (``hi > lo``): how many are
+    strictly inside their limits (:func:`inside_limits`), at their lower and at their upper
+    limit, into ``inside``, ``at_low`` and ``at_high``; ``p`` MW, ``lo``/``hi`` shares of the
+    ``demand`` (MW). Returns whether any generator below a line is at a limit (if none, no
+    line or pair is pinned and the counts are left as they were)."""
     pinned = False
     for i in range(generator_line.shape[0]):
         if generator_line[i] < 0 or not hi[i] > lo[i]:
@@ -340,19 +341,26 @@ def free_below(p, generator_line, line_up, preorder, lo, hi, demand, free):
             break
     if not pinned:
         return False
-    free[:] = 0.0
-    for i in range(generator_line.shape[0]):  # inside: 1; at a limit: a tally far below 1
+    inside[:] = 0.0
+    at_low[:] = 0.0
+    at_high[:] = 0.0
+    for i in range(generator_line.shape[0]):
         k = generator_line[i]
         if k < 0 or not hi[i] > lo[i]:
             continue
-        inside = inside_limits(p[i], lo[i] * demand, hi[i] * demand)
-        free[k] += 1.0 if inside else AT_LIMIT_TALLY
+        low, high = lo[i] * demand, hi[i] * demand
+        if inside_limits(p[i], low, high):
+            inside[k] += 1.0
+        elif p[i] - low < high - p[i]:
+            at_low[k] += 1.0
+        else:
+            at_high[k] += 1.0
     for r in range(preorder.shape[0] - 1, -1, -1):
         k = preorder[r]
         if line_up[k] >= 0:
-            free[line_up[k]] += free[k]
-    for k in range(free.shape[0]):
-        free[k] = -1.0 if free[k] == 0.0 else np.floor(free[k])
+            inside[line_up[k]] += inside[k]
+            at_low[line_up[k]] += at_low[k]
+            at_high[line_up[k]] += at_high[k]
     return True
 
 
@@ -367,30 +375,59 @@ def hastened(rate, speed):
 
 
 @nb.njit(cache=True, inline="always")
-def hasten_pinned(p, params, minute, work, z_rate):
-    """The pinned lines' prices hastened (docs/exact-mode.md, "Pinned lines"): where no
-    generator below a limited line is inside its limits (and some can trade), its overflow
-    cannot fall until its price crosses one's marginal cost, so each of its prices gains what
-    raises its own plain rate ``alpha e`` (``e`` its excess in ``work.flow``) to
-    ``params.pinned_speed`` (EUR/MW per s; 0: never), by at most :data:`PINNED_BOOST` times
-    (:func:`hastened`), on top of its law's rate. ``z_rate`` in place; reads the flows in
-    ``work.flow``; scratch ``work.path``. The gain has the sign of the line's own excess and
-    is zero with it, so the rest points are unchanged; the tree law's rates from the other
-    lines' excesses are not hastened."""
+def hasten_pinned(p, z, params, minute, work, z_rate):
+    """The pinned lines' and pairs' prices hastened (docs/exact-mode.md, "Pinned lines"),
+    ``z_rate`` in place at prices ``z`` (EUR/MW) and the flows in ``work.flow``; scratch
+    ``work.path``, ``work.parent_side`` and ``work.child_side`` (the broadcast is done);
+    ``params.pinned_speed`` the least speed (EUR/MW per s; 0: never), each gain at most
+    :data:`PINNED_BOOST` times the rate it raises (:func:`hastened`).
+
+    - A *pinned line* (generators below it that can trade, none inside its limits): its
+      overflow cannot fall until its price crosses one's marginal cost, so each of its prices
+      gains what raises its own plain rate ``alpha e`` to the speed. The gain has the sign of
+      the line's own excess and is zero with it; the tree law's rates from the other lines'
+      excesses are not hastened.
+    - A *pinned pair*: a line with generators below it inside their limits and the nearest
+      limited line above it, the generators between them able to trade, none inside, each
+      at the limit the pair's gain pushes it into. The generators below the lower line answer
+      the sum of the two prices, those between do not move, so the prices' difference moves
+      at half the gap of the lines' excesses, ``alpha (e_up - e_low) / 2``, and nothing answers
+      it: that rate is raised to the speed, added to the upper price and taken from the lower
+      one (the sum's rate unchanged), while the price it lowers is positive.
+
+    Neither gain moves a rest point of the plain law: at one, a pinned line's excess is zero,
+    and of a pair's prices the one a nonzero gap lowers is zero (its line is below its
+    limit); nor makes one: with both prices still ``alpha e_up + g = 0 = alpha e_low - g``
+    would need ``g = -gap``, against the gain's sign (docs/exact-mode.md, "Pinned pairs")."""
     speed = params.pinned_speed
     n_lines = params.limit.shape[0]
     if speed == 0.0 or n_lines == 0:
         return
-    free = work.path
-    if not free_below(p, params.generator_line, params.line_up, params.line_preorder,
-                      minute.lo, minute.hi, minute.demand, free):  # fmt: skip
+    inside, at_low, at_high = work.path, work.parent_side, work.child_side
+    if not count_below(p, params.generator_line, params.line_up, params.line_preorder,
+                       minute.lo, minute.hi, minute.demand, inside, at_low, at_high):  # fmt: skip
         return
     for k in range(n_lines):
-        if free[k] == 0.0:
-            for j, excess in ((k, work.flow[k] - params.limit[k]),
-                              (n_lines + k, -work.flow[k] - params.limit[k])):  # fmt: skip
+        for side, sign in ((0, 1.0), (n_lines, -1.0)):  # the up and down prices
+            excess = sign * work.flow[k] - params.limit[k]
+            if inside[k] == 0.0 and at_low[k] + at_high[k] > 0.0:
                 own = params.price_rate * excess
-                z_rate[j] += hastened(own, speed) - own
+                z_rate[side + k] += hastened(own, speed) - own
+            up = params.line_up[k]
+            if up < 0 or inside[k] == 0.0 or inside[up] != inside[k]:
+                continue
+            gap = 0.5 * params.price_rate * (sign * work.flow[up] - params.limit[up] - excess)
+            # the generators between see the upper price's change: up prices raise their
+            # fitness, down prices lower it; each must stay at the limit it is pushed into
+            raised = gap * sign > 0.0
+            lows, highs = at_low[up] - at_low[k], at_high[up] - at_high[k]
+            held = lows + highs > 0.0 and (lows == 0.0 if raised else highs == 0.0)
+            lowered = z[side + k] if gap > 0.0 else z[side + up]
+            if held and lowered > 0.0:
+                gain = hastened(gap, speed) - gap
+                gain = max(-lowered / PINNED_SETTLE, min(lowered / PINNED_SETTLE, gain))
+                z_rate[side + up] += gain
+                z_rate[side + k] -= gain
 
 
 @nb.njit(cache=True, inline="always")
@@ -542,7 +579,7 @@ def pinned_payoff(p, z, params, minute, work, fitness, z_rate):
     engine's kernel with adaptive steps on a feeder with limited lines."""
     congestion, residual = line_signals(p, z, params, minute, work, fitness, z_rate)
     marginal_costs_into(p, params, fitness)
-    hasten_pinned(p, params, minute, work, z_rate)
+    hasten_pinned(p, z, params, minute, work, z_rate)
     return congestion, residual
 
 
@@ -551,7 +588,7 @@ def pinned_tree_payoff(p, z, params, minute, work, fitness, z_rate):
     """:func:`tree_payoff` with the pinned lines' prices hastened (:func:`hasten_pinned`)."""
     congestion, residual = tree_line_signals(p, z, params, minute, work, fitness, z_rate)
     marginal_costs_into(p, params, fitness)
-    hasten_pinned(p, params, minute, work, z_rate)
+    hasten_pinned(p, z, params, minute, work, z_rate)
     return congestion, residual
 
 
