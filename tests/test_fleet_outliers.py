@@ -275,6 +275,16 @@ def test_a_pinned_pair_with_distributed_smith_converges_in_200_iterations():
     _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(NESTED_PAIR_GRAPH))
 
 
+@pytest.mark.xfail(strict=True, reason="the revision-rate cap of a generator below a limited "
+                   "line is static, whether the line binds or not (docs/exact-mode.md, known "
+                   "limits): 1438 iterations")  # fmt: skip
+def test_a_generator_below_an_idle_line_trades_at_its_own_rate():
+    """A random fleet of tests/test_fleets.py: G12 (``c`` 1.39 EUR/MW^2h) below a line with 7.5 kW
+    of slack and no price trades with a flat generator at the priced cap, 10, about a
+    thousandth of its Newton rate (a steep generator's range makes the spread large)."""
+    _check(random_fleet_problem(3156973452, 4, 1), "plain")
+
+
 def test_pinned_lines_are_hastened_with_adaptive_steps_on_a_radial_feeder_only():
     """The engine's least speed of a pinned line's prices is ``pinned_speed`` times the spread
     with its adaptive Heun steps in exact mode under the plain law; none with fixed Euler
