@@ -386,6 +386,7 @@ def test_a_line_that_dispatch_barely_moves_is_priced_within_the_cap_and_quickly(
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(0, 2**32 - 1), st.integers(3, 7), st.integers(1, 4), st.integers(2, 4),
        st.integers(0, 3))  # fmt: skip
+@example(4294, 5, 2, 3, 1)  # a line 2.7 kW inside its limit priced -7.6e-4 and -9.8e-5 EUR/MWh
 def test_the_angle_formulation_lands_on_the_exact_dc_opf(seed, n_buses, chords, gens, limits):
     """Clarabel's DC-OPF in bus angles (the default on a mesh) against the optimum found by
     enumerating active sets (tests/qp_exact.py), at three minutes whose bus loads are scaled
@@ -417,11 +418,13 @@ def test_the_angle_formulation_lands_on_the_exact_dc_opf(seed, n_buses, chords, 
         other = factors.solve(minute)
         assert opf.cost == pytest.approx(other.cost, rel=1e-9)
         assert np.abs(opf.p_kw - other.p_kw).max() <= tol
-        # prices (duals) within 1e-5 of the price scale: two interior-point runs stopped at
-        # Clarabel's 1e-10 gap agree less closely in the duals
+        # prices (duals) within 1e-4 of the price scale: two interior-point runs stopped at
+        # Clarabel's 1e-10 gap agree less closely in the duals than in the set points (a row
+        # just inside its limit keeps a multiplier of about the gap over its slack: 1.4e-5 of
+        # the scale on the example above)
         scale = max(1.0, abs(other.marginal_price), np.abs(other.line_price).max(initial=0.0))
-        assert abs(opf.marginal_price - other.marginal_price) <= 1e-5 * scale
-        assert np.abs(opf.line_price - other.line_price).max(initial=0.0) <= 1e-5 * scale
+        assert abs(opf.marginal_price - other.marginal_price) <= 1e-4 * scale
+        assert np.abs(opf.line_price - other.line_price).max(initial=0.0) <= 1e-4 * scale
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
