@@ -375,6 +375,23 @@ def hastened(rate, speed):
 
 
 @nb.njit(cache=True, inline="always")
+def pair_gain(gap, sign, lows, highs, lowered, speed):
+    """What a pinned pair adds to its upper price's rate and takes from its lower one's
+    (EUR/MW per s) at the rate ``gap`` of their difference: :func:`hastened` to ``speed``, at
+    most ``lowered / PINNED_SETTLE`` (``lowered``: the price the gain lowers, EUR/MW), and 0
+    unless that price is positive and every generator between (``lows`` at their lower
+    limit, ``highs`` at their upper, none inside) stays at the limit the gain pushes it into.
+    ``sign``: +1 for the up prices, whose gain raises those generators' fitness; -1 for the
+    down prices, whose gain lowers it."""
+    raised = gap * sign > 0.0
+    held = lows + highs > 0.0 and (lows == 0.0 if raised else highs == 0.0)
+    if not held or not lowered > 0.0:
+        return 0.0
+    cap = lowered / PINNED_SETTLE
+    return max(-cap, min(cap, hastened(gap, speed) - gap))
+
+
+@nb.njit(cache=True, inline="always")
 def hasten_pinned(p, z, params, minute, work, z_rate):
     """The pinned lines' and pairs' prices hastened (docs/exact-mode.md, "Pinned lines"),
     ``z_rate`` in place at prices ``z`` (EUR/MW) and the flows in ``work.flow``; scratch
@@ -417,17 +434,10 @@ def hasten_pinned(p, z, params, minute, work, z_rate):
             if up < 0 or inside[k] == 0.0 or inside[up] != inside[k]:
                 continue
             gap = 0.5 * params.price_rate * (sign * work.flow[up] - params.limit[up] - excess)
-            # the generators between see the upper price's change: up prices raise their
-            # fitness, down prices lower it; each must stay at the limit it is pushed into
-            raised = gap * sign > 0.0
-            lows, highs = at_low[up] - at_low[k], at_high[up] - at_high[k]
-            held = lows + highs > 0.0 and (lows == 0.0 if raised else highs == 0.0)
-            lowered = z[side + k] if gap > 0.0 else z[side + up]
-            if held and lowered > 0.0:
-                gain = hastened(gap, speed) - gap
-                gain = max(-lowered / PINNED_SETTLE, min(lowered / PINNED_SETTLE, gain))
-                z_rate[side + up] += gain
-                z_rate[side + k] -= gain
+            gain = pair_gain(gap, sign, at_low[up] - at_low[k], at_high[up] - at_high[k],
+                             z[side + k] if gap > 0.0 else z[side + up], speed)  # fmt: skip
+            z_rate[side + up] += gain
+            z_rate[side + k] -= gain
 
 
 @nb.njit(cache=True, inline="always")
