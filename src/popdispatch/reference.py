@@ -27,7 +27,7 @@ from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import ROUND_OFF, Status
 from popdispatch.integrate.steppers import next_step
 from popdispatch.modes import ModeCode, get_mode
-from popdispatch.modes.exact import PINNED_BOOST, PINNED_MARGIN
+from popdispatch.modes.exact import PINNED_BOOST, PINNED_MARGIN, PINNED_SETTLE
 
 
 def at_rest(x, last_x, z, last_z) -> bool:
@@ -126,16 +126,18 @@ def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, pr
     between able to trade, none inside, each at the limit the gain pushes it into (an up
     price's gain raises their fitness, a down price's lowers it), gain the same on half the
     gap of their excesses, added to the upper price and taken from the lower while the price
-    it lowers is positive; each gain by at most ``PINNED_BOOST`` times."""
+    it lowers is positive, by at most that price over ``PINNED_SETTLE``; each gain by at most
+    ``PINNED_BOOST`` times."""
     inputs = MinuteInputs.of(problem, minute)
     low, high = inputs.lo * inputs.demand, inputs.hi * inputs.demand
     margin = PINNED_MARGIN * (high - low)
     tradable = high > low
     is_inside = (p > low + margin) & (p < high - margin)
     at_limit = tradable & ~is_inside
+    nearer_low = p - low < high - p
     inside = problem.down @ is_inside
-    at_low = problem.down @ (at_limit & (p - low < high - p))
-    at_high = problem.down @ (at_limit & ~(p - low < high - p))
+    at_low = problem.down @ (at_limit & nearer_low)
+    at_high = problem.down @ (at_limit & ~nearer_low)
     lines = len(inside)
 
     def gain(rate):
@@ -155,8 +157,9 @@ def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, pr
         low_row, up_row = side + lower[pair], side + upper[pair]
         gap = 0.5 * price_rate * (excess[up_row] - excess[low_row])
         held = (lows + highs > 0) & np.where(gap * sign > 0, lows == 0, highs == 0)
-        moving = held & (((gap > 0) & (z[low_row] > 0)) | ((gap < 0) & (z[up_row] > 0)))
-        pair_gain = np.where(moving, gain(gap), 0.0)
+        lowered = np.where(gap > 0, z[low_row], z[up_row])
+        cap = lowered / PINNED_SETTLE
+        pair_gain = np.where(held & (lowered > 0), np.clip(gain(gap), -cap, cap), 0.0)
         np.add.at(z_rate, up_row, pair_gain)
         np.add.at(z_rate, low_row, -pair_gain)
     return z_rate
