@@ -162,6 +162,11 @@ PRICE_CRAWL = {
 NESTED_PAIR = (3376343775, 5, 2)
 NESTED_PAIR_GRAPH = [("G1", "G4"), ("G10", "G7"), ("G11", "G4"), ("G4", "G7")]
 
+#: A random fleet of two without limits (tests/test_fleets.py's draw): the warm start puts the
+#: flat generator (``c`` 5.7 EUR/MW^2h, Newton rate 628) at its Pmax beside the steep source
+#: (``c`` 286, rate 12.6) inside its range.
+FLAT_AT_PMAX_SEED = 2754344515
+
 
 #: ``(case, limited line or None, limit kW, fleet rows, communication graph)``: the runs of
 #: ``bench_fleets.py --runs 500 --distributed`` whose distributed Smith did not converge in
@@ -283,6 +288,17 @@ def test_a_generator_below_an_idle_line_trades_at_its_own_rate():
     of slack and no price trades with a flat generator at the priced cap, 10, about a
     thousandth of its Newton rate (a steep generator's range makes the spread large)."""
     _check(random_fleet_problem(3156973452, 4, 1), "plain")
+
+
+@pytest.mark.parametrize("dynamics", ["smith", "distributed-smith"])
+def test_a_flat_generator_at_its_pmax_beside_a_steep_one_leaves_the_warm_start(dynamics):
+    """Trading at its own rate, the flat generator moved the steep one's marginal cost 50
+    times faster than its Newton step; the adaptive steps never resolved the first move and
+    the run stayed at the warm start, 7.8 kW from the optimum, for 6000 iterations. A rate at
+    a limit is at most that of the generators inside (dynamics/newton.py)."""
+    problem = random_fleet_problem(FLAT_AT_PMAX_SEED, 2, 0)
+    assert problem.limit.size == 0
+    _check(problem, "plain", dynamics=dynamics)
 
 
 def test_pinned_lines_are_hastened_with_adaptive_steps_on_a_radial_feeder_only():

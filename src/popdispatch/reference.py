@@ -262,7 +262,7 @@ class ReferenceMinute:
         law = self.law
         w, v, room, mass = law.reference(self.tag, x, f, self.lo, self.hi, self.active, self.rate)
         if law.reference_local is not None and self.sparse:
-            w = law.reference_local(self.graph, self.rate, w, room, mass)
+            w, v = law.reference_local(self.graph, self.rate, w, v, room, mass)
         inflow, outflow = self.flows(f, w, v, mass, room)
         return (f, w, v, room, mass, inflow, outflow, z_rate), congestion, residual
 

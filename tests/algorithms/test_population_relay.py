@@ -75,7 +75,7 @@ def test_the_message_relay_sends_the_engines_relay_flows(seed, chain):
     f = algorithm.own[:, 0]  # the fitness each DG reports
     w, v, room, mass = weights(algorithm.field, p / demand, f, minute.lo / demand,
                                minute.hi / demand, minute.hi > minute.lo, rate)  # fmt: skip
-    w = reference_local(graph, rate, w, room, mass)
+    w, v = reference_local(graph, rate, w, v, room, mass)
     direct = graph * w[:, None] * v[None, :] * np.maximum(f[:, None] - f[None, :], 0.0)
     T = direct + relay_matrix(f, w, v, graph, mass, room, slow_members(rate, graph))
     expected = algorithm.h * demand * T.T  # [sender, receiver], MW

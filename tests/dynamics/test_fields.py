@@ -133,3 +133,56 @@ def test_a_strategy_a_few_ulp_below_its_upper_limit_is_at_it():
     np.testing.assert_array_equal(room[:2], [0.0, 0.0])
     assert room[2] == hi[2] - x[2] > 0.0
     np.testing.assert_array_equal(v, x - lo)  # the senders' side is untouched
+
+
+def _pairwise_rate(w, v, f, adjacency):
+    """``x'`` of a product-form pairwise law, written out pair by pair: ``w_i v_j [f_i -
+    f_j]_+`` from ``j`` to each neighbour ``i``."""
+    gain = adjacency * w[:, None] * v[None, :] * np.maximum(f[:, None] - f[None, :], 0.0)
+    return gain.sum(axis=1) - gain.sum(axis=0)
+
+
+def test_a_generator_at_a_limit_trades_at_most_at_the_rate_of_those_inside():
+    """The curvature-scaled field: a flat generator at its upper limit (rate 500) sending to
+    two steep ones inside (rates 2 and 3) has sender weight ``R = 5``, not its own rate, so
+    their marginal costs move at no more than their own Newton rates; a flat one at its lower
+    limit is a receiver of weight 1. The weights by hand, the flows pair by pair."""
+    x = np.array([0.4, 0.3, 0.3, 0.0])
+    lo = np.array([0.0, 0.0, 0.0, 0.0])
+    hi = np.array([0.4, 0.8, 0.8, 0.5])
+    rates = np.array([500.0, 2.0, 3.0, 400.0])
+    f = np.array([-3.0, -1.0, -2.0, 0.5])
+    complete = np.ones((4, 4)) - np.eye(4)
+    w = np.array([0.0, 2.0 / 5.0, 3.0 / 5.0, 1.0])  # receivers: r / R, at a limit min(r, R) / R
+    v = np.array([5.0, 2.0, 3.0, 0.0])  # senders: r, at a limit min(r, R)
+    got = field_rate(Field.CAPACITY_NEWTON, x, f, complete, lo, hi, np.ones(4, bool), rates)
+    np.testing.assert_allclose(got, _pairwise_rate(w, v, f, complete), rtol=1e-13, atol=0)
+    tag = field_tag(Field.CAPACITY_NEWTON)
+    reference = weights(tag, x, f, lo, hi, np.ones(4, bool), rates)
+    np.testing.assert_allclose(reference[:2], (w, v), rtol=1e-14)
+
+
+def test_on_a_graph_each_generator_at_a_limit_is_capped_by_its_own_neighbourhood():
+    """On the path 0 - 1 - 2 - 3 (0 at its upper limit, 3 at its lower one, 1 and 2 inside):
+    generator 0's closed neighbourhood has only 1 inside, so its sender weight is ``r_1``;
+    3's has only 2, so its receiver weight is ``min(r_3, r_2) / r_2``; the compiled kernel
+    and the plain-numpy statement agree with the values by hand."""
+    from popdispatch.dynamics.newton import neighbourhood_weights, reference_local
+
+    path = np.diag(np.ones(3), 1) + np.diag(np.ones(3), -1)
+    indptr = np.array([0, 1, 3, 5, 6])
+    indices = np.array([1, 0, 2, 1, 3, 2])
+    rates = np.array([500.0, 2.0, 3.0, 400.0])
+    room = np.array([0.0, 0.5, 0.5, 0.5])
+    mass = np.array([0.4, 0.3, 0.3, 0.0])
+    w0 = np.where(room > 0, rates, 0.0)
+    v0 = np.where(mass > 0, rates, 0.0)
+    want_w = np.array([0.0, 2.0 / 5.0, 3.0 / 5.0, 1.0])
+    want_v = np.array([2.0, 2.0, 3.0, 0.0])
+    w, v = w0.copy(), v0.copy()
+    neighbourhood_weights(indptr, indices, rates, w, v, room, mass)
+    np.testing.assert_allclose(w, want_w, rtol=1e-14)
+    np.testing.assert_allclose(v, want_v, rtol=1e-14)
+    for got, want in zip(reference_local(path, rates, w0, v0, room, mass), (want_w, want_v),
+                         strict=True):  # fmt: skip
+        np.testing.assert_allclose(got, want, rtol=1e-14)

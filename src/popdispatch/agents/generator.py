@@ -11,9 +11,10 @@ Each round (:mod:`popdispatch.agents.schedule`) the generator
    neighbours in the communication graph. Under the curvature-scaled field (exact mode,
    dynamics/newton.py) ``v`` is its revision rate ``r`` (from its own cost curve) where it
    has mass to move and ``w`` is ``r / R`` where it has room, ``R`` the rates of the
-   generators inside their limits: on a sparse graph those of its closed neighbourhood,
+   generators inside their limits (``r`` at most ``R`` at a limit): on a sparse graph those
+   of its closed neighbourhood,
    which it normalises itself from the standings of tick 0
-   (:func:`~popdispatch.dynamics.newton.neighbourhood_receivers`); on the complete graph
+   (:func:`~popdispatch.dynamics.newton.neighbourhood_weights`); on the complete graph
    those of the whole fleet, which every listener normalises from the statuses it holds;
 2. (tick 3) from the latest statuses of its neighbours, sums its pairwise in- and outflow
    (:func:`popdispatch.dynamics.pairwise.graph_flows` on its own star of edges, eqs. 13-14)
@@ -63,7 +64,7 @@ from popdispatch.agents.messages import (
 from popdispatch.agents.plant import Inverters
 from popdispatch.agents.schedule import Phase
 from popdispatch.dynamics.fields import Field, field_tag, law_of
-from popdispatch.dynamics.newton import neighbourhood_receivers
+from popdispatch.dynamics.newton import neighbourhood_weights
 from popdispatch.dynamics.pairwise import graph_flows, receives_relayed, relays_at_limit
 from popdispatch.game.fitness import fitness_into
 from popdispatch.game.parameters import share_bounds
@@ -276,10 +277,10 @@ class GeneratorAgent(RoundAgent):
 
     @property
     def normalises_itself(self) -> bool:
-        """Whether this generator normalises its own receiver weight (a sparse graph under
+        """Whether this generator normalises its own weights (a sparse graph under
         the curvature-scaled field: by its closed neighbourhood, from their standings); on
         the complete graph every listener normalises every receiver weight by the rates of
-        all (:meth:`_receiver_weights`)."""
+        all (:meth:`_normalised_weights`)."""
         return self.relay and self.rule.scaled
 
     def receive(self, content, sender) -> None:
@@ -530,6 +531,7 @@ class GeneratorAgent(RoundAgent):
                                                      r.rate * one)  # fmt: skip
         if r.scaled:
             w[0] = r.rate if room[0] > 0.0 else 0.0
+            v[0] = r.rate if mass[0] > 0.0 else 0.0
         return float(w[0]), float(v[0]), float(room[0]), float(mass[0])
 
     def _standing(self, rnd: int) -> None:
@@ -540,21 +542,22 @@ class GeneratorAgent(RoundAgent):
         for aid in self.neighbours:
             self.send(standing, aid)
 
-    def _own_receiver_weight(self, w: float, room: float, mass: float) -> float:
-        """The own receiver weight ``r / R`` with ``R`` the rates of the closed neighbourhood
-        inside their limits, else of those with room (the engine's
-        :func:`~popdispatch.dynamics.newton.neighbourhood_receivers` on the own star, with the
+    def _own_weights(self, w: float, v: float, room: float, mass: float) -> tuple[float, float]:
+        """The own receiver and sender weights normalised by the closed neighbourhood: ``r /
+        R`` and ``r``, the rate at a limit at most ``R``, with ``R`` the rates of the closed
+        neighbourhood inside their limits, else of those with room (the engine's
+        :func:`~popdispatch.dynamics.newton.neighbourhood_weights` on the own star, with the
         neighbours' latest standings)."""
-        if w <= 0.0:
-            return 0.0
+        if w <= 0.0 and v <= 0.0:
+            return 0.0, 0.0
         known = [self.standings[aid] for aid in self.neighbours if aid in self.standings]
         rate = np.array([self.rule.rate, *(s.rate for s in known)])
         rooms = np.array([room, *(s.room for s in known)])
         masses = np.array([mass, *(s.mass for s in known)])
-        weights = np.zeros(len(rate))
-        weights[0] = w
-        neighbourhood_receivers(*star(len(rate)), rate, weights, rooms, masses)
-        return float(weights[0])
+        receivers, senders = np.zeros(len(rate)), np.zeros(len(rate))
+        receivers[0], senders[0] = w, v
+        neighbourhood_weights(*star(len(rate)), rate, receivers, senders, rooms, masses)
+        return float(receivers[0]), float(senders[0])
 
     def _status(self, rnd: int) -> None:
         """Fitness and weights at the own set point; status to the neighbours."""
@@ -573,7 +576,7 @@ class GeneratorAgent(RoundAgent):
                      signal, r.barrier, f)  # fmt: skip
         w, v, room, mass = self._weights()
         if self.normalises_itself:
-            w = self._own_receiver_weight(w, room, mass)
+            w, v = self._own_weights(w, v, room, mass)
         theta = r.step_factor(self._priced_above())
         self.own = Own(float(f[0]), w, v, room, mass, theta)
         self.status_round = rnd
@@ -590,12 +593,14 @@ class GeneratorAgent(RoundAgent):
         return sum(1 for k in self.rule.lines_above
                    if self.signals.get(str(k), (0, 0.0))[1] != 0.0)  # fmt: skip
 
-    def _receiver_weights(self, w: np.ndarray, room: np.ndarray, mass: np.ndarray) -> None:
-        """Complete graph, curvature-scaled field: every receiver weight of the own star (the
-        whole fleet) normalised in place by the rates of all generators inside their limits,
-        else of those with room (the engine's ``newton_weights``; ``w`` holds the rates where
-        there is room, and the kernel reads a rate only there)."""
-        neighbourhood_receivers(*complete(len(w)), w.copy(), w, room, mass)
+    def _normalised_weights(self, w: np.ndarray, v: np.ndarray, room: np.ndarray,
+                            mass: np.ndarray) -> None:  # fmt: skip
+        """Complete graph, curvature-scaled field: every weight of the own star (the whole
+        fleet) normalised in place by ``R``, the rates of all generators inside their limits,
+        else of those with room, each rate at a limit at most ``R`` (the engine's
+        ``newton_weights``; ``w`` holds the rates where there is room, ``v`` where there is
+        mass, and the kernel reads a rate only where one of them is set)."""
+        neighbourhood_weights(*complete(len(w)), np.maximum(w, v), w, v, room, mass)
 
     def _offer(self, rnd: int) -> None:
         """Own pairwise in/outflow, the limiter's factors, offers to better neighbours."""
@@ -609,8 +614,8 @@ class GeneratorAgent(RoundAgent):
         w = np.array([self.own.w] + [s.w for s in known])
         v = np.array([v0] + [s.v for s in known])
         if self.rule.scaled and not self.relay:
-            self._receiver_weights(w, np.array([room0] + [s.room for s in known]),
-                                   np.array([mass0] + [s.mass for s in known]))  # fmt: skip
+            self._normalised_weights(w, v, np.array([room0] + [s.room for s in known]),
+                                     np.array([mass0] + [s.mass for s in known]))  # fmt: skip
         if self.rule.local_step:  # each pair at the step of its stiffer end
             theta = self.own.theta
             w[1:] *= np.minimum(theta, [_theta(s) for s in known])

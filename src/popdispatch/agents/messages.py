@@ -41,7 +41,7 @@ class Standing:
     complete, under the curvature-scaled field (dynamics/newton.py): its revision ``rate``
     (dimensionless), its ``room`` below ``Pmax`` and its movable ``mass`` above ``Pmin``
     (shares). Each receiver normalises its weight by the rates of its closed neighbourhood
-    inside their limits (``neighbourhood_receivers``), which it learns from these."""
+    inside their limits (``neighbourhood_weights``), which it learns from these."""
 
     round: int
     rate: float

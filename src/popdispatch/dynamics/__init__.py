@@ -23,7 +23,7 @@ from scipy import sparse
 
 from popdispatch.dynamics.capacity import project_to_box
 from popdispatch.dynamics.fields import NAMED, Field, field_tag, law_flows, order_for
-from popdispatch.dynamics.fields import local_receivers as _local
+from popdispatch.dynamics.fields import local_weights as _local
 from popdispatch.dynamics.fields import weights as _weights
 from popdispatch.dynamics.graph import GRAPHS, communication_graph
 from popdispatch.dynamics.law import Dynamics, FlowLaw, Kernel
@@ -36,7 +36,7 @@ DYNAMICS: dict[str, Dynamics] = {d.name: d for d in NAMED}
 @nb.njit(cache=True)
 def _field_rate(tag, graph, x, f, lo, hi, active, rate, w, v, room, mass, order, inflow, outflow):
     _weights(tag, x, f, lo, hi, active, rate, w, v, room, mass)
-    _local(tag, graph, rate, w, room, mass)
+    _local(tag, graph, rate, w, v, room, mass)
     order_for(tag, graph, f, order)
     law_flows(tag, graph, f, w, v, mass, room, order, inflow, outflow)
 

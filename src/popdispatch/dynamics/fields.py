@@ -8,7 +8,7 @@ and the kernels numba compiles for a run.
 
 The engine picks a field's kernels at compile time: the field travels into the kernels as
 its record (:func:`field_tag`), one small class per weight kernel, and the stubs below
-(:func:`weights`, :func:`local_receivers`, :func:`order_for`, :func:`law_flows`) have numba
+(:func:`weights`, :func:`local_weights`, :func:`order_for`, :func:`law_flows`) have numba
 ``@overload`` implementations that return, when numba types the call, the kernels the
 record's class names: its weights, and the sums of its kernel on the run's graph (the
 records' classes of law and graph together: pairwise comparison,
@@ -117,26 +117,26 @@ def _weights(tag, x, f, lo, hi, active, rate, w, v, room, mass):
     return impl
 
 
-def local_receivers(tag, graph, rate, w, room, mass):
-    """On a communication graph, the receiver weights of a law that normalises them over
-    each receiver's neighbourhood (:attr:`FlowLaw.local`: the curvature-scaled field,
-    :func:`~popdispatch.dynamics.newton.neighbourhood_receivers`); nothing for any other law
-    or graph. Compiled code only."""
-    raise TypeError("local_receivers() runs in compiled code only")
+def local_weights(tag, graph, rate, w, v, room, mass):
+    """On a communication graph, the receiver and sender weights of a law that normalises
+    them over each generator's neighbourhood (:attr:`FlowLaw.local`: the curvature-scaled
+    field, :func:`~popdispatch.dynamics.newton.neighbourhood_weights`); nothing for any other
+    law or graph. Compiled code only."""
+    raise TypeError("local_weights() runs in compiled code only")
 
 
-@overload(local_receivers, inline="always")
-def _local_receivers(tag, graph, rate, w, room, mass):
+@overload(local_weights, inline="always")
+def _local_weights(tag, graph, rate, w, v, room, mass):
     law = _law(tag)
     local = None if law is None else law.local
     if local is not None and getattr(graph, "instance_class", None) is SparseGraph:
 
-        def neighbourhood(tag, graph, rate, w, room, mass):
-            local(graph.indptr, graph.indices, rate, w, room, mass)
+        def neighbourhood(tag, graph, rate, w, v, room, mass):
+            local(graph.indptr, graph.indices, rate, w, v, room, mass)
 
         return neighbourhood
 
-    def nothing(tag, graph, rate, w, room, mass):
+    def nothing(tag, graph, rate, w, v, room, mass):
         pass
 
     return nothing
@@ -232,4 +232,4 @@ def field_weights(code, x, lo, hi, active, w, v, room):
 FORMER_TAGS = (FieldTag, SmithTag, ReplicatorTag, CapacitySmithTag, CapacityNewtonTag)
 
 __all__ = ["LAWS", "MODULES", "NAMED", "Field", "FieldTag", "field_tag", "field_weights",
-           "law_flows", "law_of", "local_receivers", "order_for", "weights"]  # fmt: skip
+           "law_flows", "law_of", "local_weights", "order_for", "weights"]  # fmt: skip

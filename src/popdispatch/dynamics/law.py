@@ -66,10 +66,11 @@ class FlowLaw:
     reference : the same in plain numpy, ``(tag, x, f, lo, hi, active, rate) -> (w, v, room,
         mass)``, written from the law's definition (the reference's, and the tests').
     kernel : :class:`Kernel`.
-    local : compiled ``(indptr, indices, rate, w, room, mass)``: the receiver weights on a
-        communication graph (CSR), in place, for a law that normalises them over the
-        neighbourhood; ``None``: the same weights on every graph.
-    reference_local : the same in plain numpy, ``(adjacency, rate, w, room, mass) -> w``.
+    local : compiled ``(indptr, indices, rate, w, v, room, mass)``: the receiver and sender
+        weights on a communication graph (CSR), in place, for a law that normalises them
+        over the neighbourhood; ``None``: the same weights on every graph.
+    reference_local : the same in plain numpy, ``(adjacency, rate, w, v, room, mass) -> (w,
+        v)``.
     """
 
     name: str

@@ -22,13 +22,21 @@ receivers on their limits. The rest points are those of every capacity-constrain
 protocol on the complete graph: interior generators with equal fitness, a generator at ``hi``
 fitter and one at ``lo`` less fit than them (the KKT conditions, docs/exact-mode.md).
 
+``R`` sums the rates of the generators strictly inside their limits. A generator at a limit
+trades at a rate of at most ``R`` (:func:`own_rate`): a flat generator at ``Pmax`` beside
+steep ones inside would otherwise move their set points at ``r_j / R`` times their own Newton
+rate (a fleet of two, the flat one 50 times the steep one's rate, never left the warm start:
+the adaptive steps could not resolve the first move). With the cap a pair's rate is at most
+the smaller of ``r_i`` and ``R``, so no marginal cost relaxes faster than its own Newton step.
+
 A linear generator (``c = 0``) has no curvature to scale by: its rate is capped at
 :data:`RATE_CAP` (:func:`revision_rates`).
 
-On a communication graph no generator knows ``R``: each receiver normalises by its own closed
+On a communication graph no generator knows ``R``: each normalises by its own closed
 neighbourhood instead, ``w_i = r_i / R_i`` with ``R_i`` the rates of ``i`` and its neighbours
-inside their limits (:func:`neighbourhood_receivers`); on the complete graph that is ``R``.
-The weights stay positive, so the rest points are unchanged.
+inside their limits, and caps its rate at a limit by ``R_i`` (:func:`neighbourhood_weights`);
+on the complete graph that is ``R``. The weights stay positive, so the rest points are
+unchanged.
 """
 
 from __future__ import annotations
@@ -79,10 +87,18 @@ def revision_rates(
 
 
 @nb.njit(cache=True, inline="always")
+def own_rate(rate, inside, total):
+    """The rate a generator trades at: its own ``rate`` strictly inside its limits, at a limit
+    at most ``total``, the rates of those inside (when there are any to compare with)."""
+    return rate if inside or not total > 0.0 else min(rate, total)
+
+
+@nb.njit(cache=True, inline="always")
 def newton_weights(x, lo, hi, active, rate, w, v, room, mass):
-    """Receiver weight ``r_i / R`` below ``hi``, sender weight ``r_j`` above ``lo``, room
-    ``hi - x`` and movable mass ``x - lo`` (shares); ``R`` sums the rates of the generators
-    taking part (online, with ``hi > lo``). Room or mass of at most
+    """Receiver weight ``r_i / R`` below ``hi``, sender weight ``r_j`` above ``lo`` (a rate at
+    a limit at most ``R``, :func:`own_rate`), room ``hi - x`` and movable mass ``x - lo``
+    (shares); ``R`` sums the rates of the generators taking part (online, with ``hi > lo``)
+    strictly inside their limits, else with room. Room or mass of at most
     :data:`~popdispatch.dynamics.capacity.ROOM_ULPS` units in the last place of ``hi`` is none
     (the limiter lands on a limit up to round-off)."""
     for i in range(x.shape[0]):
@@ -110,27 +126,37 @@ def newton_weights(x, lo, hi, active, rate, w, v, room, mass):
                 inside += rate[i]
     total = inside if inside > 0.0 else receivers
     for i in range(x.shape[0]):
-        w[i] = rate[i] / total if room[i] > 0.0 else 0.0
-        v[i] = rate[i] if mass[i] > 0.0 else 0.0
+        own = own_rate(rate[i], room[i] > 0.0 and mass[i] > 0.0, total)
+        w[i] = own / total if room[i] > 0.0 else 0.0
+        v[i] = own if mass[i] > 0.0 else 0.0
 
 
 @nb.njit(cache=True)
-def neighbourhood_receivers(indptr, indices, rate, w, room, mass):
-    """Receiver weights ``r_i / R_i`` (in place, where ``w > 0``) with ``R_i`` the rates of
-    generator ``i`` and its neighbours in the graph of CSR adjacency ``indptr``, ``indices``
-    that are strictly inside their limits (room and movable mass), else of those with room."""
+def neighbourhood_weights(indptr, indices, rate, w, v, room, mass):
+    """The weights on a communication graph, in place, normalised by each generator's closed
+    neighbourhood in the graph of CSR adjacency ``indptr``, ``indices``: ``R_i`` the rates of
+    generator ``i`` and its neighbours strictly inside their limits (room and movable mass),
+    else of those with room; receiver weight ``r_i / R_i`` (where ``w > 0``), sender weight
+    ``r_i`` (where ``v > 0``), each rate of a generator at a limit at most ``R_i``
+    (:func:`own_rate`)."""
     for i in range(w.shape[0]):
-        if w[i] <= 0.0:
+        if w[i] <= 0.0 and v[i] <= 0.0:
             continue
-        inside = rate[i] if mass[i] > 0.0 else 0.0
-        receivers = rate[i]
+        inside_i = room[i] > 0.0 and mass[i] > 0.0
+        inside = rate[i] if inside_i else 0.0
+        receivers = rate[i] if room[i] > 0.0 else 0.0
         for e in range(indptr[i], indptr[i + 1]):
             j = indices[e]
             if room[j] > 0.0:
                 receivers += rate[j]
                 if mass[j] > 0.0:
                     inside += rate[j]
-        w[i] = rate[i] / (inside if inside > 0.0 else receivers)
+        total = inside if inside > 0.0 else receivers
+        own = own_rate(rate[i], inside_i, total)
+        if w[i] > 0.0:
+            w[i] = own / total
+        if v[i] > 0.0:
+            v[i] = own
 
 
 @nb.njit(cache=True, inline="always")
@@ -141,23 +167,29 @@ def weights(tag, x, f, lo, hi, active, rate, w, v, room, mass):
 
 def reference(tag, x, f, lo, hi, active, rate):
     """Plain numpy: receiver weight ``r_i / R`` below ``hi``, sender weight ``r_j`` above
-    ``lo`` (``R``: the rates strictly inside their limits, else of those with room)."""
+    ``lo`` (``R``: the rates strictly inside their limits, else of those with room; a rate at
+    a limit at most ``R``)."""
     room, mass = box(x, lo, hi, active)
     mass = np.where(mass <= ROOM_ULPS * np.spacing(hi), 0.0, mass)
     inside = (room > 0.0) & (mass > 0.0)
     total = rate[inside].sum() if inside.any() else rate[room > 0.0].sum()
-    return np.where(room > 0.0, rate / total, 0.0), np.where(mass > 0.0, rate, 0.0), room, mass
-
-
-def reference_local(adjacency, rate, w, room, mass):
-    """Plain numpy: the receiver weights on a communication graph, ``r_i / R_i`` with ``R_i``
-    the rates of ``i``'s closed neighbourhood inside their limits (else with room)."""
-    closed = (adjacency + np.eye(len(w))) > 0
-    inside = closed @ np.where((room > 0) & (mass > 0), rate, 0.0)
-    receivers = closed @ np.where(room > 0, rate, 0.0)
-    total = np.where(inside > 0, inside, receivers)
+    own = np.where(inside | (total <= 0.0), rate, np.minimum(rate, total))
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(w > 0, rate / total, 0.0)
+        w = np.where(room > 0.0, own / total, 0.0)
+    return w, np.where(mass > 0.0, own, 0.0), room, mass
+
+
+def reference_local(adjacency, rate, w, v, room, mass):
+    """Plain numpy: the weights on a communication graph, ``(w, v)``: ``R_i`` the rates of
+    ``i``'s closed neighbourhood inside their limits (else with room), receiver weight
+    ``r_i / R_i``, sender weight ``r_i``, a rate at a limit at most ``R_i``."""
+    closed = (adjacency + np.eye(len(w))) > 0
+    inside = (room > 0) & (mass > 0)
+    total = closed @ np.where(inside, rate, 0.0)
+    total = np.where(total > 0, total, closed @ np.where(room > 0, rate, 0.0))
+    own = np.where(inside | (total <= 0), rate, np.minimum(rate, total))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(w > 0, own / total, 0.0), np.where(v > 0, own, 0.0)
 
 
 class CapacityNewtonTag(FieldTag):
@@ -168,6 +200,6 @@ class CapacityNewtonTag(FieldTag):
 
 
 LAW = FlowLaw("CAPACITY_NEWTON", CapacityNewtonTag, weights, reference,
-              local=neighbourhood_receivers, reference_local=reference_local)  # fmt: skip
+              local=neighbourhood_weights, reference_local=reference_local)  # fmt: skip
 LAWS = (LAW,)
 DYNAMICS = ()  # exact mode's curvature-scaled revision of smith (RunSettings.field)

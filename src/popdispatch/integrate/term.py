@@ -20,7 +20,7 @@ from popdispatch.dynamics.fields import (
     Field,
     field_tag,
     law_flows,
-    local_receivers,
+    local_weights,
     order_for,
     weights,
 )
@@ -133,7 +133,7 @@ def evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term,
     field, graph = term.field, term.graph
     weights(field, x, f, minute.lo, minute.hi, minute.active, params.revision_rate, w, v, room,
             mass)  # fmt: skip
-    local_receivers(field, graph, params.revision_rate, w, room, mass)
+    local_weights(field, graph, params.revision_rate, w, v, room, mass)
     order_for(field, graph, f, order)
     law_flows(field, graph, f, w, v, mass, room, order, inflow, outflow)
     return congestion, residual
