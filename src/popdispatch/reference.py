@@ -27,7 +27,7 @@ from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import ROUND_OFF, Status
 from popdispatch.integrate.steppers import next_step
 from popdispatch.modes import ModeCode, get_mode
-from popdispatch.modes.exact import PINNED_BOOST, PINNED_MARGIN, PINNED_SETTLE
+from popdispatch.modes.exact import IDLE_MARGIN, PINNED_BOOST, PINNED_MARGIN, PINNED_SETTLE
 
 
 def at_rest(x, last_x, z, last_z) -> bool:
@@ -114,6 +114,24 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
     congestion = prices.max() if len(prices) else 0.0
     residual = slack.max() if len(slack) else 0.0
     return fitness(problem, p, signal, fp, fp.gain, False), z_rate, congestion, residual
+
+
+def rates_in_force(problem: DispatchProblem, minute: int, p, z, C: float, rate, idle_rate):
+    """The revision rates at set points ``p`` (MW) and prices ``z`` (EUR/MW; ``C`` EUR/MW per
+    MW): a generator's priced ``rate`` under an active limited line, its ``idle_rate`` while
+    every line above it has no price and more than ``IDLE_MARGIN`` of its limit in slack,
+    geometrically between by ``h = clip(1 + max(z + C e) / (C m U), 0, 1)`` of the most
+    active line above it (:func:`popdispatch.modes.exact.rates_in_force`)."""
+    lines = len(problem.limit)
+    flow = problem.line_load_flow[minute - 1] - problem.down @ p
+    augmented = np.maximum(z[:lines] + C * (flow - problem.limit),
+                           z[lines : 2 * lines] + C * (-flow - problem.limit))  # fmt: skip
+    margin = C * IDLE_MARGIN * problem.limit
+    with np.errstate(divide="ignore", invalid="ignore"):
+        activity = np.where(margin > 0, np.clip(1.0 + augmented / margin, 0.0, 1.0), 1.0)
+    below = problem.down != 0.0  # lines x generators
+    hot = np.where(below, activity[:, None], 0.0).max(axis=0, initial=0.0)
+    return np.where(below.any(axis=0), rate**hot * idle_rate ** (1.0 - hot), rate)
 
 
 def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, price_rate: float,
@@ -250,6 +268,8 @@ class ReferenceMinute:
         )
         self.integrator = settings.stepping
         self.rate = settings.engine_revision_rates(problem)
+        complete = not dynamics.uses_graph or settings.graph == "complete"
+        self.idle_rate = settings.engine_idle_rates(problem, complete)
         self.slow = slow_members(self.rate, self.graph) | settings.engine_held_relays(problem)
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         self.pinned_speed = settings.engine_pinned_speed(problem)
@@ -260,9 +280,13 @@ class ReferenceMinute:
             self.pinned_speed,
         )
         law = self.law
-        w, v, room, mass = law.reference(self.tag, x, f, self.lo, self.hi, self.active, self.rate)
+        rate = self.rate
+        if len(self.idle_rate):
+            rate = rates_in_force(self.problem, self.minute, x * self.demand, z, self.fp.C,
+                                  self.rate, self.idle_rate)  # fmt: skip
+        w, v, room, mass = law.reference(self.tag, x, f, self.lo, self.hi, self.active, rate)
         if law.reference_local is not None and self.sparse:
-            w, v = law.reference_local(self.graph, self.rate, w, v, room, mass)
+            w, v = law.reference_local(self.graph, rate, w, v, room, mass)
         inflow, outflow = self.flows(f, w, v, mass, room)
         return (f, w, v, room, mass, inflow, outflow, z_rate), congestion, residual
 

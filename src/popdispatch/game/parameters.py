@@ -84,15 +84,19 @@ class GameParameters(NamedTuple):
     # exact mode on a radial feeder: the least speed of a pinned line's prices, EUR/MW per s
     # (modes/exact.py hasten_pinned); 0: none
     pinned_speed: float = 0.0
+    # per generator, the revision rate while every limited line above it is idle (modes/exact.py
+    # rates_in_force), dimensionless; empty: the rates are revision_rate throughout
+    idle_rate: np.ndarray = NO_RATES
 
     @classmethod
     def of(
         cls, problem: DispatchProblem, fp: FitnessParameters, revision_rate: np.ndarray = NO_RATES,
-        pinned_speed: float = 0.0,
+        pinned_speed: float = 0.0, idle_rate: np.ndarray = NO_RATES,
     ) -> GameParameters:
         """The parameters of ``problem`` with the constants ``fp`` (EUR/MW), the dynamic's
-        per-generator ``revision_rate`` (dimensionless; empty when it takes none) and exact
-        mode's least speed of a pinned line's prices (EUR/MW per s; 0: none)."""
+        per-generator ``revision_rate`` (dimensionless; empty when it takes none), exact
+        mode's least speed of a pinned line's prices (EUR/MW per s; 0: none) and the revision
+        rates while the lines above are idle (dimensionless; empty: none)."""
         return cls(
             problem.b, problem.c, problem.pmin, problem.pmax, float(fp.B), float(fp.m),
             float(fp.C), float(fp.gain), float(fp.price_rate), problem.limit,
@@ -103,6 +107,7 @@ class GameParameters(NamedTuple):
             else np.ascontiguousarray(problem.factor, dtype=float),
             NO_RATES if problem.factor is None else lever_scale(problem.factor),
             float(pinned_speed),
+            np.ascontiguousarray(idle_rate, dtype=float),
         )  # fmt: skip
 
 
@@ -142,13 +147,16 @@ def share_bounds(pmin, pmax, active, demand, lo, hi):
 
 class GameWork(NamedTuple):
     """Scratch of one game evaluation, one value per limited line: flows (MW), the values sent
-    to the parent and child sides of each line, path sums of the broadcast."""
+    to the parent and child sides of each line, path sums of the broadcast; and, for a game
+    whose revision rates follow its state, the rates in force, one per generator
+    (dimensionless; empty otherwise, the field then reads the parameters' own)."""
 
     flow: np.ndarray
     parent_side: np.ndarray
     child_side: np.ndarray
     path: np.ndarray
+    rate: np.ndarray
 
     @classmethod
-    def empty(cls, n_lines: int) -> GameWork:
-        return cls(*(np.zeros(n_lines) for _ in range(4)))
+    def empty(cls, n_lines: int, n_rates: int = 0) -> GameWork:
+        return cls(*(np.zeros(n_lines) for _ in range(4)), np.zeros(n_rates))

@@ -163,17 +163,20 @@ class Workspace(NamedTuple):
     counters: Counters
 
 
-def workspace(n: int, n_lines: int, n_states: int, window: int) -> Workspace:
+def workspace(n: int, n_lines: int, n_states: int, window: int, live_rates: bool = False
+              ) -> Workspace:  # fmt: skip
     """Workspace for ``n`` generators, ``n_lines`` limited lines, ``n_states`` controller
-    states and a stopping window of ``window`` iterations."""
+    states and a stopping window of ``window`` iterations (``live_rates``: the game writes the
+    revision rates in force at each evaluation, :class:`~popdispatch.game.parameters.GameWork`)."""
 
     def limited() -> Limited:
         return Limited(*(np.zeros(n) for _ in range(4)))
 
+    game = GameWork.empty(n_lines, n if live_rates else 0)
     return Workspace(
         Stage.empty(n, n_states), Stage.empty(n, n_states), limited(), limited(),
         np.zeros(n), np.zeros(n), np.zeros(n_states), np.zeros(n_states), np.zeros(n),
-        np.zeros(n_states), GameWork.empty(n_lines), np.zeros((3 * window, n)),
+        np.zeros(n_states), game, np.zeros((3 * window, n)),
         Counters(np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)),
     )  # fmt: skip
 

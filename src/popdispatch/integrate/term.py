@@ -131,9 +131,10 @@ def evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term,
     # records' arrays, a large share of a paper-mode minute)
     congestion, residual = payoff(term.mode, p, z, params, minute, work, f, z_rate)
     field, graph = term.field, term.graph
-    weights(field, x, f, minute.lo, minute.hi, minute.active, params.revision_rate, w, v, room,
-            mass)  # fmt: skip
-    local_weights(field, graph, params.revision_rate, w, v, room, mass)
+    # the revision rates in force: the payoff's, where it sets them (GameWork.rate)
+    rate = work.rate if work.rate.shape[0] else params.revision_rate
+    weights(field, x, f, minute.lo, minute.hi, minute.active, rate, w, v, room, mass)
+    local_weights(field, graph, rate, w, v, room, mass)
     order_for(field, graph, f, order)
     law_flows(field, graph, f, w, v, mass, room, order, inflow, outflow)
     return congestion, residual

@@ -52,6 +52,10 @@ PINNED_SPEED, PINNED_BOOST, PINNED_MARGIN = 1000.0, 1000.0, 1e-12
 #: A pinned pair's gain empties the price it lowers no faster than with this time constant
 #: (s): the gain fades with that price instead of stopping where it reaches zero.
 PINNED_SETTLE = 1e-3
+#: A limited line is idle, and the generators below it revise at their idle rates
+#: (:func:`rates_in_force`), once its augmented term ``z + C e`` is below ``-C`` times this
+#: fraction of its limit in both directions: no price and this much slack.
+IDLE_MARGIN = 0.1
 #: Exact mode's revision protocols: each generator's revision scaled by its own curvature
 #: (dynamics/newton.py), or capacity-constrained Smith (dynamics/capacity.py).
 REVISIONS = ("newton", "capacity")
@@ -441,6 +445,50 @@ def hasten_pinned(p, z, params, minute, work, z_rate):
 
 
 @nb.njit(cache=True, inline="always")
+def line_activity(z_up, z_down, excess_up, excess_down, C, limit):
+    """How active a limited line is, 0 (idle) to 1: its larger augmented term ``a = z + C e``
+    over both directions (EUR/MW) from ``-C m`` (``m`` :data:`IDLE_MARGIN` times the
+    ``limit``, MW: no price and that much slack) to 0 (priced or at its limit), linearly; 1
+    for a line without a positive limit."""
+    margin = C * IDLE_MARGIN * limit
+    if not margin > 0.0:
+        return 1.0
+    a = max(z_up + C * excess_up, z_down + C * excess_down)
+    return min(1.0, max(0.0, 1.0 + a / margin))
+
+
+@nb.njit(cache=True, inline="always")
+def rates_in_force(z, params, work):
+    """The revision rates of this evaluation into ``work.rate`` (docs/exact-mode.md,
+    "Revision"), at prices ``z`` (EUR/MW) and the flows in ``work.flow``; scratch
+    ``work.path`` (the broadcast is done). A generator below limited lines revises at its
+    priced rate ``params.revision_rate`` under an active line and at ``params.idle_rate``
+    while every line above it is idle, geometrically between by the most active line above
+    it (:func:`line_activity`): the cap of the priced rate is there for the stiffness of an
+    active line's augmented term, which an idle line does not have. Continuous in the state;
+    the rates stay positive, so the rest points are unchanged."""
+    rate = work.rate
+    if rate.shape[0] == 0:
+        return
+    n_lines = params.limit.shape[0]
+    activity = work.path
+    for r in range(n_lines):  # pre-order: the most active line on the path from the root
+        k = params.line_preorder[r]
+        a = line_activity(z[k], z[n_lines + k], work.flow[k] - params.limit[k],
+                          -work.flow[k] - params.limit[k], params.C, params.limit[k])  # fmt: skip
+        up = params.line_up[k]
+        activity[k] = a if up < 0 else max(a, activity[up])
+    for i in range(rate.shape[0]):
+        k = params.generator_line[i]
+        priced = params.revision_rate[i]
+        if k < 0:
+            rate[i] = priced
+        else:
+            h = activity[k]
+            rate[i] = priced ** h * params.idle_rate[i] ** (1.0 - h)
+
+
+@nb.njit(cache=True, inline="always")
 def region_weight(own, below):
     """Inverse weight ``1 / w`` of a region of the active tree: generators below its line over
     those in the region itself (1 for a line without active lines below it)."""
@@ -559,9 +607,11 @@ def scaled_line_signals(p, z, params, minute, work, signal, z_rate):
 
 @nb.njit(cache=True)
 def scaled_payoff(p, z, params, minute, work, fitness, z_rate):
-    """:func:`payoff` with the scaled price law (:func:`scaled_line_signals`)."""
+    """:func:`payoff` with the scaled price law (:func:`scaled_line_signals`) and, where the
+    engine gives idle rates, the revision rates following the lines (:func:`rates_in_force`)."""
     congestion, residual = scaled_line_signals(p, z, params, minute, work, fitness, z_rate)
     marginal_costs_into(p, params, fitness)
+    rates_in_force(z, params, work)
     return congestion, residual
 
 
@@ -585,19 +635,23 @@ def tree_payoff(p, z, params, minute, work, fitness, z_rate):
 
 @nb.njit(cache=True)
 def pinned_payoff(p, z, params, minute, work, fitness, z_rate):
-    """:func:`payoff` with the pinned lines' prices hastened (:func:`hasten_pinned`): the
+    """:func:`payoff` with the pinned lines' prices hastened (:func:`hasten_pinned`) and, on
+    the complete graph, the revision rates following the lines (:func:`rates_in_force`): the
     engine's kernel with adaptive steps on a feeder with limited lines."""
     congestion, residual = line_signals(p, z, params, minute, work, fitness, z_rate)
     marginal_costs_into(p, params, fitness)
+    rates_in_force(z, params, work)
     hasten_pinned(p, z, params, minute, work, z_rate)
     return congestion, residual
 
 
 @nb.njit(cache=True)
 def pinned_tree_payoff(p, z, params, minute, work, fitness, z_rate):
-    """:func:`tree_payoff` with the pinned lines' prices hastened (:func:`hasten_pinned`)."""
+    """:func:`tree_payoff` with the pinned lines' prices hastened (:func:`hasten_pinned`) and
+    the revision rates following the lines (:func:`rates_in_force`)."""
     congestion, residual = tree_line_signals(p, z, params, minute, work, fitness, z_rate)
     marginal_costs_into(p, params, fitness)
+    rates_in_force(z, params, work)
     hasten_pinned(p, z, params, minute, work, z_rate)
     return congestion, residual
 

@@ -52,15 +52,18 @@ class Engine:
         pinned_speed = settings.engine_pinned_speed(problem)
         tag = mode_tag(self.mode.code, settings.exact.price_law, problem.meshed, pinned_speed > 0)
         rates = settings.engine_revision_rates(problem)
-        self.term = Term.of(field, tag, *self._graph(), rates, settings.engine_held_relays(problem))
+        complete, indptr, indices = self._graph()
+        held = settings.engine_held_relays(problem)
+        self.term = Term.of(field, tag, complete, indptr, indices, rates, held)
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
-        self.params = GameParameters.of(problem, self.constants, rates, pinned_speed)
+        idle = settings.engine_idle_rates(problem, complete)
+        self.params = GameParameters.of(problem, self.constants, rates, pinned_speed, idle)
         self.z = np.zeros(self.mode.controller_states(problem))
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         integrator = settings.stepping
         self.ws = workspace(
-            problem.n_generators, len(problem.limit), len(self.z), integrator.window
+            problem.n_generators, len(problem.limit), len(self.z), integrator.window, len(idle) > 0
         )
         self.h_try = integrator.dt
 
