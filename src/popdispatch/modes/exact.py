@@ -480,12 +480,13 @@ def rates_in_force(z, params, work):
         activity[k] = a if up < 0 else max(a, activity[up])
     for i in range(rate.shape[0]):
         k = params.generator_line[i]
-        priced = params.revision_rate[i]
-        if k < 0:
-            rate[i] = priced
+        h = activity[k] if k >= 0 else 1.0
+        if h >= 1.0:
+            rate[i] = params.revision_rate[i]
+        elif h <= 0.0:
+            rate[i] = params.idle_rate[i]
         else:
-            h = activity[k]
-            rate[i] = priced ** h * params.idle_rate[i] ** (1.0 - h)
+            rate[i] = params.revision_rate[i] ** h * params.idle_rate[i] ** (1.0 - h)
 
 
 @nb.njit(cache=True, inline="always")
