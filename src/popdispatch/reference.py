@@ -268,8 +268,7 @@ class ReferenceMinute:
         )
         self.integrator = settings.stepping
         self.rate = settings.engine_revision_rates(problem)
-        complete = not dynamics.uses_graph or settings.graph == "complete"
-        self.idle_rate = settings.engine_idle_rates(problem, complete)
+        self.idle_rate = settings.engine_idle_rates(problem)
         self.slow = slow_members(self.rate, self.graph) | settings.engine_held_relays(problem)
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         self.pinned_speed = settings.engine_pinned_speed(problem)

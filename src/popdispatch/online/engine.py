@@ -57,7 +57,7 @@ class Engine:
         self.term = Term.of(field, tag, complete, indptr, indices, rates, held)
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
-        idle = settings.engine_idle_rates(problem, complete)
+        idle = settings.engine_idle_rates(problem)
         self.params = GameParameters.of(problem, self.constants, rates, pinned_speed, idle)
         self.z = np.zeros(self.mode.controller_states(problem))
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
@@ -127,7 +127,7 @@ class Engine:
     def _graph(self) -> tuple[bool, np.ndarray, np.ndarray]:
         """``(complete?, indptr, indices)`` of the communication graph (CSR)."""
         names = list(self.problem.generators)
-        if not self.dynamics.uses_graph or self.settings.graph == "complete":
+        if self.settings.complete_graph:
             communication_graph("complete", names)  # validates the names
             empty = np.zeros(0, dtype=np.int64)
             return True, empty, empty
