@@ -33,6 +33,7 @@ import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
+from popdispatch.dynamics.pairwise import slow_relays
 from popdispatch.feeder import Feeder
 from popdispatch.feeder.generators import make_fleet
 from popdispatch.feeder.profiles import single_minute_profiles
@@ -288,6 +289,33 @@ def test_a_generator_below_an_idle_line_trades_at_its_own_rate(law):
     iterations under every law. With adaptive steps on the complete graph its rate follows
     the line (modes/exact.py ``rates_in_force``)."""
     _check(random_fleet_problem(3156973452, 4, 1), law)
+
+
+#: The idle-line fleet's graph as the property test drew it (a star around G12), and a
+#: fleet whose generator G1 is slow only by its rates while its line is idle (``(seed,
+#: generators, limits, edges)``).
+IDLE_LINE_GRAPH = [("G1", "G12"), ("G10", "G12"), ("G2", "G12")]
+SLOW_WHEN_IDLE = (2507391264, 4, 1, [("G1", "G10"), ("G1", "G7"), ("G5", "G10")])
+
+
+def test_a_generator_below_an_idle_line_trades_at_its_own_rate_on_a_graph():
+    """The idle-line fleet with distributed Smith on its drawn star took 590 iterations with
+    static rates; its rates follow the line on a graph too."""
+    problem = random_fleet_problem(3156973452, 4, 1)
+    _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(IDLE_LINE_GRAPH))
+
+
+def test_a_generator_slow_while_its_line_is_idle_relays():
+    """Following the lines on a graph with the relays chosen by the priced rates alone took
+    this fleet 378 iterations: a generator slow against its neighbours' idle rates relays
+    too (dynamics/pairwise.py ``graph_of``)."""
+    seed, n_gens, n_limits, edges = SLOW_WHEN_IDLE
+    problem = random_fleet_problem(seed, n_gens, n_limits)
+    settings_ = RunSettings(mode="exact", dynamics="distributed-smith", graph=nx.Graph(edges))
+    graph = Engine(problem, settings_).term.graph
+    by_price = slow_relays(settings_.engine_revision_rates(problem), graph.indptr, graph.indices)
+    assert (graph.slow & ~by_price & ~settings_.engine_held_relays(problem)).any()
+    _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(edges))
 
 
 @pytest.mark.parametrize("dynamics", ["smith", "distributed-smith"])

@@ -17,7 +17,7 @@ from __future__ import annotations
 import networkx as nx
 import numpy as np
 
-from popdispatch.dynamics import Kernel, communication_graph, get_dynamics
+from popdispatch.dynamics import Kernel, communication_graph
 from popdispatch.dynamics.fields import field_tag, law_of
 from popdispatch.dynamics.pairwise import NEAR_LIMIT, RELAY_MASS, SLOW_RELAY
 from popdispatch.game.fitness import FitnessParameters, generator_fitness
@@ -253,11 +253,9 @@ class ReferenceMinute:
         self.fp = settings.game_constants(problem)  # EUR/MW (exact mode: scaled)
         self.price_scale = settings.price_scale(problem)
         self.mode = get_mode(settings.mode)
-        dynamics = get_dynamics(settings.dynamics)
         self.tag = settings.field_tag(problem)
         self.law = law_of(self.tag)
-        kind = settings.graph if dynamics.uses_graph else "complete"
-        self.graph = communication_graph(kind, list(problem.generators))
+        self.graph = communication_graph(settings.trading_graph, list(problem.generators))
         self.sparse = not (self.graph + np.eye(len(problem.generators)) > 0).all()
         inputs = MinuteInputs.of(problem, minute)
         self.active, self.demand, self.lo, self.hi = (
@@ -270,6 +268,8 @@ class ReferenceMinute:
         self.rate = settings.engine_revision_rates(problem)
         self.idle_rate = settings.engine_idle_rates(problem)
         self.slow = slow_members(self.rate, self.graph) | settings.engine_held_relays(problem)
+        if len(self.idle_rate):  # slow by either rate relays (dynamics/pairwise.py graph_of)
+            self.slow |= slow_members(self.idle_rate, self.graph)
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         self.pinned_speed = settings.engine_pinned_speed(problem)
 

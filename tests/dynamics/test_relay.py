@@ -268,6 +268,21 @@ def test_a_generator_ten_times_slower_than_a_neighbour_relays_by_rate():
     assert not slow_relays(np.full(4, 3.0), indptr, indices).any()
 
 
+def test_a_generator_slow_by_either_of_its_rates_relays():
+    """Where the rates in force move between the priced and the idle ones, a generator slow
+    by either relays: path 0-1-2, priced rates (10, 0.5, 10) make 1 slow, idle rates (1, 20,
+    10) make 0 slow (1 against 20); with both, 0 and 1 relay. The complete graph has none."""
+    from popdispatch.dynamics.pairwise import graph_of
+
+    indptr, indices = csr(nx.path_graph(3), 3)
+    priced, idle = np.array([10.0, 0.5, 10.0]), np.array([1.0, 20.0, 10.0])
+    assert graph_of(False, indptr, indices, priced).slow.tolist() == [False, True, False]
+    assert graph_of(False, indptr, indices, idle).slow.tolist() == [True, False, False]
+    both = graph_of(False, indptr, indices, priced, idle_rate=idle)
+    assert both.slow.tolist() == [True, True, False]
+    assert graph_of(True, indptr, indices, priced, idle_rate=idle).slow.size == 0
+
+
 def test_the_generators_a_line_holds_relay_in_exact_mode_on_a_sparse_graph():
     """Exact mode's engine relays, besides the generators slow by rate, every generator below
     a limited line (its ``generator_line``); paper mode none; the complete graph has no relay."""

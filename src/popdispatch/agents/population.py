@@ -34,7 +34,7 @@ from popdispatch.agents.system import (
 )
 from popdispatch.agents.world import WorldOptions, WorldRun, run_world
 from popdispatch.constants import KW_PER_MW
-from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.dynamics import communication_graph
 from popdispatch.dynamics.pairwise import slow_relays
 from popdispatch.errors import OptionError
 from popdispatch.game.controllers import NodeControllers
@@ -255,9 +255,7 @@ def game_constants(problem: DispatchProblem, settings: RunSettings):
 def generator_graph(problem: DispatchProblem, settings: RunSettings) -> nx.Graph:
     """The communication graph over generator names (complete for dynamics without one)."""
     names = list(problem.generators)
-    dynamics = get_dynamics(settings.dynamics)
-    kind = settings.graph if dynamics.uses_graph else "complete"
-    adjacency = communication_graph(kind, names)
+    adjacency = communication_graph(settings.trading_graph, names)
     return nx.relabel_nodes(nx.from_numpy_array(adjacency), dict(enumerate(names)))
 
 

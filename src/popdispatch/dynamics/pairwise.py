@@ -52,16 +52,20 @@ class SparseGraph(Graph):
 
 
 def graph_of(complete: bool, indptr: np.ndarray, indices: np.ndarray,
-             rate: np.ndarray | None = None, held: np.ndarray | None = None) -> Graph:  # fmt: skip
+             rate: np.ndarray | None = None, held: np.ndarray | None = None,
+             idle_rate: np.ndarray | None = None) -> Graph:  # fmt: skip
     """The graph record: complete, else the CSR adjacency ``indptr``, ``indices`` (int64) with
-    the strategies that relay always: by their revision rates ``rate`` (:func:`slow_relays`;
-    none without rates) and those of ``held`` (bool; the mode's choice,
-    :meth:`popdispatch.modes.mechanism.Mode.held_relays`)."""
+    the strategies that relay always: by their revision rates ``rate`` or, where the rates in
+    force move between ``rate`` and ``idle_rate`` (:func:`popdispatch.modes.exact.rates_in_force`),
+    by either (:func:`slow_relays`; none without rates), and those of ``held`` (bool; the
+    mode's choice, :meth:`popdispatch.modes.mechanism.Mode.held_relays`)."""
     if complete:
         return CompleteGraph(indptr, indices, np.zeros(0, dtype=np.bool_))
     n = len(indptr) - 1
-    slow = np.zeros(n, dtype=np.bool_) if rate is None or len(rate) != n else \
-        slow_relays(np.asarray(rate, dtype=float), indptr, indices)  # fmt: skip
+    slow = np.zeros(n, dtype=np.bool_)
+    for rates in (rate, idle_rate):
+        if rates is not None and len(rates) == n:
+            slow |= slow_relays(np.asarray(rates, dtype=float), indptr, indices)
     if held is not None and len(held) == n:
         slow = slow | np.asarray(held, dtype=np.bool_)
     return SparseGraph(indptr, indices, slow)

@@ -46,15 +46,17 @@ class Term(NamedTuple):
 
     @classmethod
     def of(cls, field: Field | tuple, mode, complete: bool, indptr, indices,
-           rate=None, held=None) -> Term:  # fmt: skip
+           rate=None, held=None, idle_rate=None) -> Term:  # fmt: skip
         """The term of ``field`` (a :class:`~popdispatch.dynamics.fields.Field` whose law takes
         no parameters, or its record, :meth:`popdispatch.online.RunSettings.field_tag`) and the
         mode's record ``mode`` (a :class:`~popdispatch.modes.mechanism.ModeTag`:
         :func:`popdispatch.modes.mode_tag`) on the complete graph, else on the graph of CSR
         adjacency ``indptr``, ``indices`` (``rate``: the revision rates, which say who relays
         by rate: :func:`~popdispatch.dynamics.pairwise.slow_relays`; ``held``: who else relays
-        always, bool per strategy)."""
-        return cls(field_tag(field), mode, graph_of(complete, indptr, indices, rate, held))
+        always, bool per strategy; ``idle_rate``: the rates while the lines above are idle,
+        where the rates follow the lines)."""
+        graph = graph_of(complete, indptr, indices, rate, held, idle_rate)
+        return cls(field_tag(field), mode, graph)
 
     @property
     def complete(self) -> bool:

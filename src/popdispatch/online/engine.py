@@ -54,10 +54,10 @@ class Engine:
         rates = settings.engine_revision_rates(problem)
         complete, indptr, indices = self._graph()
         held = settings.engine_held_relays(problem)
-        self.term = Term.of(field, tag, complete, indptr, indices, rates, held)
+        idle = settings.engine_idle_rates(problem)
+        self.term = Term.of(field, tag, complete, indptr, indices, rates, held, idle)
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
-        idle = settings.engine_idle_rates(problem)
         self.params = GameParameters.of(problem, self.constants, rates, pinned_speed, idle)
         self.z = np.zeros(self.mode.controller_states(problem))
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf

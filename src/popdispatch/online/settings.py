@@ -253,24 +253,30 @@ class RunSettings:
                               priced_generators(problem), self.exact.free_rate_cap)  # fmt: skip
 
     @property
+    def trading_graph(self) -> str | nx.Graph:
+        """The communication graph the generators trade on: :attr:`graph` under a dynamic
+        that takes one, else ``"complete"`` (a kind or a graph, as
+        :func:`popdispatch.dynamics.communication_graph` takes it)."""
+        return self.graph if get_dynamics(self.dynamics).uses_graph else "complete"
+
+    @property
     def complete_graph(self) -> bool:
         """Do the generators trade on the complete graph (the dynamic takes no graph, or the
         graph is ``"complete"``)?"""
-        return not get_dynamics(self.dynamics).uses_graph or self.graph == "complete"
+        graph = self.trading_graph
+        return isinstance(graph, str) and graph == "complete"
 
     def engine_idle_rates(self, problem: DispatchProblem) -> np.ndarray:
         """The revision rates the engine gives a generator while every limited line above it
         is idle (dimensionless; empty: the rates do not follow the lines): in exact mode with
-        adaptive steps, limited lines on a radial feeder and the curvature-scaled field on the
-        complete graph (:attr:`complete_graph`), the rate of a generator below no priced row,
-        ``free_rate_cap`` for a quadratic one
-        (:func:`popdispatch.modes.exact.rates_in_force`). On a communication graph the rates
-        stay static: who relays by rate is fixed for the run
-        (:func:`~popdispatch.dynamics.pairwise.slow_relays`), and following the lines there
-        took one random fleet from 37 to 378 iterations."""
-        if not (self.complete_graph and self.adaptive and self.mode == "exact"
-                and len(problem.limit) and not problem.meshed
-                and self.field == Field.CAPACITY_NEWTON):  # fmt: skip
+        adaptive steps, limited lines on a radial feeder and the curvature-scaled field, the
+        rate of a generator below no priced row, ``free_rate_cap`` for a quadratic one
+        (:func:`popdispatch.modes.exact.rates_in_force`). On a communication graph a
+        generator slow by either set of rates relays always
+        (:func:`~popdispatch.dynamics.pairwise.graph_of`): who relays is fixed for the run
+        while its rates move between the two."""
+        if not (self.adaptive and self.mode == "exact" and len(problem.limit)
+                and not problem.meshed and self.field == Field.CAPACITY_NEWTON):  # fmt: skip
             return np.zeros(0)
         from popdispatch.dynamics.newton import revision_rates
         from popdispatch.modes.exact import scales

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from popdispatch.dynamics import communication_graph, get_dynamics
+from popdispatch.dynamics import communication_graph
 from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import STABLE_STEP
 from popdispatch.modes import get_mode
@@ -85,8 +85,7 @@ def round_step(problem: DispatchProblem, settings: RunSettings, minute: int) -> 
 def _fan(problem: DispatchProblem, settings: RunSettings) -> int:
     """The most receivers a sender's weights sum over: 1 on the complete graph, else the
     communication graph's largest degree plus one."""
-    kind = settings.graph if get_dynamics(settings.dynamics).uses_graph else "complete"
-    adjacency = communication_graph(kind, [str(g) for g in problem.generators])
+    adjacency = communication_graph(settings.trading_graph, [str(g) for g in problem.generators])
     n = len(adjacency)
     if (adjacency + np.eye(n) > 0).all():
         return 1
