@@ -39,7 +39,7 @@ GAIN, WEIGHT, PRICE_RATE = 1000.0, 2.5, 1500.0
 #: (docs/exact-mode.md, "Revision rates").
 NEWTON_GAIN, NEWTON_PRICE_RATE, NEWTON_RATE_CAP = 300.0, 3000.0, 10.0
 #: The cap of the revision rate of a quadratic generator whose output moves no priced row, in
-#: the adaptive engine on the complete graph (dynamics/newton.py): measured on the random
+#: the adaptive engine (dynamics/newton.py): measured on the random
 #: fleets and the ELV congestion minute (docs/exact-mode.md, "Revision").
 NEWTON_FREE_RATE_CAP = 1000.0
 #: Pinned lines (docs/exact-mode.md, "Pinned lines"): with adaptive steps, under the plain
@@ -636,9 +636,9 @@ def tree_payoff(p, z, params, minute, work, fitness, z_rate):
 
 @nb.njit(cache=True)
 def pinned_payoff(p, z, params, minute, work, fitness, z_rate):
-    """:func:`payoff` with the pinned lines' prices hastened (:func:`hasten_pinned`) and, on
-    the complete graph, the revision rates following the lines (:func:`rates_in_force`): the
-    engine's kernel with adaptive steps on a feeder with limited lines."""
+    """:func:`payoff` with the pinned lines' prices hastened (:func:`hasten_pinned`) and the
+    revision rates following the lines (:func:`rates_in_force`): the engine's kernel with
+    adaptive steps on a feeder with limited lines."""
     congestion, residual = line_signals(p, z, params, minute, work, fitness, z_rate)
     marginal_costs_into(p, params, fitness)
     rates_in_force(z, params, work)
