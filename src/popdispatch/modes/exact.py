@@ -429,13 +429,19 @@ def hasten_pinned(p, z, params, minute, work, z_rate):
                        minute.lo, minute.hi, minute.demand, inside, at_low, at_high):  # fmt: skip
         return
     for k in range(n_lines):
+        up = params.line_up[k]
+        pinned = inside[k] == 0.0 and at_low[k] + at_high[k] > 0.0
+        # a pair: generators below inside, none between inside, some between at a limit
+        pair = (up >= 0 and inside[k] > 0.0 and inside[up] == inside[k]
+                and at_low[up] + at_high[up] > at_low[k] + at_high[k])  # fmt: skip
+        if not (pinned or pair):
+            continue
         for side, sign in ((0, 1.0), (n_lines, -1.0)):  # the up and down prices
             excess = sign * work.flow[k] - params.limit[k]
-            if inside[k] == 0.0 and at_low[k] + at_high[k] > 0.0:
+            if pinned:
                 own = params.price_rate * excess
                 z_rate[side + k] += hastened(own, speed) - own
-            up = params.line_up[k]
-            if up < 0 or inside[k] == 0.0 or inside[up] != inside[k]:
+            if not pair:
                 continue
             gap = 0.5 * params.price_rate * (sign * work.flow[up] - params.limit[up] - excess)
             gain = pair_gain(gap, sign, at_low[up] - at_low[k], at_high[up] - at_high[k],
