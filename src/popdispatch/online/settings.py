@@ -241,8 +241,8 @@ class RunSettings:
         quadratic generator adds at most ``S / P`` to the field's fastest rate whatever its
         rate; far from rest a flat generator's fast moves are resolved by the adaptive steps,
         not by fixed ones. On a communication graph as on the complete graph: capped at
-        ``rate_cap``, two flat neighbours on a path met at a few % per iteration (2,246
-        iterations on a random fleet, 20 at ``free_rate_cap``)."""
+        ``rate_cap``, two flat neighbours on a path meet at a few % per iteration
+        (docs/exact-mode.md, "Random fleets")."""
         capped = self.revision_rates(problem)
         if not (self.adaptive and len(capped)):
             return capped
