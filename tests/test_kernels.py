@@ -224,10 +224,12 @@ def test_reference_agrees_on_random_limited_feeders(seed, dynamics, eta):
 def pinned_prices(seed: int, iterations: int) -> tuple[np.ndarray, np.ndarray]:
     """The line prices after ``iterations`` of exact mode on random fleet ``seed`` (5
     generators, 2 limits; tests/test_fleets.py), the engine's and the plain-numpy reference's
-    from the engine's first state, after comparing their trajectories."""
+    from the engine's first state, after comparing their trajectories over those
+    iterations."""
     problem = random_fleet_problem(seed, 5, 2)
     settings = RunSettings(mode="exact")
-    compare(problem, settings, 1, 8, atol=1e-6, min_rows=4, stop_slack=2)
+    compare(problem, settings, 1, iterations, atol=1e-6, min_rows=min(iterations + 1, 4),
+            stop_slack=2)
     engine = Engine(problem, settings)
     run = engine.run_minute(initial_shares(problem, settings.x0, 1), 1,
                             max_iterations=iterations)  # fmt: skip
@@ -239,9 +241,12 @@ def pinned_prices(seed: int, iterations: int) -> tuple[np.ndarray, np.ndarray]:
 
 def test_a_pinned_lines_prices_equal_the_numpy_reference():
     """A line overflowed by 2.4 W with both generators below it at 0: its price climbs to
-    21.8 EUR/MWh at the pinned lines' least speed in a few iterations (at its rate times the
-    overflow: over 600), the same in both."""
-    z, z_ref = pinned_prices(4195038496, 4)
+    21.8 EUR/MWh at the pinned lines' least speed within the first iteration (at its rate
+    times the overflow: over 600), the same in both. Two iterations: from the third the
+    reference's steps fall to 1e-8 s (a generator 2.35 W above its Pmin below the line
+    flips it between pinned and not; 1.2 million evaluations, minutes in numpy), where the
+    engine's do not (docs/exact-mode.md, "Known limits")."""
+    z, z_ref = pinned_prices(4195038496, 2)
     assert z[0] > 20.0
     np.testing.assert_allclose(z, z_ref, rtol=1e-6, atol=1e-6)
 
