@@ -74,23 +74,20 @@ def run_classes(settings: RunSettings, limited: bool = True) -> set[type] | None
     """The record classes that select the compiled kernels of a run with ``settings`` (as
     :class:`~popdispatch.online.engine.Engine` builds them) on a radial feeder with
     (``limited``) or without limited lines, None for settings that cannot run."""
-    from popdispatch.dynamics import get_dynamics
     from popdispatch.dynamics.fields import law_of
     from popdispatch.dynamics.pairwise import CompleteGraph, SparseGraph
     from popdispatch.integrate.steppers import method_tag
     from popdispatch.modes import get_mode, mode_tag
 
     mode = get_mode(settings.mode)
-    dynamics = get_dynamics(settings.dynamics)
     field = settings.field
     if field is None:
         return None
-    complete = not dynamics.uses_graph or settings.graph == "complete"
     return {
         law_of(field).tag,
         type(mode_tag(mode.code, settings.exact.price_law,
                       pinned=limited and settings.hastens_pinned_lines)),
-        CompleteGraph if complete else SparseGraph,
+        CompleteGraph if settings.complete_graph else SparseGraph,
         type(method_tag(settings.stepping.method_code)),
     }  # fmt: skip
 
