@@ -134,18 +134,19 @@ def rates_in_force(problem: DispatchProblem, minute: int, p, z, C: float, rate, 
     return np.where(below.any(axis=0), rate**hot * idle_rate ** (1.0 - hot), rate)
 
 
-def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, price_rate: float,
-                 speed: float):  # fmt: skip
+def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, price_rate,
+                 speed: float, pinned_lines: bool = True):  # fmt: skip
     """The line prices' rates ``z_rate`` (both directions, EUR/MW per s, at prices ``z``) plus
     the gains of the pinned lines and pairs: a line with generators below it that can trade,
     none more than ``PINNED_MARGIN`` of its range inside its limits, gains on each price what
-    raises its own plain rate ``price_rate * excess`` to ``speed`` in magnitude; a line and the
-    nearest limited line above it, with some generators below the lower one inside and those
-    between able to trade, none inside, each at the limit the gain pushes it into (an up
-    price's gain raises their fitness, a down price's lowers it), gain the same on half the
-    gap of their excesses, added to the upper price and taken from the lower while the price
-    it lowers is positive, by at most that price over ``PINNED_SETTLE``; each gain by at most
-    ``PINNED_BOOST`` times."""
+    raises its own plain rate ``price_rate * excess`` to ``speed`` in magnitude (unless not
+    ``pinned_lines``: the scaled law's); a line and the nearest limited line above it, with some
+    generators below the lower one inside and those between able to trade, none inside, each
+    at the limit the gain pushes it into (an up price's gain raises their fitness, a down
+    price's lowers it), gain the same on half the gap of their rates ``price_rate * excess``,
+    added to the upper price and taken from the lower while the price it lowers is positive,
+    by at most that price over ``PINNED_SETTLE``; each gain by at most ``PINNED_BOOST`` times.
+    ``price_rate``: one value, or one per price (the scaled law's ``alpha s_k``)."""
     inputs = MinuteInputs.of(problem, minute)
     low, high = inputs.lo * inputs.demand, inputs.hi * inputs.demand
     margin = PINNED_MARGIN * (high - low)
@@ -165,15 +166,16 @@ def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, pr
                               1.0)  # fmt: skip
         return rate * (factor - 1.0)
 
-    pinned = np.tile((inside == 0) & (at_low + at_high > 0), 2)
-    z_rate = z_rate + np.where(pinned, gain(price_rate * excess), 0.0)
+    pinned = np.tile((inside == 0) & (at_low + at_high > 0), 2) & pinned_lines
+    own = np.broadcast_to(price_rate, excess.shape) * excess
+    z_rate = z_rate + np.where(pinned, gain(own), 0.0)
     lower = np.flatnonzero(problem.line_up >= 0)
     upper = problem.line_up[lower]
     pair = (inside[lower] >= 1) & (inside[upper] == inside[lower])
     lows, highs = (at_low[upper] - at_low[lower])[pair], (at_high[upper] - at_high[lower])[pair]
     for side, sign in ((0, 1.0), (lines, -1.0)):
         low_row, up_row = side + lower[pair], side + upper[pair]
-        gap = 0.5 * price_rate * (excess[up_row] - excess[low_row])
+        gap = 0.5 * (own[up_row] - own[low_row])
         held = (lows + highs > 0) & np.where(gap * sign > 0, lows == 0, highs == 0)
         lowered = np.where(gap > 0, z[low_row], z[up_row])
         cap = lowered / PINNED_SETTLE

@@ -85,12 +85,13 @@ def test_tree_rates_equal_the_dense_preconditioner(problem, seed):
 def test_run_settings_carry_the_law_to_the_engine(problem):
     """``RunSettings.exact.price_law`` reaches the engine as its term's compile-time mode
     record (a choice of kernel, so a run compiles only its own law); paper mode has no line
-    prices and keeps its record. With limited lines and adaptive steps the plain and tree
-    laws' kernels hasten the pinned lines (modes/exact.py ``hasten_pinned``); with fixed
-    steps they do not."""
+    prices and keeps its record. With limited lines and adaptive steps the laws' kernels
+    hasten the pinned lines or pairs (modes/exact.py ``hasten_pinned``); with fixed steps
+    they do not."""
     from popdispatch.integrate import Integrator
     from popdispatch.modes.exact import (
         ExactPinnedTag,
+        ExactScaledPinnedTag,
         ExactScaledTag,
         ExactTag,
         ExactTreePinnedTag,
@@ -103,7 +104,7 @@ def test_run_settings_carry_the_law_to_the_engine(problem):
     euler = Integrator(method="euler")
     for law, adaptive, fixed in [("plain", ExactPinnedTag, ExactTag),
                                  ("tree", ExactTreePinnedTag, ExactTreeTag),
-                                 ("scaled", ExactScaledTag, ExactScaledTag)]:  # fmt: skip
+                                 ("scaled", ExactScaledPinnedTag, ExactScaledTag)]:  # fmt: skip
         settings = RunSettings(mode="exact", exact=ExactConstants(price_law=law))
         assert type(Engine(problem, settings).term.mode) is adaptive
         settings = RunSettings(mode="exact", exact=ExactConstants(price_law=law), integrator=euler)

@@ -60,8 +60,9 @@ class LinePrice:
             generator_line=np.array([-1, 0], dtype=np.int64),
             line_up=np.array([-1], dtype=np.int64), line_preorder=np.array([0], dtype=np.int64),
         )  # fmt: skip
-        self.minute = MinuteInputs(1.0, np.zeros(1), two, two, np.ones(2, dtype=np.bool_))
-        self.work = GameWork.empty(1)
+        self.minute = MinuteInputs(1.0, np.zeros(1), two, two, np.ones(2, dtype=np.bool_),
+                                   np.zeros(1))  # fmt: skip
+        self.work = GameWork.empty(1, 0, 2)
         self.p = np.zeros(2)
         self.values = np.zeros(2)
         self.z = np.zeros(n_states)

@@ -115,14 +115,16 @@ class MinuteInputs(NamedTuple):
     """What changes from minute to minute: demand (MW), the loads-only flow of each limited
     line (MW; then the voltage rows' loads-only excesses, see
     :attr:`~popdispatch.game.problem.DispatchProblem.load_flow`), the share bounds
-    ``lo``/``hi`` (``Pmin / P_d``, ``Pmax / P_d`` online, 0 offline) and the online
-    generators."""
+    ``lo``/``hi`` (``Pmin / P_d``, ``Pmax / P_d`` online, 0 offline), the online
+    generators and, per limited line, how many online generators with room to trade
+    (``hi > lo``) are below it (:func:`tradable_below`; a count, as a float)."""
 
     demand: float
     load_flow: np.ndarray
     lo: np.ndarray
     hi: np.ndarray
     active: np.ndarray
+    below: np.ndarray
 
     @classmethod
     def of(cls, problem: DispatchProblem, minute: int) -> MinuteInputs:
@@ -133,7 +135,10 @@ class MinuteInputs(NamedTuple):
         lo, hi = np.empty(n), np.empty(n)
         active = problem.online[row]
         share_bounds(problem.pmin, problem.pmax, active, demand, lo, hi)
-        return cls(demand, problem.load_flow[row], lo, hi, active)
+        below = np.empty(problem.line_up.shape[0])
+        tradable_below(problem.generator_line, problem.line_up, problem.line_preorder, lo, hi,
+                       below)  # fmt: skip
+        return cls(demand, problem.load_flow[row], lo, hi, active, below)
 
 
 @nb.njit(cache=True, inline="always")
@@ -145,18 +150,46 @@ def share_bounds(pmin, pmax, active, demand, lo, hi):
         hi[i] = pmax[i] / demand if active[i] else 0.0
 
 
+@nb.njit(cache=True)
+def tradable_below(generator_line, line_up, preorder, lo, hi, below):
+    """Per limited line, the online generators with room to trade (``hi > lo``) below it,
+    into ``below`` (counts, as floats); ``generator_line``, ``line_up`` and ``preorder`` as in
+    :class:`~popdispatch.game.problem.DispatchProblem`."""
+    below[:] = 0.0
+    for i in range(generator_line.shape[0]):
+        k = generator_line[i]
+        if k >= 0 and hi[i] > lo[i]:
+            below[k] += 1.0
+    for r in range(preorder.shape[0] - 1, -1, -1):
+        k = preorder[r]
+        if line_up[k] >= 0:
+            below[line_up[k]] += below[k]
+
+
 class GameWork(NamedTuple):
     """Scratch of one game evaluation, one value per limited line: flows (MW), the values sent
     to the parent and child sides of each line, path sums of the broadcast; and, for a game
     whose revision rates follow its state, the rates in force, one per generator
-    (dimensionless; empty otherwise, the field then reads the parameters' own)."""
+    (dimensionless; empty otherwise, the field then reads the parameters' own).
+
+    Kept from one evaluation to the next (exact mode's pinned lines, modes/exact.py
+    ``count_at_limits``): each generator's limit state (-1 at its lower limit, +1 at its
+    upper, 0 inside them or not counted) and, per limited line, how many generators below it
+    are at their lower and at their upper limit; all zero to start with (a consistent state),
+    and changed only where a generator's state changes."""
 
     flow: np.ndarray
     parent_side: np.ndarray
     child_side: np.ndarray
     path: np.ndarray
     rate: np.ndarray
+    limit_state: np.ndarray
+    at_low: np.ndarray
+    at_high: np.ndarray
 
     @classmethod
-    def empty(cls, n_lines: int, n_rates: int = 0) -> GameWork:
-        return cls(*(np.zeros(n_lines) for _ in range(4)), np.zeros(n_rates))
+    def empty(cls, n_lines: int, n_rates: int = 0, n_generators: int = 0) -> GameWork:
+        """Scratch for ``n_lines`` limited lines, ``n_rates`` rates in force and the limit
+        states of ``n_generators`` generators (0 for a game that counts none)."""
+        return cls(*(np.zeros(n_lines) for _ in range(4)), np.zeros(n_rates),
+                   np.zeros(n_generators), np.zeros(n_lines), np.zeros(n_lines))  # fmt: skip

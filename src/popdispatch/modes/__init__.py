@@ -42,7 +42,8 @@ TAGS: dict[ModeCode, dict[PriceLaw, type]] = {
 #: and tree laws; modes/exact.py ``hasten_pinned``): the engine's kernels with adaptive steps
 #: on a radial feeder with limited lines.
 PINNED_TAGS: dict[PriceLaw, type] = {PriceLaw.PLAIN: exact.ExactPinnedTag,
-                                     PriceLaw.TREE: exact.ExactTreePinnedTag}  # fmt: skip
+                                     PriceLaw.TREE: exact.ExactTreePinnedTag,
+                                     PriceLaw.SCALED: exact.ExactScaledPinnedTag}  # fmt: skip
 
 #: Each mode's tag class on a meshed network (the plain law only: the tree and scaled laws
 #: read the tree of limited lines).

@@ -330,42 +330,44 @@ def inside_limits(p, low, high):
 
 
 @nb.njit(cache=True, inline="always")
-def count_below(p, generator_line, line_up, preorder, lo, hi, demand, inside, at_low, at_high):
-    """Per limited line, its generators below that can trade (``hi > lo``): how many are
-    strictly inside their limits (:func:`inside_limits`), at their lower and at their upper
-    limit, into ``inside``, ``at_low`` and ``at_high``; ``p`` MW, ``lo``/``hi`` shares of the
-    ``demand`` (MW). Returns whether any generator below a line is at a limit (if none, no
-    line or pair is pinned and the counts are left as they were)."""
-    pinned = False
-    for i in range(generator_line.shape[0]):
-        if generator_line[i] < 0 or not hi[i] > lo[i]:
+def limit_state(p, low, high):
+    """Where ``p`` is in ``[low, high]`` (MW): 0 inside (:func:`inside_limits`), else -1 at
+    the lower limit, +1 at the upper (the nearer one)."""
+    if inside_limits(p, low, high):
+        return 0.0
+    return -1.0 if p - low < high - p else 1.0
+
+
+@nb.njit(cache=True, inline="always")
+def count_at_limits(p, params, minute, work):
+    """Per limited line, its generators below that can trade (``hi > lo``) and are not
+    strictly inside their limits (:func:`limit_state`): how many are at their lower and at
+    their upper limit, in ``work.at_low`` and ``work.at_high``, at set points ``p`` (MW).
+    Kept from the evaluation before (``work.limit_state``): only a generator whose state
+    changed walks its path up the tree of limited lines, so an evaluation costs one pass over
+    the generators. Returns how many generators below a line are at a limit."""
+    state, at_low, at_high = work.limit_state, work.at_low, work.at_high
+    if state.shape[0] != p.shape[0]:
+        raise ValueError("GameWork holds no limit state per generator (GameWork.empty)")
+    lo, hi, demand, line_up = minute.lo, minute.hi, minute.demand, params.line_up
+    held = 0
+    for i in range(p.shape[0]):
+        k = params.generator_line[i]
+        new = 0.0
+        if k >= 0 and hi[i] > lo[i]:
+            new = limit_state(p[i], lo[i] * demand, hi[i] * demand)
+        held += new != 0.0
+        old = state[i]
+        if new == old:
             continue
-        if not inside_limits(p[i], lo[i] * demand, hi[i] * demand):
-            pinned = True
-            break
-    if not pinned:
-        return False
-    inside[:] = 0.0
-    at_low[:] = 0.0
-    at_high[:] = 0.0
-    for i in range(generator_line.shape[0]):
-        k = generator_line[i]
-        if k < 0 or not hi[i] > lo[i]:
-            continue
-        low, high = lo[i] * demand, hi[i] * demand
-        if inside_limits(p[i], low, high):
-            inside[k] += 1.0
-        elif p[i] - low < high - p[i]:
-            at_low[k] += 1.0
-        else:
-            at_high[k] += 1.0
-    for r in range(preorder.shape[0] - 1, -1, -1):
-        k = preorder[r]
-        if line_up[k] >= 0:
-            inside[line_up[k]] += inside[k]
-            at_low[line_up[k]] += at_low[k]
-            at_high[line_up[k]] += at_high[k]
-    return True
+        state[i] = new
+        while k >= 0:  # the generator's path: every limited line above it
+            if old != 0.0:
+                (at_low if old < 0.0 else at_high)[k] -= 1.0
+            if new != 0.0:
+                (at_low if new < 0.0 else at_high)[k] += 1.0
+            k = line_up[k]
+    return held
 
 
 @nb.njit(cache=True, inline="always")
@@ -396,12 +398,12 @@ def pair_gain(gap, sign, lows, highs, lowered, speed):
 
 
 @nb.njit(cache=True, inline="always")
-def hasten_pinned(p, z, params, minute, work, z_rate):
+def hasten_pinned(p, z, params, minute, work, z_rate, scaled=False):
     """The pinned lines' and pairs' prices hastened (docs/exact-mode.md, "Pinned lines"),
-    ``z_rate`` in place at prices ``z`` (EUR/MW) and the flows in ``work.flow``; scratch
-    ``work.path``, ``work.parent_side`` and ``work.child_side`` (the broadcast is done);
-    ``params.pinned_speed`` the least speed (EUR/MW per s; 0: never), each gain at most
-    :data:`PINNED_BOOST` times the rate it raises (:func:`hastened`).
+    ``z_rate`` in place at prices ``z`` (EUR/MW) and the flows in ``work.flow``; the counts
+    at the limits in ``work`` (:func:`count_at_limits`); ``params.pinned_speed`` the least
+    speed (EUR/MW per s; 0: never), each gain at most :data:`PINNED_BOOST` times the rate it
+    raises (:func:`hastened`).
 
     - A *pinned line* (generators below it that can trade, none inside its limits): its
       overflow cannot fall until its price crosses one's marginal cost, so each of its prices
@@ -412,38 +414,50 @@ def hasten_pinned(p, z, params, minute, work, z_rate):
       limited line above it, the generators between them able to trade, none inside, each
       at the limit the pair's gain pushes it into. The generators below the lower line answer
       the sum of the two prices, those between do not move, so the prices' difference moves
-      at half the gap of the lines' excesses, ``alpha (e_up - e_low) / 2``, and nothing answers
-      it: that rate is raised to the speed, added to the upper price and taken from the lower
-      one (the sum's rate unchanged), while the price it lowers is positive.
+      at half the gap of the lines' rates, ``(alpha_up e_up - alpha_low e_low) / 2``, and
+      nothing answers it: that rate is raised to the speed, added to the upper price and
+      taken from the lower one (the sum's rate unchanged), while the price it lowers is
+      positive.
 
-    Neither gain moves a rest point of the plain law: at one, a pinned line's excess is zero,
-    and of a pair's prices the one a nonzero gap lowers is zero (its line is below its
-    limit); nor makes one: with both prices still ``alpha e_up + g = 0 = alpha e_low - g``
-    would need ``g = -gap``, against the gain's sign (docs/exact-mode.md, "Pinned pairs")."""
+    ``scaled``: the scaled law, each line's rate ``alpha s_k`` (:func:`line_rate`), whose
+    pinned lines are not hastened (a generator touching its limit in a transient switched
+    their gain on and off, and the adaptive steps fell to 1e-8 s), its pairs are.
+
+    Neither gain moves a rest point of the plain or scaled law: at one, a pinned line's excess
+    is zero, and of a pair's prices the one a nonzero gap lowers is zero (its line is below
+    its limit); nor makes one: with both prices still ``alpha_up e_up + g = 0 = alpha_low
+    e_low - g`` would need ``g = -gap``, against the gain's sign (docs/exact-mode.md, "Pinned
+    pairs")."""
     speed = params.pinned_speed
     n_lines = params.limit.shape[0]
     if speed == 0.0 or n_lines == 0:
         return
-    inside, at_low, at_high = work.path, work.parent_side, work.child_side
-    if not count_below(p, params.generator_line, params.line_up, params.line_preorder,
-                       minute.lo, minute.hi, minute.demand, inside, at_low, at_high):  # fmt: skip
+    if count_at_limits(p, params, minute, work) == 0:
         return
+    at_low, at_high, below = work.at_low, work.at_high, minute.below
+    total = tradable_count(minute.lo, minute.hi) if scaled else 0.0
     for k in range(n_lines):
         up = params.line_up[k]
-        pinned = inside[k] == 0.0 and at_low[k] + at_high[k] > 0.0
-        # a pair: generators below inside, none between inside, some between at a limit
-        pair = (up >= 0 and inside[k] > 0.0 and inside[up] == inside[k]
-                and at_low[up] + at_high[up] > at_low[k] + at_high[k])  # fmt: skip
+        held = at_low[k] + at_high[k]
+        inside = below[k] - held
+        pinned = not scaled and inside == 0.0 and held > 0.0
+        # a pair: a positive price to lower, generators below inside, none between inside,
+        # some between at a limit
+        pair = (up >= 0 and max(z[k], z[n_lines + k], z[up], z[n_lines + up]) > 0.0
+                and inside > 0.0 and at_low[up] + at_high[up] > held
+                and below[up] - at_low[up] - at_high[up] == inside)  # fmt: skip
         if not (pinned or pair):
             continue
+        rate = line_rate(params.price_rate, below[k], total)
+        rate_up = line_rate(params.price_rate, below[up], total) if pair else 0.0
         for side, sign in ((0, 1.0), (n_lines, -1.0)):  # the up and down prices
             excess = sign * work.flow[k] - params.limit[k]
             if pinned:
-                own = params.price_rate * excess
+                own = rate * excess
                 z_rate[side + k] += hastened(own, speed) - own
             if not pair:
                 continue
-            gap = 0.5 * params.price_rate * (sign * work.flow[up] - params.limit[up] - excess)
+            gap = 0.5 * (rate_up * (sign * work.flow[up] - params.limit[up]) - rate * excess)
             gain = pair_gain(gap, sign, at_low[up] - at_low[k], at_high[up] - at_high[k],
                              z[side + k] if gap > 0.0 else z[side + up], speed)  # fmt: skip
             z_rate[side + up] += gain
@@ -513,14 +527,14 @@ def tree_rates(z, params, minute, work, z_rate):
     subtracts the value of the nearest active line ``a`` above: ``(M eps)_k = g_k / w_k -
     g_a / w_a``. Lines neither priced nor overflowing keep ``z' = price_rate * excess``.
     Scratch: ``work.parent_side`` (direction), ``child_side`` (``g``), ``path`` (nearest
-    active ancestor) and ``z_rate`` itself (generators in each line's region and below it).
+    active ancestor) and ``z_rate`` itself (generators in each line's region; those below
+    it are the minute's ``below``).
     """
     flow, sign, g, above = work.flow, work.parent_side, work.child_side, work.path
     limit, price_rate = params.limit, params.price_rate
     line_up, preorder = params.line_up, params.line_preorder
     n_lines = limit.shape[0]
-    own, below = z_rate[:n_lines], z_rate[n_lines:]
-    tradable_below(params.generator_line, line_up, preorder, minute.lo, minute.hi, below)
+    own, below = z_rate[:n_lines], minute.below
     for r in range(n_lines):  # pre-order: direction, excess, nearest active ancestor
         k = preorder[r]
         s = active_direction(z[k], z[n_lines + k], flow[k] - limit[k], -flow[k] - limit[k])
@@ -553,21 +567,6 @@ def tree_rates(z, params, minute, work, z_rate):
 
 
 @nb.njit(cache=True, inline="always")
-def tradable_below(generator_line, line_up, preorder, lo, hi, below):
-    """Per limited line, the online generators with room to trade (``hi > lo``) below it,
-    into ``below``."""
-    below[:] = 0.0
-    for i in range(generator_line.shape[0]):
-        k = generator_line[i]
-        if k >= 0 and hi[i] > lo[i]:
-            below[k] += 1.0
-    for r in range(preorder.shape[0] - 1, -1, -1):
-        k = preorder[r]
-        if line_up[k] >= 0:
-            below[line_up[k]] += below[k]
-
-
-@nb.njit(cache=True, inline="always")
 def line_scale(below, total):
     """The scaled law's factor of one line, ``N / N_k``: the online tradable generators of the
     fleet over those below the line (1 for a line with none below, whose price moves nothing).
@@ -576,23 +575,36 @@ def line_scale(below, total):
 
 
 @nb.njit(cache=True, inline="always")
+def tradable_count(lo, hi):
+    """The online generators with room to trade (``hi > lo``), the scaled law's ``N``."""
+    total = 0.0
+    for i in range(lo.shape[0]):
+        total += 1.0 if hi[i] > lo[i] else 0.0
+    return total
+
+
+@nb.njit(cache=True, inline="always")
+def line_rate(price_rate, below, total):
+    """A line's price rate (1/s): ``price_rate`` times the scaled law's :func:`line_scale` of
+    its ``below`` tradable generators out of ``total`` (0: the plain and tree laws, no
+    scale)."""
+    return price_rate * line_scale(below, total) if total > 0.0 else price_rate
+
+
+@nb.njit(cache=True, inline="always")
 def scaled_line_signals(p, z, params, minute, work, signal, z_rate):
     """:func:`line_signals` with each line's price rate and augmented-Lagrangian weight
     multiplied by its :func:`line_scale` ``s_k`` and its square root (the scaled law,
     docs/exact-mode.md "Per-line scaling"): ``z' = s_k price_rate excess`` and ``nu = max(0, z+
-    + sqrt(s_k) C e+) - max(0, z- + sqrt(s_k) C e-)``. Scratch: the second half of ``z_rate``
-    holds the tradable generators below each line until the line's own rates overwrite it."""
+    + sqrt(s_k) C e+) - max(0, z- + sqrt(s_k) C e-)``, ``s_k`` from the minute's tradable
+    generators below each line (``minute.below``)."""
     limited_line_flows(minute.load_flow, p, params.generator_line, params.line_up,
                        params.line_preorder, work.flow)  # fmt: skip
     flow, parent_side, child_side = work.flow, work.parent_side, work.child_side
     limit, C, price_rate = params.limit, params.C, params.price_rate
     n_lines = limit.shape[0]
-    below = z_rate[n_lines:]
-    tradable_below(params.generator_line, params.line_up, params.line_preorder, minute.lo,
-                   minute.hi, below)  # fmt: skip
-    total = 0.0
-    for i in range(minute.lo.shape[0]):
-        total += 1.0 if minute.hi[i] > minute.lo[i] else 0.0
+    below = minute.below
+    total = tradable_count(minute.lo, minute.hi)
     congestion = 0.0
     residual = 0.0
     for k in range(n_lines):
@@ -619,6 +631,17 @@ def scaled_payoff(p, z, params, minute, work, fitness, z_rate):
     congestion, residual = scaled_line_signals(p, z, params, minute, work, fitness, z_rate)
     marginal_costs_into(p, params, fitness)
     rates_in_force(z, params, work)
+    return congestion, residual
+
+
+@nb.njit(cache=True)
+def pinned_scaled_payoff(p, z, params, minute, work, fitness, z_rate):
+    """:func:`scaled_payoff` with the pinned pairs' prices hastened (:func:`hasten_pinned`,
+    ``scaled``)."""
+    congestion, residual = scaled_line_signals(p, z, params, minute, work, fitness, z_rate)
+    marginal_costs_into(p, params, fitness)
+    rates_in_force(z, params, work)
+    hasten_pinned(p, z, params, minute, work, z_rate, True)
     return congestion, residual
 
 
@@ -735,3 +758,11 @@ class ExactTreePinnedTag(ModeTag):
 
     __slots__ = ()
     kernel = staticmethod(pinned_tree_payoff)
+
+
+class ExactScaledPinnedTag(ModeTag):
+    """Exact mode's payoff with the scaled price law and the pinned pairs hastened
+    (:func:`pinned_scaled_payoff`)."""
+
+    __slots__ = ()
+    kernel = staticmethod(pinned_scaled_payoff)

@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from popdispatch.game.parameters import MinuteInputs, share_bounds
+from popdispatch.game.parameters import MinuteInputs, share_bounds, tradable_below
 from popdispatch.integrate import Status, integrate
 from popdispatch.warm_start import warm_start
 
@@ -62,6 +62,7 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
     lo = np.empty(n)
     hi = np.empty(n)
     weight = np.empty(n)
+    below = np.empty(params.line_up.shape[0])
     old_demand = day.previous_demand
     pmin, pmax = params.pmin, params.pmax
     for row in range(day.demand.shape[0]):
@@ -71,7 +72,8 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
         warm_start(day.warm_start, day.bounded, x, old_demand, demand, pmin, pmax, active, weight,
                    params.b, params.c)  # fmt: skip
         share_bounds(pmin, pmax, active, demand, lo, hi)
-        minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active)
+        tradable_below(params.generator_line, params.line_up, params.line_preorder, lo, hi, below)
+        minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active, below)
         outcome = integrate(x, z, term, params, minute, ws, stepper, rule, h_try, out.history)
         h_try = outcome.h_try
         for i in range(n):
