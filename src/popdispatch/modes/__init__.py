@@ -38,9 +38,9 @@ TAGS: dict[ModeCode, dict[PriceLaw, type]] = {
 }  # fmt: skip
 
 
-#: Exact mode's tag classes with the pinned lines' prices hastened, by price law (the plain
-#: and tree laws; modes/exact.py ``hasten_pinned``): the engine's kernels with adaptive steps
-#: on a radial feeder with limited lines.
+#: Exact mode's tag classes with the pinned lines' and pairs' prices hastened, by price law
+#: (the scaled law's pairs only; modes/exact.py ``hasten_pinned``): the engine's kernels with
+#: adaptive steps on a radial feeder with limited lines.
 PINNED_TAGS: dict[PriceLaw, type] = {PriceLaw.PLAIN: exact.ExactPinnedTag,
                                      PriceLaw.TREE: exact.ExactTreePinnedTag,
                                      PriceLaw.SCALED: exact.ExactScaledPinnedTag}  # fmt: skip
