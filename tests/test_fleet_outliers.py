@@ -264,7 +264,7 @@ def test_a_pinned_line_prices_its_overflow_in_200_iterations(crawl):
     _check(problem, "plain", dynamics="distributed-smith", graph=nx.Graph(edges))
 
 
-@pytest.mark.parametrize("law", ["plain", "tree"])  # the scaled law's rates are not hastened
+@pytest.mark.parametrize("law", LAWS)
 @pytest.mark.parametrize("crawl", sorted(PRICE_CRAWL))
 def test_a_pinned_line_on_the_complete_graph_converges_in_200_iterations(crawl, law):
     seed, n_gens, n_limits, _ = PRICE_CRAWL[crawl]
@@ -332,10 +332,9 @@ def test_a_flat_generator_at_its_pmax_beside_a_steep_one_leaves_the_warm_start(d
 
 def test_pinned_lines_are_hastened_with_adaptive_steps_on_a_radial_feeder_only():
     """The engine's least speed of a pinned line's prices is ``pinned_speed`` times the spread
-    with its adaptive Heun steps in exact mode under the plain law (and the scaled law, which
-    hastens its pinned pairs only); none with fixed Euler steps (which the agents follow
-    round by round), in paper mode or without limited lines (then the engine compiles the
-    kernel without it)."""
+    with its adaptive Heun steps in exact mode under the plain and scaled laws; none with
+    fixed Euler steps (which the agents follow round by round), in paper mode or without
+    limited lines (then the engine compiles the kernel without it)."""
     problem = random_fleet_problem(4195038496, 5, 2)
     heun = RunSettings(mode="exact", exact=ExactConstants(pinned_speed=250.0))
     spread = float((problem.b + 2 * problem.c * problem.pmax).max()

@@ -242,13 +242,52 @@ def pinned_prices(seed: int, iterations: int) -> tuple[np.ndarray, np.ndarray]:
 def test_a_pinned_lines_prices_equal_the_numpy_reference():
     """A line overflowed by 2.4 W with both generators below it at 0: its price climbs to
     21.8 EUR/MWh at the pinned lines' least speed within the first iteration (at its rate
-    times the overflow: over 600), the same in both. Two iterations: from the third the
-    reference's steps fall to 1e-8 s (a generator 2.35 W above its Pmin below the line
-    flips it between pinned and not; 1.2 million evaluations, minutes in numpy), where the
-    engine's do not (docs/exact-mode.md, "Known limits")."""
-    z, z_ref = pinned_prices(4195038496, 2)
+    times the overflow: over 600), the same in both, through the engine's convergence (5
+    iterations). A generator 2.35 W above its Pmin below the line at the optimum: with a
+    switch at the limit instead of the gain's fade the reference's steps fell to 1e-8 s from
+    the third iteration (1.2 million evaluations; docs/exact-mode.md, "Pinned lines")."""
+    z, z_ref = pinned_prices(4195038496, 6)
     assert z[0] > 20.0
     np.testing.assert_allclose(z, z_ref, rtol=1e-6, atol=1e-6)
+
+
+def test_a_pinned_lines_gain_fades_as_its_generator_leaves_its_limit():
+    """The pinned line of fleet 4195038496 with every generator below it at its Pmin, then
+    one of them moved 0.3 and 2 times ``PINNED_FADE`` of its range above it: the compiled
+    rates equal the plain-numpy statement (``reference.pinned_rates``) at each, and the
+    line's gain over its plain rate ``a`` is its full value ``a (min(PINNED_BOOST, v / |a|) -
+    1)``, then 0.7 of it, then nothing."""
+    from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs
+    from popdispatch.modes.exact import PINNED_BOOST, PINNED_FADE, pinned_payoff
+    from popdispatch.reference import pinned_rates
+
+    problem = random_fleet_problem(4195038496, 5, 2)
+    settings = RunSettings(mode="exact")
+    speed = settings.engine_pinned_speed(problem)
+    fp = settings.game_constants(problem)
+    params = GameParameters.of(problem, fp, pinned_speed=speed)
+    minute = MinuteInputs.of(problem, 1)
+    low, high = minute.lo * minute.demand, minute.hi * minute.demand
+    line = 0
+    below = np.flatnonzero(problem.down[line] > 0)
+    assert len(below) >= 1 and (high[below] > low[below]).all()
+    n = len(problem.limit)
+    work = GameWork.empty(n, 0, problem.n_generators)
+    for fraction, weight in ((0.0, 1.0), (0.3, 0.7), (2.0, 0.0)):
+        p = np.where(problem.down[line] > 0, low, 0.5 * (low + high))
+        p[below[0]] += fraction * PINNED_FADE * (high - low)[below[0]]
+        z = np.zeros(2 * n)
+        fitness, z_rate = np.empty(len(p)), np.empty(2 * n)
+        pinned_payoff(p, z, params, minute, work, fitness, z_rate)
+        flow = problem.load_flow[0] - problem.down @ p
+        excess = np.concatenate([flow - problem.limit, -flow - problem.limit])
+        plain = fp.price_rate * excess
+        expected = pinned_rates(problem, 1, p, z, excess, plain, fp.price_rate, speed)
+        np.testing.assert_allclose(z_rate, expected, rtol=1e-12, atol=1e-12 * fp.price_rate)
+        own = plain[line]
+        assert 0.0 < abs(own) < speed  # slow: the full gain is not zero
+        full = own * (min(PINNED_BOOST, speed / abs(own)) - 1.0)
+        assert z_rate[line] - own == pytest.approx(weight * full, rel=1e-9, abs=1e-9 * speed)
 
 
 def test_a_pinned_pairs_prices_equal_the_numpy_reference():

@@ -27,7 +27,13 @@ from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import ROUND_OFF, Status
 from popdispatch.integrate.steppers import next_step
 from popdispatch.modes import ModeCode, get_mode
-from popdispatch.modes.exact import IDLE_MARGIN, PINNED_BOOST, PINNED_MARGIN, PINNED_SETTLE
+from popdispatch.modes.exact import (
+    IDLE_MARGIN,
+    PINNED_BOOST,
+    PINNED_FADE,
+    PINNED_MARGIN,
+    PINNED_SETTLE,
+)
 
 
 def at_rest(x, last_x, z, last_z) -> bool:
@@ -135,12 +141,14 @@ def rates_in_force(problem: DispatchProblem, minute: int, p, z, C: float, rate, 
 
 
 def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, price_rate,
-                 speed: float, pinned_lines: bool = True):  # fmt: skip
+                 speed: float):  # fmt: skip
     """The line prices' rates ``z_rate`` (both directions, EUR/MW per s, at prices ``z``) plus
     the gains of the pinned lines and pairs: a line with generators below it that can trade,
-    none more than ``PINNED_MARGIN`` of its range inside its limits, gains on each price what
-    raises its own plain rate ``price_rate * excess`` to ``speed`` in magnitude (unless not
-    ``pinned_lines``: the scaled law's); a line and the nearest limited line above it, with some
+    none more than ``PINNED_FADE`` of its range inside its limits, gains on each price what
+    raises its own plain rate ``price_rate * excess`` to ``speed`` in magnitude, times ``1 -
+    sum(d_i / PINNED_FADE)`` (at least 0) over the generators below it more than
+    ``PINNED_MARGIN`` of their range from their limits, ``d_i`` the fraction of its range from
+    the nearer one; a line and the nearest limited line above it, with some
     generators below the lower one inside and those between able to trade, none inside, each
     at the limit the gain pushes it into (an up price's gain raises their fitness, a down
     price's lowers it), gain the same on half the gap of their rates ``price_rate * excess``,
@@ -152,6 +160,10 @@ def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, pr
     margin = PINNED_MARGIN * (high - low)
     tradable = high > low
     is_inside = (p > low + margin) & (p < high - margin)
+    fade = PINNED_FADE * (high - low)
+    deep = (p > low + fade) & (p < high - fade)
+    near = tradable & is_inside & ~deep
+    distance = np.minimum(p - low, high - p) / np.where(tradable, (high - low) * PINNED_FADE, 1.0)
     at_limit = tradable & ~is_inside
     nearer_low = p - low < high - p
     inside = problem.down @ is_inside
@@ -166,9 +178,10 @@ def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, pr
                               1.0)  # fmt: skip
         return rate * (factor - 1.0)
 
-    pinned = np.tile((inside == 0) & (at_low + at_high > 0), 2) & pinned_lines
+    weight = np.maximum(0.0, 1.0 - problem.down @ np.where(near, distance, 0.0))
+    pinned = (problem.down @ (tradable & deep) == 0) & (problem.down @ tradable > 0)
     own = np.broadcast_to(price_rate, excess.shape) * excess
-    z_rate = z_rate + np.where(pinned, gain(own), 0.0)
+    z_rate = z_rate + np.tile(np.where(pinned, weight, 0.0), 2) * gain(own)
     lower = np.flatnonzero(problem.line_up >= 0)
     upper = problem.line_up[lower]
     pair = (inside[lower] >= 1) & (inside[upper] == inside[lower])

@@ -174,9 +174,9 @@ class GameWork(NamedTuple):
 
     Kept from one evaluation to the next (exact mode's pinned lines, modes/exact.py
     ``count_at_limits``): each generator's limit state (-1 at its lower limit, +1 at its
-    upper, 0 inside them or not counted) and, per limited line, how many generators below it
-    are at their lower and at their upper limit; all zero to start with (a consistent state),
-    and changed only where a generator's state changes."""
+    upper, -2/+2 near them, 0 inside them or not counted) and, per limited line, how many
+    generators below it are at their lower limit, at their upper limit and near one; all zero
+    to start with (a consistent state), and changed only where a generator's state changes."""
 
     flow: np.ndarray
     parent_side: np.ndarray
@@ -186,10 +186,11 @@ class GameWork(NamedTuple):
     limit_state: np.ndarray
     at_low: np.ndarray
     at_high: np.ndarray
+    near: np.ndarray
 
     @classmethod
     def empty(cls, n_lines: int, n_rates: int = 0, n_generators: int = 0) -> GameWork:
         """Scratch for ``n_lines`` limited lines, ``n_rates`` rates in force and the limit
         states of ``n_generators`` generators (0 for a game that counts none)."""
         return cls(*(np.zeros(n_lines) for _ in range(4)), np.zeros(n_rates),
-                   np.zeros(n_generators), np.zeros(n_lines), np.zeros(n_lines))  # fmt: skip
+                   np.zeros(n_generators), *(np.zeros(n_lines) for _ in range(3)))  # fmt: skip

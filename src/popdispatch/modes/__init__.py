@@ -39,8 +39,8 @@ TAGS: dict[ModeCode, dict[PriceLaw, type]] = {
 
 
 #: Exact mode's tag classes with the pinned lines' and pairs' prices hastened, by price law
-#: (the scaled law's pairs only; modes/exact.py ``hasten_pinned``): the engine's kernels with
-#: adaptive steps on a radial feeder with limited lines.
+#: (modes/exact.py ``hasten_pinned``): the engine's kernels with adaptive steps on a radial
+#: feeder with limited lines.
 PINNED_TAGS: dict[PriceLaw, type] = {PriceLaw.PLAIN: exact.ExactPinnedTag,
                                      PriceLaw.TREE: exact.ExactTreePinnedTag,
                                      PriceLaw.SCALED: exact.ExactScaledPinnedTag}  # fmt: skip

@@ -49,6 +49,13 @@ NEWTON_FREE_RATE_CAP = 1000.0
 #: times their plain rate; a generator within ``PINNED_MARGIN`` of its range from a limit is
 #: at it.
 PINNED_SPEED, PINNED_BOOST, PINNED_MARGIN = 1000.0, 1000.0, 1e-12
+#: A generator within this fraction of its range from a limit (and not within
+#: ``PINNED_MARGIN``) is *near* it: a line with no generator below it further inside is pinned
+#: in part, its gain weighed by ``1 - sum(d_i / PINNED_FADE)`` over the near ones (``d_i``
+#: each one's distance from its nearer limit as a fraction of its range), so the gain fades
+#: continuously as a generator leaves its limit instead of switching off (docs/exact-mode.md,
+#: "Pinned lines").
+PINNED_FADE = 1e-6
 #: A pinned pair's gain empties the price it lowers no faster than with this time constant
 #: (s): the gain fades with that price instead of stopping where it reaches zero.
 PINNED_SETTLE = 1e-3
@@ -322,52 +329,98 @@ def active_direction(z_up, z_down, excess_up, excess_down):
 
 
 @nb.njit(cache=True, inline="always")
-def inside_limits(p, low, high):
-    """Is ``p`` strictly inside ``[low, high]``, more than :data:`PINNED_MARGIN` of the range
-    from either end?"""
-    margin = PINNED_MARGIN * (high - low)
+def inside_by(p, low, high, fraction):
+    """Is ``p`` strictly inside ``[low, high]``, more than ``fraction`` of the range from
+    either end?"""
+    margin = fraction * (high - low)
     return low + margin < p < high - margin
 
 
 @nb.njit(cache=True, inline="always")
+def inside_limits(p, low, high):
+    """Is ``p`` strictly inside ``[low, high]``, more than :data:`PINNED_MARGIN` of the range
+    from either end?"""
+    return inside_by(p, low, high, PINNED_MARGIN)
+
+
+@nb.njit(cache=True, inline="always")
 def limit_state(p, low, high):
-    """Where ``p`` is in ``[low, high]`` (MW): 0 inside (:func:`inside_limits`), else -1 at
-    the lower limit, +1 at the upper (the nearer one)."""
-    if inside_limits(p, low, high):
+    """Where ``p`` is in ``[low, high]`` (MW): 0 inside, more than :data:`PINNED_FADE` of the
+    range from both ends; -1 at the lower limit, +1 at the upper (not :func:`inside_limits`,
+    the nearer one); -2 and +2 near them (between)."""
+    if inside_by(p, low, high, PINNED_FADE):
         return 0.0
-    return -1.0 if p - low < high - p else 1.0
+    side = -1.0 if p - low < high - p else 1.0
+    return 2.0 * side if inside_limits(p, low, high) else side
+
+
+@nb.njit(cache=True, inline="always")
+def count_on_path(state, k, line_up, work, step):
+    """Add ``step`` to the count of the limit ``state`` (:func:`limit_state`; 0 counts
+    nowhere) of every limited line from ``k`` up to the source: ``work.at_low``,
+    ``work.at_high`` or ``work.near``."""
+    if state == 0.0:
+        return
+    counts = work.at_low if state == -1.0 else (work.at_high if state == 1.0 else work.near)
+    while k >= 0:
+        counts[k] += step
+        k = line_up[k]
 
 
 @nb.njit(cache=True, inline="always")
 def count_at_limits(p, params, minute, work):
-    """Per limited line, its generators below that can trade (``hi > lo``) and are not
-    strictly inside their limits (:func:`limit_state`): how many are at their lower and at
-    their upper limit, in ``work.at_low`` and ``work.at_high``, at set points ``p`` (MW).
-    Kept from the evaluation before (``work.limit_state``): only a generator whose state
-    changed walks its path up the tree of limited lines, so an evaluation costs one pass over
-    the generators. Returns how many generators below a line are at a limit."""
-    state, at_low, at_high = work.limit_state, work.at_low, work.at_high
+    """Per limited line, its generators below that can trade (``hi > lo``) at their lower
+    limit, at their upper limit and near either (:func:`limit_state`), in ``work.at_low``,
+    ``work.at_high`` and ``work.near``, at set points ``p`` (MW). Kept from the evaluation
+    before (``work.limit_state``): only a generator whose state changed walks its path up the
+    tree of limited lines, so an evaluation costs one pass over the generators. Returns how
+    many generators below a line are at a limit and how many near one."""
+    state = work.limit_state
     if state.shape[0] != p.shape[0]:
         raise ValueError("GameWork holds no limit state per generator (GameWork.empty)")
-    lo, hi, demand, line_up = minute.lo, minute.hi, minute.demand, params.line_up
-    held = 0
+    lo, hi, demand = minute.lo, minute.hi, minute.demand
+    held, near = 0, 0
     for i in range(p.shape[0]):
         k = params.generator_line[i]
         new = 0.0
         if k >= 0 and hi[i] > lo[i]:
             new = limit_state(p[i], lo[i] * demand, hi[i] * demand)
-        held += new != 0.0
+        held += abs(new) == 1.0
+        near += abs(new) == 2.0
         old = state[i]
-        if new == old:
-            continue
-        state[i] = new
-        while k >= 0:  # the generator's path: every limited line above it
-            if old != 0.0:
-                (at_low if old < 0.0 else at_high)[k] -= 1.0
-            if new != 0.0:
-                (at_low if new < 0.0 else at_high)[k] += 1.0
-            k = line_up[k]
-    return held
+        if new != old:
+            state[i] = new
+            count_on_path(old, k, params.line_up, work, -1.0)
+            count_on_path(new, k, params.line_up, work, 1.0)
+    return held, near
+
+
+@nb.njit(cache=True, inline="always")
+def fade_sums(p, params, minute, work):
+    """Per limited line with generators near a limit below it (``work.near`` > 0), the sum of
+    their distances from their nearer limits, each as a fraction of its range over
+    :data:`PINNED_FADE`, into ``work.path`` (other lines' values are left as they were)."""
+    lo, hi, demand, line_up = minute.lo, minute.hi, minute.demand, params.line_up
+    for sweep in range(2):  # zero the paths of the near generators, then add along them
+        for i in range(p.shape[0]):
+            if abs(work.limit_state[i]) != 2.0:
+                continue
+            low, high = lo[i] * demand, hi[i] * demand
+            share = min(p[i] - low, high - p[i]) / ((high - low) * PINNED_FADE)
+            k = params.generator_line[i]
+            while k >= 0:
+                work.path[k] = 0.0 if sweep == 0 else work.path[k] + share
+                k = line_up[k]
+
+
+@nb.njit(cache=True, inline="always")
+def pinned_weight(held, near, below, fade_sum):
+    """How pinned a line is, 0 to 1: 0 unless every one of the ``below`` generators below it
+    that can trade is ``held`` at a limit or ``near`` one (:func:`limit_state`), then ``1 -
+    fade_sum`` (:func:`fade_sums`, read only with near ones), at least 0."""
+    if below == 0.0 or held + near != below:
+        return 0.0
+    return 1.0 if near == 0.0 else max(0.0, 1.0 - fade_sum)
 
 
 @nb.njit(cache=True, inline="always")
@@ -409,7 +462,10 @@ def hasten_pinned(p, z, params, minute, work, z_rate, scaled=False):
       overflow cannot fall until its price crosses one's marginal cost, so each of its prices
       gains what raises its own plain rate ``alpha e`` to the speed. The gain has the sign of
       the line's own excess and is zero with it; the tree law's rates from the other lines'
-      excesses are not hastened.
+      excesses are not hastened. It is weighed by :func:`pinned_weight`: 1 with every
+      generator below at a limit, fading to 0 as one leaves it by :data:`PINNED_FADE` of its
+      range (a switch there took the adaptive steps to 1e-8 s where a generator sat just
+      inside its limit at the optimum).
     - A *pinned pair*: a line with generators below it inside their limits and the nearest
       limited line above it, the generators between them able to trade, none inside, each
       at the limit the pair's gain pushes it into. The generators below the lower line answer
@@ -419,9 +475,7 @@ def hasten_pinned(p, z, params, minute, work, z_rate, scaled=False):
       taken from the lower one (the sum's rate unchanged), while the price it lowers is
       positive.
 
-    ``scaled``: the scaled law, each line's rate ``alpha s_k`` (:func:`line_rate`), whose
-    pinned lines are not hastened (a generator touching its limit in a transient switched
-    their gain on and off, and the adaptive steps fell to 1e-8 s), its pairs are.
+    ``scaled``: the scaled law, each line's rate ``alpha s_k`` (:func:`line_rate`).
 
     Neither gain moves a rest point of the plain or scaled law: at one, a pinned line's excess
     is zero, and of a pair's prices the one a nonzero gap lowers is zero (its line is below
@@ -432,15 +486,19 @@ def hasten_pinned(p, z, params, minute, work, z_rate, scaled=False):
     n_lines = params.limit.shape[0]
     if speed == 0.0 or n_lines == 0:
         return
-    if count_at_limits(p, params, minute, work) == 0:
+    held_any, near_any = count_at_limits(p, params, minute, work)
+    if held_any + near_any == 0:
         return
-    at_low, at_high, below = work.at_low, work.at_high, minute.below
+    if near_any > 0:
+        fade_sums(p, params, minute, work)
+    at_low, at_high, near, below = work.at_low, work.at_high, work.near, minute.below
     total = tradable_count(minute.lo, minute.hi) if scaled else 0.0
     for k in range(n_lines):
         up = params.line_up[k]
         held = at_low[k] + at_high[k]
         inside = below[k] - held
-        pinned = not scaled and inside == 0.0 and held > 0.0
+        weight = pinned_weight(held, near[k], below[k], work.path[k])
+        pinned = weight > 0.0
         # a pair: a positive price to lower, generators below inside, none between inside,
         # some between at a limit
         pair = (up >= 0 and max(z[k], z[n_lines + k], z[up], z[n_lines + up]) > 0.0
@@ -454,7 +512,7 @@ def hasten_pinned(p, z, params, minute, work, z_rate, scaled=False):
             excess = sign * work.flow[k] - params.limit[k]
             if pinned:
                 own = rate * excess
-                z_rate[side + k] += hastened(own, speed) - own
+                z_rate[side + k] += weight * (hastened(own, speed) - own)
             if not pair:
                 continue
             gap = 0.5 * (rate_up * (sign * work.flow[up] - params.limit[up]) - rate * excess)
@@ -636,8 +694,8 @@ def scaled_payoff(p, z, params, minute, work, fitness, z_rate):
 
 @nb.njit(cache=True)
 def pinned_scaled_payoff(p, z, params, minute, work, fitness, z_rate):
-    """:func:`scaled_payoff` with the pinned pairs' prices hastened (:func:`hasten_pinned`,
-    ``scaled``)."""
+    """:func:`scaled_payoff` with the pinned lines' and pairs' prices hastened
+    (:func:`hasten_pinned`, ``scaled``)."""
     congestion, residual = scaled_line_signals(p, z, params, minute, work, fitness, z_rate)
     marginal_costs_into(p, params, fitness)
     rates_in_force(z, params, work)
@@ -761,7 +819,7 @@ class ExactTreePinnedTag(ModeTag):
 
 
 class ExactScaledPinnedTag(ModeTag):
-    """Exact mode's payoff with the scaled price law and the pinned pairs hastened
+    """Exact mode's payoff with the scaled price law and the pinned lines and pairs hastened
     (:func:`pinned_scaled_payoff`)."""
 
     __slots__ = ()

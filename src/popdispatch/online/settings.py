@@ -310,8 +310,8 @@ class RunSettings:
     @property
     def hastens_pinned_lines(self) -> bool:
         """Does the engine hasten the pinned lines' prices (on a radial feeder with limited
-        lines)? In exact mode with adaptive Heun steps (under the scaled law the pinned pairs
-        only: :func:`popdispatch.modes.exact.hasten_pinned`). Fixed steps (the engine's Euler
+        lines)? In exact mode with adaptive Heun steps
+        (:func:`popdispatch.modes.exact.hasten_pinned`). Fixed steps (the engine's Euler
         steps, the agents' rounds, which follow them) and voltage mode keep each price at its
         rate."""
         return self.adaptive and self.mode == "exact"
