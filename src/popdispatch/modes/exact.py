@@ -382,9 +382,9 @@ def count_at_limits(p, params, minute, work):
     held, near = 0, 0
     for i in range(p.shape[0]):
         k = params.generator_line[i]
-        new = 0.0
-        if k >= 0 and hi[i] > lo[i]:
-            new = limit_state(p[i], lo[i] * demand, hi[i] * demand)
+        if k < 0:  # below no limited line: never counted
+            continue
+        new = limit_state(p[i], lo[i] * demand, hi[i] * demand) if hi[i] > lo[i] else 0.0
         held += abs(new) == 1.0
         near += abs(new) == 2.0
         old = state[i]
