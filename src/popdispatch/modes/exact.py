@@ -355,15 +355,20 @@ def limit_state(p, low, high):
 
 
 @nb.njit(cache=True, inline="always")
-def count_on_path(state, k, line_up, work, step):
+def count_on_path(state, k, line_up, at_low, at_high, near, step):
     """Add ``step`` to the count of the limit ``state`` (:func:`limit_state`; 0 counts
-    nowhere) of every limited line from ``k`` up to the source: ``work.at_low``,
-    ``work.at_high`` or ``work.near``."""
+    nowhere) of every limited line from ``k`` up to the source: ``at_low``, ``at_high`` or
+    ``near``. (One branch per array: choosing the array in an expression made numba count
+    references at every call of the loop around it, eight times its cost.)"""
     if state == 0.0:
         return
-    counts = work.at_low if state == -1.0 else (work.at_high if state == 1.0 else work.near)
     while k >= 0:
-        counts[k] += step
+        if state == -1.0:
+            at_low[k] += step
+        elif state == 1.0:
+            at_high[k] += step
+        else:
+            near[k] += step
         k = line_up[k]
 
 
@@ -390,8 +395,8 @@ def count_at_limits(p, params, minute, work):
         old = state[i]
         if new != old:
             state[i] = new
-            count_on_path(old, k, params.line_up, work, -1.0)
-            count_on_path(new, k, params.line_up, work, 1.0)
+            count_on_path(old, k, params.line_up, work.at_low, work.at_high, work.near, -1.0)
+            count_on_path(new, k, params.line_up, work.at_low, work.at_high, work.near, 1.0)
     return held, near
 
 
