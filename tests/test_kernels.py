@@ -272,7 +272,7 @@ def test_a_pinned_lines_gain_fades_as_its_generator_leaves_its_limit():
     below = np.flatnonzero(problem.down[line] > 0)
     assert len(below) >= 1 and (high[below] > low[below]).all()
     n = len(problem.limit)
-    work = GameWork.empty(n, 0, problem.n_generators)
+    work = GameWork.empty(n, n_generators=problem.n_generators)
     for fraction, weight in ((0.0, 1.0), (0.3, 0.7), (2.0, 0.0)):
         p = np.where(problem.down[line] > 0, low, 0.5 * (low + high))
         p[below[0]] += fraction * PINNED_FADE * (high - low)[below[0]]

@@ -38,8 +38,8 @@ def test_game_work_has_one_value_per_limited_line():
     """One value per limited line in each line scratch; the rates in force, one per generator,
     only for a game whose rates follow its state (else empty: the field reads the
     parameters' own)."""
-    work = GameWork.empty(3)
+    work = GameWork.empty(3, n_generators=2)
     assert all(getattr(work, name).shape == (3,)
                for name in ("flow", "parent_side", "child_side", "path"))  # fmt: skip
     assert work.rate.shape == (0,)
-    assert GameWork.empty(3, 5).rate.shape == (5,)
+    assert GameWork.empty(3, 5, n_generators=5).rate.shape == (5,)

@@ -32,7 +32,7 @@ def test_one_evaluation_equals_the_reference(problem, mode, dynamics, graph):
     x = rng.dirichlet(np.ones(problem.n_generators))
     z = rng.uniform(0.0, 20.0, len(engine.z))
     stage = Stage.empty(len(x), len(z))
-    work = GameWork.empty(len(problem.limit), 0, problem.n_generators)
+    work = GameWork.empty(len(problem.limit), n_generators=problem.n_generators)
     evaluate(x, z, stage.p, stage.f, stage.w, stage.v, stage.room, stage.mass, stage.inflow,
              stage.outflow, stage.z_rate, stage.order, engine.term, engine.params, minute,
              work)  # fmt: skip

@@ -34,5 +34,6 @@ def law_payoff(problem, law: PriceLaw, p, z, minute):
     fp = game_constants(problem, ExactConstants(price_law=law))
     params = GameParameters.of(problem, fp)
     fitness, z_rate = np.empty(len(p)), np.empty(len(z))
-    KERNELS[law](p, z, params, minute, GameWork.empty(len(problem.limit)), fitness, z_rate)
+    work = GameWork.empty(len(problem.limit), n_generators=len(p))
+    KERNELS[law](p, z, params, minute, work, fitness, z_rate)
     return fitness, z_rate, fp

@@ -33,7 +33,7 @@ def _payoff(problem, mode, p, z, fp):
     params = GameParameters.of(problem, fp)
     minute = MinuteInputs.of(problem, PEAK_MINUTE)
     fitness, z_rate = np.empty(len(p)), np.empty(len(z))
-    work = GameWork.empty(len(problem.limit))
+    work = GameWork.empty(len(problem.limit), n_generators=problem.n_generators)
     payoff = importlib.import_module(f"popdispatch.modes.{mode.name}").payoff
     congestion, residual = payoff(p, z, params, minute, work, fitness, z_rate)
     return fitness, z_rate, congestion, residual

@@ -111,7 +111,8 @@ def test_a_pinned_pairs_scaled_rates_equal_the_numpy_statement():
     s = np.where(r_k > 0, response.sum() / np.where(r_k > 0, r_k, 1.0), 1.0)
     gained = 0
     rng = np.random.default_rng(5)
-    work = GameWork.empty(n, 0, problem.n_generators)  # its counts kept from state to state
+    # one work for all states: its counts are kept from state to state
+    work = GameWork.empty(n, n_generators=problem.n_generators)
     for p in run.trajectory:
         z = rng.uniform(0.0, 30.0, 2 * n)
         fitness, z_rate = np.empty(len(p)), np.empty(2 * n)

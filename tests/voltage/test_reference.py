@@ -32,8 +32,9 @@ def test_reference_game_equals_the_compiled_voltage_payoff(problem):
         p = problem.pmax * rng.uniform(0.0, 1.0, problem.n_generators)
         z = rng.uniform(0.0, 5.0, n_states) * (rng.random(n_states) < 0.5)
         got_f, got_rate = np.empty(len(p)), np.empty(n_states)
-        got = payoff(p, z, GameParameters.of(problem, fp), MinuteInputs.of(problem, 1),
-                     GameWork.empty(len(problem.limit)), got_f, got_rate)  # fmt: skip
+        work = GameWork.empty(len(problem.limit), n_generators=problem.n_generators)
+        got = payoff(p, z, GameParameters.of(problem, fp), MinuteInputs.of(problem, 1), work,
+                     got_f, got_rate)  # fmt: skip
         f, rate, congestion, residual = game(ModeCode.VOLTAGE, p, z, problem, 1, fp)
         np.testing.assert_allclose(got_f, f, rtol=1e-12, atol=1e-9)
         np.testing.assert_allclose(got_rate, rate, rtol=1e-12, atol=1e-12)

@@ -284,8 +284,9 @@ def test_voltage_payoff_equals_a_dense_reference(problems):
     n_states = mode.controller_states(problem)
     z = rng.uniform(0.0, 5.0, n_states) * (rng.random(n_states) < 0.5)  # half of them priced
     got_f, got_rate = np.empty(len(p)), np.empty(len(z))
+    work = GameWork.empty(len(problem.limit), n_generators=problem.n_generators)
     congestion, residual = payoff(p, z, GameParameters.of(problem, fp), MinuteInputs.of(problem, 1),
-                                  GameWork.empty(len(problem.limit)), got_f, got_rate)  # fmt: skip
+                                  work, got_f, got_rate)  # fmt: skip
     # dense: v^2 from the unscaled model, rows divided by the scales
     scale = problem.voltage_scale
     v_sq = problem.voltage_sq(p, 1)

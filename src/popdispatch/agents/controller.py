@@ -62,7 +62,7 @@ class LinePrice:
         )  # fmt: skip
         self.minute = MinuteInputs(1.0, np.zeros(1), two, two, np.ones(2, dtype=np.bool_),
                                    np.zeros(1))  # fmt: skip
-        self.work = GameWork.empty(1, 0, 2)
+        self.work = GameWork.empty(1, n_generators=2)
         self.p = np.zeros(2)
         self.values = np.zeros(2)
         self.z = np.zeros(n_states)

@@ -189,8 +189,9 @@ class GameWork(NamedTuple):
     near: np.ndarray
 
     @classmethod
-    def empty(cls, n_lines: int, n_rates: int = 0, n_generators: int = 0) -> GameWork:
+    def empty(cls, n_lines: int, n_rates: int = 0, *, n_generators: int) -> GameWork:
         """Scratch for ``n_lines`` limited lines, ``n_rates`` rates in force and the limit
-        states of ``n_generators`` generators (0 for a game that counts none)."""
+        states of the game's ``n_generators`` generators (every evaluation that counts them
+        reads one per generator, unchecked)."""
         return cls(*(np.zeros(n_lines) for _ in range(4)), np.zeros(n_rates),
                    np.zeros(n_generators), *(np.zeros(n_lines) for _ in range(3)))  # fmt: skip

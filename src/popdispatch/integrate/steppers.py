@@ -172,7 +172,7 @@ def workspace(n: int, n_lines: int, n_states: int, window: int, live_rates: bool
     def limited() -> Limited:
         return Limited(*(np.zeros(n) for _ in range(4)))
 
-    game = GameWork.empty(n_lines, n if live_rates else 0, n)
+    game = GameWork.empty(n_lines, n if live_rates else 0, n_generators=n)
     return Workspace(
         Stage.empty(n, n_states), Stage.empty(n, n_states), limited(), limited(),
         np.zeros(n), np.zeros(n), np.zeros(n_states), np.zeros(n_states), np.zeros(n),

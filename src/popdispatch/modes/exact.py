@@ -379,10 +379,10 @@ def count_at_limits(p, params, minute, work):
     ``work.at_high`` and ``work.near``, at set points ``p`` (MW). Kept from the evaluation
     before (``work.limit_state``): only a generator whose state changed walks its path up the
     tree of limited lines, so an evaluation costs one pass over the generators. Returns how
-    many generators below a line are at a limit and how many near one."""
+    many generators below a line are at a limit and how many near one. ``work`` must hold a
+    limit state per generator (``GameWork.empty``'s ``n_generators``; not checked here: a
+    check of the sizes cost the ELV congestion minute 120 ns an evaluation, 15 %)."""
     state = work.limit_state
-    if state.shape[0] != p.shape[0]:
-        raise ValueError("GameWork holds no limit state per generator (GameWork.empty)")
     lo, hi, demand = minute.lo, minute.hi, minute.demand
     held, near = 0, 0
     for i in range(p.shape[0]):
