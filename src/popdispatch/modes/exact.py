@@ -358,8 +358,8 @@ def limit_state(p, low, high):
 def count_on_path(state, k, line_up, at_low, at_high, near, step):
     """Add ``step`` to the count of the limit ``state`` (:func:`limit_state`; 0 counts
     nowhere) of every limited line from ``k`` up to the source: ``at_low``, ``at_high`` or
-    ``near``. (One branch per array: choosing the array in an expression made numba count
-    references at every call of the loop around it, eight times its cost.)"""
+    ``near`` (one branch per array, so that numba counts no references in the loop that
+    calls it)."""
     if state == 0.0:
         return
     while k >= 0:
@@ -380,8 +380,8 @@ def count_at_limits(p, params, minute, work):
     before (``work.limit_state``): only a generator whose state changed walks its path up the
     tree of limited lines, so an evaluation costs one pass over the generators. Returns how
     many generators below a line are at a limit and how many near one. ``work`` must hold a
-    limit state per generator (``GameWork.empty``'s ``n_generators``; not checked here: a
-    check of the sizes cost the ELV congestion minute 120 ns an evaluation, 15 %)."""
+    limit state per generator (``GameWork.empty``'s ``n_generators``; not checked here, on
+    the hot path)."""
     state = work.limit_state
     lo, hi, demand = minute.lo, minute.hi, minute.demand
     held, near = 0, 0
@@ -469,8 +469,7 @@ def hasten_pinned(p, z, params, minute, work, z_rate, scaled=False):
       the line's own excess and is zero with it; the tree law's rates from the other lines'
       excesses are not hastened. It is weighed by :func:`pinned_weight`: 1 with every
       generator below at a limit, fading to 0 as one leaves it by :data:`PINNED_FADE` of its
-      range (a switch there took the adaptive steps to 1e-8 s where a generator sat just
-      inside its limit at the optimum).
+      range, so the field stays continuous where a generator leaves its limit.
     - A *pinned pair*: a line with generators below it inside their limits and the nearest
       limited line above it, the generators between them able to trade, none inside, each
       at the limit the pair's gain pushes it into. The generators below the lower line answer
