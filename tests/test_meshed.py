@@ -308,6 +308,18 @@ def random_mesh(seed: int, n_buses: int, n_chords: int, n_gens: int, n_limits: i
     branches allowed), reactances, taps, phase shifts, loads, shunt conductances and a fleet
     (several generators per bus allowed) drawn at random; ``n_limits`` lines limited between
     30 % and 120 % of their unconstrained DC-OPF flows."""
+    net, rng = unlimited_mesh(seed, n_buses, n_chords, n_gens)
+    lines = net.lines
+    chosen = list(rng.choice(lines.index, n_limits, replace=False))
+    limited = congested(net, chosen, 1.0)
+    scale = rng.uniform(0.3, 1.2, n_limits)
+    limits = limited.lines.limit_kw.copy()
+    limits[chosen] = np.maximum(limits[chosen].to_numpy() * scale, 1.0)
+    return replace(net, lines=net.lines.assign(limit_kw=limits))
+
+
+def unlimited_mesh(seed: int, n_buses: int, n_chords: int, n_gens: int):
+    """:func:`random_mesh`'s network before its lines are limited, and its random generator."""
     import pandas as pd
 
     from popdispatch.feeder.generators import make_fleet
@@ -331,13 +343,7 @@ def random_mesh(seed: int, n_buses: int, n_chords: int, n_gens: int, n_limits: i
     rows = [(int(rng.integers(1, n_buses + 1)), 0.0, rng.uniform(5, 50), rng.uniform(0.01, 2),
              0.0, rng.uniform(0.6, 1.0) * total * 1e3) for _ in range(n_gens)]  # fmt: skip
     fleet = make_fleet(rows, [f"G{i}" for i in range(n_gens)])
-    net = DcNetwork("random", 100.0, buses, lines, fleet, 1)
-    chosen = list(rng.choice(lines.index, n_limits, replace=False))
-    limited = congested(net, chosen, 1.0)
-    scale = rng.uniform(0.3, 1.2, n_limits)
-    limits = limited.lines.limit_kw.copy()
-    limits[chosen] = np.maximum(limits[chosen].to_numpy() * scale, 1.0)
-    return replace(net, lines=net.lines.assign(limit_kw=limits))
+    return DcNetwork("random", 100.0, buses, lines, fleet, 1), rng
 
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -451,6 +457,20 @@ def test_the_angle_formulation_equals_the_factors_one_on_matpower_cases(case):
     assert (np.abs(angles.line_price) > 1e-3).any()
     huge = np.flatnonzero(problem.limit * 1e3 >= 99_999e3)
     assert len(huge) == 1 and angles.line_price[huge[0]] == 0.0
+
+
+@pytest.mark.parametrize(("seed", "chords"), [(45934, 4), (4183770231, 1), (2549007272, 2)])
+def test_the_dc_opf_solves_meshes_where_clarabels_default_steps_cycle(seed, chords):
+    """Three small meshes (3 buses, 3 DGs, parallel lines, a phase shifter) on which Clarabel
+    with its default steps cycled for its 200 iterations (MaxIterations, found by random
+    draws): the DC-OPF still returns the optimum, the active-set enumeration's."""
+    from qp_exact import exact_dc_opf
+
+    net, _ = unlimited_mesh(seed, 3, chords, 3)
+    problem = build_mesh_problem(net)
+    opf = solve_opf(problem, 1)
+    assert opf.status == "optimal"
+    np.testing.assert_allclose(opf.p_kw, exact_dc_opf(problem) * 1e3, rtol=0, atol=1e-4)
 
 
 def linear_mesh(seed: int, n_buses: int, chords: int, gens: int, limits: int):

@@ -24,6 +24,23 @@ from scipy import sparse
 
 from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 
+#: The fraction of the way to the cone's boundary the careful solve steps (Clarabel: 0.99).
+CAREFUL_STEP = 0.9
+
+
+def clarabel_settings(max_step: float | None = None) -> clarabel.DefaultSettings:
+    """Clarabel's settings for the DC-OPF: tolerances 1e-10, no presolve (it keeps the data
+    updatable), quiet; ``max_step``: the fraction of the way to the cone's boundary an
+    interior-point step may go (None: Clarabel's own)."""
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.presolve_enable = False
+    settings.tol_gap_abs = settings.tol_gap_rel = 1e-10
+    settings.tol_feas = 1e-10
+    if max_step is not None:
+        settings.max_step_fraction = max_step
+    return settings
+
 
 @dataclass(frozen=True)
 class OpfResult:
@@ -174,13 +191,8 @@ class OpfSolver:
         self._zeros = zero_rows.shape[0]
         rows = 2 * n + 2 * len(self._rows) + 2 * problem.n_voltage
         cones = [clarabel.ZeroConeT(self._zeros), clarabel.NonnegativeConeT(rows)]
-        settings = clarabel.DefaultSettings()
-        settings.verbose = False
-        settings.presolve_enable = False  # keeps the data updatable
-        settings.tol_gap_abs = settings.tol_gap_rel = 1e-10
-        settings.tol_feas = 1e-10
-        self._data = (sparse.csc_matrix(P), q, A, cones, settings)
-        self._solver = None  # built by the first solve, with that minute's bounds
+        self._data = (sparse.csc_matrix(P), q, A, cones)
+        self._solvers: dict[bool, clarabel.DefaultSolver] = {}  # built by their first solve
 
     def _rhs(self, minute: int) -> np.ndarray:
         problem = self.problem
@@ -201,18 +213,31 @@ class OpfSolver:
         return np.concatenate([[demand], bus_rows, -pmin, pmax,
                                limit - load_flow, limit + load_flow, v_lo, v_hi])  # fmt: skip
 
+    def _solved(self, rhs: np.ndarray, careful: bool):
+        """Clarabel's solution at the bounds ``rhs``. ``careful``: with interior-point steps
+        of at most :data:`CAREFUL_STEP` of the way to the cone's boundary, Clarabel's default
+        0.99 having cycled without converging (MaxIterations) on rare small meshed problems;
+        a solver built once for each kind and updated with each minute's bounds."""
+        solver = self._solvers.get(careful)
+        if solver is None:
+            P, q, A, cones = self._data
+            settings = clarabel_settings(CAREFUL_STEP if careful else None)
+            solver = self._solvers[careful] = clarabel.DefaultSolver(P, q, A, rhs, cones,
+                                                                     settings)  # fmt: skip
+        else:
+            solver.update(b=rhs)
+        return solver.solve()
+
     def solve(self, minute: int) -> OpfResult:
         """Solve the DC-OPF of one 1-based minute (offline generators held at 0)."""
         problem = self.problem
         n, n_limits = problem.n_generators, len(problem.limit)
         rhs = self._rhs(minute)
-        if self._solver is None:
-            P, q, A, cones, settings = self._data
-            self._solver = clarabel.DefaultSolver(P, q, A, rhs, cones, settings)
-        else:
-            self._solver.update(b=rhs)
-        solution = self._solver.solve()
+        solution = self._solved(rhs, careful=False)
         status = str(solution.status)
+        if status not in ("Solved", "AlmostSolved", "PrimalInfeasible", "AlmostPrimalInfeasible"):
+            solution = self._solved(rhs, careful=True)
+            status = str(solution.status)
         demand = float(rhs[0])
         if status in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
             nan = np.full(n, np.nan)
