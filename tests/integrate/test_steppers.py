@@ -61,7 +61,7 @@ def _limited(ws, h, x, z, x_out, z_out):
                             gain=1.0, price_rate=0.0, limit=lines, generator_line=EMPTY,
                             line_up=EMPTY, line_preorder=EMPTY)  # fmt: skip
     minute = MinuteInputs(demand=1.0, load_flow=lines, lo=vector, hi=vector,
-                          active=np.ones(n, dtype=bool), below=lines)  # fmt: skip
+                          active=np.ones(n, dtype=bool), below=lines, tradable=0.0)  # fmt: skip
     one = ws.first
     euler_steps(1, False, h, x, z, RULES, params, minute, *one, ws.first_limited, ws.game,
                 ws.counters.evaluations, x_out, z_out)  # fmt: skip

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from price_laws import law_payoff
 
-from popdispatch.game.parameters import MinuteInputs, PriceLaw, tradable_below
+from popdispatch.game.parameters import MinuteInputs, PriceLaw, tradable_below, tradable_count
 from popdispatch.modes.exact import (
     ExactConstants,
     scaled_weights,
@@ -52,7 +52,7 @@ def test_scaled_rates_equal_the_dense_preconditioner(problem, seed):
         hi[3] = minute.lo[3]
         tradable_below(problem.generator_line, problem.line_up, problem.line_preorder,
                        minute.lo, hi, below)  # fmt: skip
-        minute = minute._replace(hi=hi, below=below)
+        minute = minute._replace(hi=hi, below=below, tradable=tradable_count(minute.lo, hi))
     fitness, rate, fp = law_payoff(problem, PriceLaw.SCALED, p, z, minute)
     expected_fitness, expected_rate = dense_scaled(problem, p, z, fp, minute)
     np.testing.assert_allclose(rate, expected_rate, rtol=1e-9, atol=1e-9 * fp.price_rate)

@@ -61,7 +61,7 @@ class LinePrice:
             line_up=np.array([-1], dtype=np.int64), line_preorder=np.array([0], dtype=np.int64),
         )  # fmt: skip
         self.minute = MinuteInputs(1.0, np.zeros(1), two, two, np.ones(2, dtype=np.bool_),
-                                   np.zeros(1))  # fmt: skip
+                                   np.zeros(1), 0.0)  # fmt: skip
         self.work = GameWork.empty(1, n_generators=2)
         self.p = np.zeros(2)
         self.values = np.zeros(2)

@@ -116,8 +116,9 @@ class MinuteInputs(NamedTuple):
     line (MW; then the voltage rows' loads-only excesses, see
     :attr:`~popdispatch.game.problem.DispatchProblem.load_flow`), the share bounds
     ``lo``/``hi`` (``Pmin / P_d``, ``Pmax / P_d`` online, 0 offline), the online
-    generators and, per limited line, how many online generators with room to trade
-    (``hi > lo``) are below it (:func:`tradable_below`; a count, as a float)."""
+    generators, per limited line how many online generators with room to trade
+    (``hi > lo``) are below it (:func:`tradable_below`; a count, as a float) and how many the
+    fleet has (:func:`tradable_count`, the scaled price law's ``N``)."""
 
     demand: float
     load_flow: np.ndarray
@@ -125,6 +126,7 @@ class MinuteInputs(NamedTuple):
     hi: np.ndarray
     active: np.ndarray
     below: np.ndarray
+    tradable: float
 
     @classmethod
     def of(cls, problem: DispatchProblem, minute: int) -> MinuteInputs:
@@ -138,7 +140,7 @@ class MinuteInputs(NamedTuple):
         below = np.empty(problem.line_up.shape[0])
         tradable_below(problem.generator_line, problem.line_up, problem.line_preorder, lo, hi,
                        below)  # fmt: skip
-        return cls(demand, problem.load_flow[row], lo, hi, active, below)
+        return cls(demand, problem.load_flow[row], lo, hi, active, below, tradable_count(lo, hi))
 
 
 @nb.njit(cache=True, inline="always")
@@ -148,6 +150,15 @@ def share_bounds(pmin, pmax, active, demand, lo, hi):
     for i in range(pmin.shape[0]):
         lo[i] = pmin[i] / demand if active[i] else 0.0
         hi[i] = pmax[i] / demand if active[i] else 0.0
+
+
+@nb.njit(cache=True)
+def tradable_count(lo, hi):
+    """The online generators with room to trade (``hi > lo``), a count as a float."""
+    total = 0.0
+    for i in range(lo.shape[0]):
+        total += 1.0 if hi[i] > lo[i] else 0.0
+    return total
 
 
 @nb.njit(cache=True)

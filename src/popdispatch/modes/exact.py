@@ -410,8 +410,10 @@ def fade_sums(p, params, minute, work):
         for i in range(p.shape[0]):
             if abs(work.limit_state[i]) != 2.0:
                 continue
-            low, high = lo[i] * demand, hi[i] * demand
-            share = min(p[i] - low, high - p[i]) / ((high - low) * PINNED_FADE)
+            share = 0.0
+            if sweep == 1:
+                low, high = lo[i] * demand, hi[i] * demand
+                share = min(p[i] - low, high - p[i]) / ((high - low) * PINNED_FADE)
             k = params.generator_line[i]
             while k >= 0:
                 work.path[k] = 0.0 if sweep == 0 else work.path[k] + share
@@ -496,7 +498,7 @@ def hasten_pinned(p, z, params, minute, work, z_rate, scaled=False):
     if near_any > 0:
         fade_sums(p, params, minute, work)
     at_low, at_high, near, below = work.at_low, work.at_high, work.near, minute.below
-    total = tradable_count(minute.lo, minute.hi) if scaled else 0.0
+    total = minute.tradable if scaled else 0.0
     for k in range(n_lines):
         up = params.line_up[k]
         held = at_low[k] + at_high[k]
@@ -637,15 +639,6 @@ def line_scale(below, total):
 
 
 @nb.njit(cache=True, inline="always")
-def tradable_count(lo, hi):
-    """The online generators with room to trade (``hi > lo``), the scaled law's ``N``."""
-    total = 0.0
-    for i in range(lo.shape[0]):
-        total += 1.0 if hi[i] > lo[i] else 0.0
-    return total
-
-
-@nb.njit(cache=True, inline="always")
 def line_rate(price_rate, below, total):
     """A line's price rate (1/s): ``price_rate`` times the scaled law's :func:`line_scale` of
     its ``below`` tradable generators out of ``total`` (0: the plain and tree laws, no
@@ -666,7 +659,7 @@ def scaled_line_signals(p, z, params, minute, work, signal, z_rate):
     limit, C, price_rate = params.limit, params.C, params.price_rate
     n_lines = limit.shape[0]
     below = minute.below
-    total = tradable_count(minute.lo, minute.hi)
+    total = minute.tradable
     congestion = 0.0
     residual = 0.0
     for k in range(n_lines):

@@ -13,7 +13,12 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from popdispatch.game.parameters import MinuteInputs, share_bounds, tradable_below
+from popdispatch.game.parameters import (
+    MinuteInputs,
+    share_bounds,
+    tradable_below,
+    tradable_count,
+)
 from popdispatch.integrate import Status, integrate
 from popdispatch.warm_start import warm_start
 
@@ -73,7 +78,8 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
                    params.b, params.c)  # fmt: skip
         share_bounds(pmin, pmax, active, demand, lo, hi)
         tradable_below(params.generator_line, params.line_up, params.line_preorder, lo, hi, below)
-        minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active, below)
+        minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active, below,
+                              tradable_count(lo, hi))  # fmt: skip
         outcome = integrate(x, z, term, params, minute, ws, stepper, rule, h_try, out.history)
         h_try = outcome.h_try
         for i in range(n):
