@@ -6,6 +6,7 @@ called with the arrays the steppers take out of the named records (:class:`Works
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -14,12 +15,14 @@ from popdispatch.game.parameters import GameParameters, MinuteInputs
 from popdispatch.integrate import Term, workspace
 from popdispatch.integrate.steppers import (
     HEUN_STEP,
+    QUIET_MOTION,
     STEP_FLOOR,
     SWITCH_CAPS,
     SWITCH_TURN,
     euler_steps,
     heun_combination,
     next_step,
+    stiffness,
 )
 from popdispatch.modes import ModeCode, mode_tag
 
@@ -198,3 +201,29 @@ def test_a_steady_linear_rate_is_capped_and_counts_no_switch():
         h, switches = next_step(h, 1e-6, 5e4, switches, dt)
     assert h == HEUN_STEP / 5e4
     assert switches == 0
+
+
+def _measured_rate(h, x, k1, k2, rtol=1e-4, atol=1e-8):
+    """:func:`stiffness` of a step of ``h`` whose two stages' fields (shares per s) are ``k1``
+    and ``k2``, no prices, the limiter nowhere near."""
+    room = np.ones_like(x)
+    zero = np.zeros(0)
+    return stiffness(h, x, zero, room, room, np.maximum(k1, 0), np.maximum(-k1, 0), zero,
+                     np.maximum(k2, 0), np.maximum(-k2, 0), zero, rtol, atol, 1e-4)  # fmt: skip
+
+
+def test_a_linear_rate_is_measured_and_round_off_at_rest_is_not():
+    """A displacement decaying at ``lam`` is measured as ``lam``; a field of round-off (a state
+    at rest, each evaluation's field a different few units of the last place) measures no
+    rate: read as ``||k2 - k1|| / (h ||k1||)`` it is about ``1 / h`` at any step, which held
+    the steps at rest where they were (1e-6 s on the synthetic 1k feeder x100)."""
+    rng = np.random.default_rng(3)
+    x = np.array([0.3, 0.3, 0.4])
+    h, lam = 1e-3, 50.0
+    k1 = -lam * np.array([1e-3, -2e-3, 1e-3])
+    assert _measured_rate(h, x, k1, k1 * (1 - h * lam)) == pytest.approx(lam, rel=1e-9)
+    scale = 1e-8 + 1e-4 * x
+    for _ in range(100):
+        noise1, noise2 = (rng.normal(0, 1, 3) * 1e-16 for _ in range(2))
+        assert h * np.linalg.norm(noise1 / scale) < QUIET_MOTION
+        assert _measured_rate(h, x, noise1, noise2) == 0.0

@@ -92,6 +92,12 @@ STABLE_STEP = 1.5
 #: damped loop, where the set points chatter with the error tolerance's amplitude, above the
 #: stopping tolerance (docs/exact-mode.md, "Step size and stopping").
 HEUN_STEP = 1.0
+#: A step that moves the state by less than this, in the error norm's scaling (``h ||k1||``),
+#: measures no rate (:func:`stiffness`): at rest the field is round-off, whose ``||k2 - k1|| /
+#: ||k1||`` is of order one at any step, a rate of ``1 / h`` that would hold the steps where
+#: they are. The oscillations the cap is for move the state by about the error tolerance a
+#: step (docs/exact-mode.md, "Step size and stopping").
+QUIET_MOTION = 1e-9
 #: A measured ``h * rate`` beyond this is a switch of the field between the two stages of a
 #: step (a limiter, or distributed Smith's relay, turning on or off), not a linear rate: it
 #: stays about the same whatever ``h`` (beyond Heun's real stability limit, 2, a step the error
@@ -356,6 +362,7 @@ def stiffness(h, x, z, mass1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,
     oscillation of the size of the error tolerance, far above the convergence tolerance.
     Capping the step by this estimate keeps Heun inside its stability region. Strategies that
     the limiter stopped at a limit are left out: their fast approach is absorbed exactly.
+    A step that moved the state by at most :data:`QUIET_MOTION` measures no rate (0).
     Takes the arrays of the two stages it reads (``1``: first point, ``2``: second).
     """
     moved = 0.0
@@ -376,7 +383,7 @@ def stiffness(h, x, z, mass1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,
         k2 = zr2[k] / scale
         moved += k1 * k1
         turned += (k2 - k1) * (k2 - k1)
-    if moved <= 0.0:
+    if h * h * moved <= QUIET_MOTION * QUIET_MOTION:
         return 0.0
     return np.sqrt(turned / moved) / h
 

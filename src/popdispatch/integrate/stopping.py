@@ -80,11 +80,12 @@ def windows_agree(ring, last, window, tol, extrapolate):
     return True
 
 
-#: What an iteration may move a state that it leaves "unchanged within round-off": 1024 units
-#: of round-off (``2**-42``, about 2.3e-13) of the demand for a set point, of its own size for
-#: a controller state (measured: the end states of the ELV day's minutes move by 1e-16 of the
-#: demand per iteration, 1e-10 of the convergence tolerance ``1e-6 P_d``).
-ROUND_OFF = 1024 * np.finfo(np.float64).eps
+#: What an iteration may move a state that it leaves "unchanged within round-off": 65536 units
+#: of round-off (``2**-36``, about 1.5e-11) of the demand for a set point, of its own size for
+#: a controller state. At rest the field is round-off and the steps add it up: a set point
+#: moves by about 1e-12 of the demand an iteration (docs/exact-mode.md, "Step size and
+#: stopping"), 1e-6 of the convergence tolerance ``1e-6 P_d``.
+ROUND_OFF = 65536 * np.finfo(np.float64).eps
 
 
 @nb.njit(cache=True, inline="always")
