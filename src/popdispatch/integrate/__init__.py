@@ -59,7 +59,7 @@ class Integrator:
     extrapolate : also require the geometrically projected remaining motion to be within
         ``tol_kw`` (for smooth, slowly converging runs; chatter in paper mode defeats it).
     fixed_point : also stop as soon as an iteration leaves the state unchanged within
-        round-off (shares within ``2**-42``, prices within ``2**-42`` of their size) with the
+        round-off (shares within ``2**-36``, prices within ``2**-36`` of their size) with the
         residual within tolerance (:mod:`popdispatch.integrate.stopping`).
     """
 
