@@ -8,8 +8,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
-from hypothesis import strategies as st
 
 from popdispatch.game.parameters import MinuteInputs
 from popdispatch.integrate import Status, integrate
@@ -158,22 +156,3 @@ def test_a_price_past_its_cap_stops_the_run_as_infeasible(congested):
     outcome = _integrate(engine, engine.settings.stepping, np.empty((0, congested.n_generators)))
     assert outcome.status == Status.INFEASIBLE
     assert 1 <= outcome.first_congestion <= outcome.iterations and engine.z.max() > 1e-9
-
-
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.integers(0, 2**32 - 1), st.integers(2, 5), st.integers(0, 2))
-def test_a_run_continued_from_its_rest_stops_there_at_once(seed, n_gens, n_limits):
-    """At rest the field is round-off and the steps the error control sizes add it up: an
-    iteration moves the set points by about 1e-12 of the demand, within the fixed-point stop's
-    round-off (``ROUND_OFF``), so a run continued from where it came to rest (its shares and
-    prices) ends after its first iteration (with a threshold of ``2**-42`` such runs waited
-    10-12 iterations for the window rule)."""
-    from helpers import random_fleet_problem
-
-    problem = random_fleet_problem(seed, n_gens, n_limits)
-    engine = Engine(problem, RunSettings(mode="exact"))
-    first = engine.run_minute(np.full(problem.n_generators, 1.0 / problem.n_generators), 1)
-    assume(first.status == Status.CONVERGED)
-    again = engine.run_minute(first.x, 1)
-    assert again.status == Status.CONVERGED
-    assert again.iterations <= 2
