@@ -26,6 +26,10 @@ from popdispatch.game.problem import KW_PER_MW, DispatchProblem
 
 #: The fraction of the way to the cone's boundary the careful solve steps (Clarabel: 0.99).
 CAREFUL_STEP = 0.9
+#: Clarabel's statuses of a solved minute and of an infeasible one; any other is retried
+#: carefully once, then raised.
+SOLVED = ("Solved", "AlmostSolved")
+INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
 
 
 def clarabel_settings(max_step: float | None = None) -> clarabel.DefaultSettings:
@@ -235,18 +239,18 @@ class OpfSolver:
         rhs = self._rhs(minute)
         solution = self._solved(rhs, careful=False)
         status = str(solution.status)
-        if status not in ("Solved", "AlmostSolved", "PrimalInfeasible", "AlmostPrimalInfeasible"):
+        if status not in SOLVED + INFEASIBLE:
             solution = self._solved(rhs, careful=True)
             status = str(solution.status)
         demand = float(rhs[0])
-        if status in ("PrimalInfeasible", "AlmostPrimalInfeasible"):
+        if status in INFEASIBLE:
             nan = np.full(n, np.nan)
             n_v = problem.n_voltage
             return OpfResult(
                 "infeasible", minute, demand, nan, np.nan, np.full(n_limits, np.nan), np.nan,
                 np.full(n_v, np.nan), np.full(n_v, np.nan),
             )  # fmt: skip
-        if status not in ("Solved", "AlmostSolved"):
+        if status not in SOLVED:
             raise RuntimeError(f"DC-OPF at minute {minute}: Clarabel returned {status}")
         bounds = rhs[self._zeros :]
         p_kw = np.clip(np.asarray(solution.x)[:n], -bounds[:n], bounds[n : 2 * n])

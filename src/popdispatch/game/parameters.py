@@ -136,11 +136,22 @@ class MinuteInputs(NamedTuple):
         demand = float(problem.demand[row])
         lo, hi = np.empty(n), np.empty(n)
         active = problem.online[row]
-        share_bounds(problem.pmin, problem.pmax, active, demand, lo, hi)
         below = np.empty(problem.line_up.shape[0])
-        tradable_below(problem.generator_line, problem.line_up, problem.line_preorder, lo, hi,
-                       below)  # fmt: skip
-        return cls(demand, problem.load_flow[row], lo, hi, active, below, tradable_count(lo, hi))
+        tradable = minute_bounds(problem.pmin, problem.pmax, active, demand,
+                                 problem.generator_line, problem.line_up, problem.line_preorder,
+                                 lo, hi, below)  # fmt: skip
+        return cls(demand, problem.load_flow[row], lo, hi, active, below, tradable)
+
+
+@nb.njit(cache=True)
+def minute_bounds(pmin, pmax, active, demand, generator_line, line_up, preorder, lo, hi, below):
+    """A minute's share bounds into ``lo``, ``hi`` (:func:`share_bounds`) and the tradable
+    generators below each limited line into ``below`` (:func:`tradable_below`); returns how
+    many the fleet has (:func:`tradable_count`): the fields :class:`MinuteInputs` adds to the
+    demand, the loads and the online generators."""
+    share_bounds(pmin, pmax, active, demand, lo, hi)
+    tradable_below(generator_line, line_up, preorder, lo, hi, below)
+    return tradable_count(lo, hi)
 
 
 @nb.njit(cache=True, inline="always")

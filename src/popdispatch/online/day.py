@@ -13,12 +13,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from popdispatch.game.parameters import (
-    MinuteInputs,
-    share_bounds,
-    tradable_below,
-    tradable_count,
-)
+from popdispatch.game.parameters import MinuteInputs, minute_bounds
 from popdispatch.integrate import Status, integrate
 from popdispatch.warm_start import warm_start
 
@@ -76,10 +71,9 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
         # the demand step in merit order (docs/exact-mode.md, "Warm start between minutes")
         warm_start(day.warm_start, day.bounded, x, old_demand, demand, pmin, pmax, active, weight,
                    params.b, params.c)  # fmt: skip
-        share_bounds(pmin, pmax, active, demand, lo, hi)
-        tradable_below(params.generator_line, params.line_up, params.line_preorder, lo, hi, below)
-        minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active, below,
-                              tradable_count(lo, hi))  # fmt: skip
+        tradable = minute_bounds(pmin, pmax, active, demand, params.generator_line,
+                                 params.line_up, params.line_preorder, lo, hi, below)  # fmt: skip
+        minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active, below, tradable)
         outcome = integrate(x, z, term, params, minute, ws, stepper, rule, h_try, out.history)
         h_try = outcome.h_try
         for i in range(n):
