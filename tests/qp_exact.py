@@ -132,3 +132,25 @@ def _solve_rational(K: np.ndarray, rhs: np.ndarray) -> np.ndarray | None:
                 factor = rows[r][col] / rows[col][col]
                 rows[r] = [a - factor * p for a, p in zip(rows[r], rows[col], strict=True)]
     return np.array([float(rows[i][size] / rows[i][i]) for i in range(size)])
+
+
+def dual_value(problem, minute: int, marginal_price: float, line_price: np.ndarray) -> float:
+    """The DC-OPF's Lagrangian dual function at prices ``marginal_price`` (EUR/MWh) and
+    ``line_price`` (EUR/MWh per line, positive where the flow presses on ``+U``), EUR/h: the
+    least cost of ``sum(b p + c p^2) - lambda (sum p - D) + mu (F - A p) - |mu| U`` over the
+    generator ranges, each generator alone (the line flows are ``F - A p``, ``A`` the rows of
+    ``problem.down``). A lower bound on the optimal cost at any prices (weak duality), equal
+    to it at optimal ones. No voltage rows."""
+    row = minute - 1
+    online = problem.online[row]
+    lo = np.where(online, problem.pmin, 0.0)
+    hi = np.where(online, problem.pmax, 0.0)
+    mu = np.asarray(line_price, dtype=float)
+    slope = problem.b - marginal_price - problem.down.T @ mu  # EUR/MWh
+    c = problem.c
+    curved = c > 0
+    free = -slope / (2.0 * np.where(curved, c, 1.0))
+    p = np.where(curved, np.clip(free, lo, hi), np.where(slope >= 0.0, lo, hi))
+    load_flow = problem.load_flow[row][: len(problem.limit)]
+    constant = marginal_price * problem.demand[row] + mu @ load_flow - np.abs(mu) @ problem.limit
+    return float(slope @ p + c @ p**2 + constant)
