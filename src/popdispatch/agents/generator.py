@@ -416,7 +416,7 @@ class GeneratorAgent(RoundAgent):
             comps.add(own)
             members.setdefault(own, {}).update(direct)
         groups = []
-        for c in comps:
+        for c in sorted(comps):  # a set of ids: sorted, or the order hangs on string hashing
             group = members.get(c, {})
             group[self.aid] = me
             groups.append([(a, st, None if a == self.aid else (a,) if a in direct
