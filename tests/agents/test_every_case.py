@@ -153,7 +153,7 @@ def test_the_synthetic_feeder_on_a_ring_reaches_the_dc_opf_with_the_local_step()
     """The synthetic 1k feeder (68 limited lines, 23 deep, 9 binding) on the ring: with the
     plain Euler rounds the curvature-scaled field's stiffness bounded the step to about 7e-5 s
     and 6000 rounds left it 0.038 kW away; with each generator's local step the round step is
-    the line prices' (4.2e-4 s) and the run converges (measured: 2111 rounds, docs/agents.md,
+    the line prices' (4.2e-4 s) and the run converges (measured: 1591 rounds, docs/agents.md,
     "The local step"): proved within the accuracy, and within it of Clarabel's DC-OPF, supply
     = demand."""
     problem, opf = case("synthetic-1k", "every line")

@@ -16,6 +16,20 @@ broadcast gives the parent side's and the child side's value):
   are equal; otherwise only the sum of the two half prices matters for the generators'
   comparisons.
 
+A line whose flow stands still over its limit (the generators that could relieve it all held
+at a limit: nothing answers its price until the price crosses one's marginal cost) has its
+overflowing price hastened, like the engine's pinned lines (docs/exact-mode.md, "Pinned
+lines") but from what the controller alone measures (:class:`StillLine`): once
+:data:`STILL_GRACE` fresh measurements in a row found the flow moved by at most
+:data:`STILL_FLOW` of the overflow, each further one multiplies the factor on that price's
+rate by :data:`STUCK_GROWTH`, up to :data:`popdispatch.modes.exact.PINNED_BOOST` and to the
+least speed ``speed`` (EUR/MW per s, :class:`ControllerAgent`). The first measurement that
+finds the flow moving ends the hastening for the minute and takes back the last round's gain
+(the generators answered a price before it; the measurement comes a round late). Once a
+minute: later still spells are the price loop ringing around its target, which the plain law
+damps and a hastened step would feed. At a rest point the line is not overflowing, so the
+hastening changes no rest point.
+
 A controller that stops (crash): every round each end sends its partner at the other end of
 the line a :class:`~popdispatch.agents.messages.Heartbeat`. An end whose partner has been
 silent for more than ``stale_rounds`` rounds takes the line over: it also sends the other
@@ -35,9 +49,52 @@ from popdispatch.agents.messages import Heartbeat, Measurement, Signals
 from popdispatch.agents.schedule import Phase
 from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs
 from popdispatch.modes import ModeCode, exact, paper
+from popdispatch.modes.exact import PINNED_BOOST
 
 #: The payoff map each mode's controllers evaluate (the agents run these two modes).
 PAYOFFS = {ModeCode.EXACT: exact.payoff, ModeCode.PAPER: paper.payoff}
+#: A fresh measurement that moved the flow by at most this fraction of the line's overflow
+#: finds the flow standing still.
+STILL_FLOW = 1e-6
+#: Still measurements in a row before a price is hastened: a climb the plain law ends in a few
+#: rounds is left alone (on random fleets, hastened from the first still round, such climbs
+#: overshot and rang for up to 50 rounds more).
+STILL_GRACE = 6
+#: The factor on a still line's overflowing price rate grows by this much a round (2 overshot
+#: more, and without the once-a-minute rule kept a case12da fleet oscillating).
+STUCK_GROWTH = 1.5
+
+
+@dataclass
+class StillLine:
+    """One line end's hastening of a still line's price (module docstring). ``boost``: the
+    factor on the overflowing price's rate; ``flow_mw``, ``round``: the measurement last
+    judged; ``still``: still measurements in a row; ``spent``: this minute's hastening has
+    ended; ``gained``: what the factor added to the (up, down) prices in the last step,
+    EUR/MW."""
+
+    boost: float = 1.0
+    flow_mw: float = 0.0
+    round: int = -1
+    still: int = 0
+    spent: bool = False
+    gained: tuple[float, float] = (0.0, 0.0)
+
+    def judge(self, flow_mw: float, flow_round: int, limit_mw: float) -> bool:
+        """Judge a measurement (``flow_round`` as the last one: nothing new, nothing changes);
+        returns whether the hastening just ended, its last gain to be taken back."""
+        if flow_round == self.round:
+            return False
+        overflow = abs(flow_mw) - limit_mw
+        moved = abs(flow_mw - self.flow_mw)
+        still = self.round >= 0 and overflow > 0.0 and moved <= STILL_FLOW * overflow
+        self.flow_mw, self.round = flow_mw, flow_round
+        self.still = self.still + 1 if still else 0
+        ended = self.boost > 1.0 and not still
+        self.spent = self.spent or ended
+        hasten = self.still > STILL_GRACE and not self.spent
+        self.boost = min(self.boost * STUCK_GROWTH, PINNED_BOOST) if hasten else 1.0
+        return ended
 
 
 class LinePrice:
@@ -89,7 +146,8 @@ class LineEnd:
     end's side; ``z_up``, ``z_down``: exact-mode prices, EUR/MW; ``partner``: the controller
     at the other end, ``other_receivers`` the generators on its side; ``partner_round``: round
     of its latest heartbeat; ``took_over``: this end sends the other side's value too (the
-    partner is silent). ``weights``: on a meshed network, each receiver's distribution factor
+    partner is silent). ``still``: the hastening of its price while the flow stands still
+    (:class:`StillLine`). ``weights``: on a meshed network, each receiver's distribution factor
     to the line (``D_ki``, :mod:`popdispatch.game.mesh`; the grid operator's PTDF row of the
     line): the parent end sends every receiver ``parent + D_ki (child - parent)``, its side's
     value where ``D_ki`` is 0 and the other's where it is 1 (a radial feeder's rule), and the
@@ -109,6 +167,7 @@ class LineEnd:
     partner_round: int = -1
     took_over: bool = False
     weights: dict[str, float] | None = None
+    still: StillLine = field(default_factory=StillLine)
 
     @property
     def states(self) -> tuple[float, ...]:
@@ -119,19 +178,21 @@ class LineEnd:
 
 class ControllerAgent(RoundAgent):
     """The node controller of one key node (see the module docstring). ``step_s``: the
-    round's Euler step ``h``, s."""
+    round's Euler step ``h``, s; ``speed``: the least speed a still line's overflowing price
+    is hastened to, EUR/MW per s (0: never)."""
 
     ROUND = Phase
 
     PHASES = (Phase.SIGNAL,)
 
     def __init__(self, ends: list[LineEnd], step_s: float, network=None,
-                 stale_rounds: int = 10):  # fmt: skip
+                 stale_rounds: int = 10, speed: float = 0.0):  # fmt: skip
         super().__init__(network)
         self.stale_rounds = int(stale_rounds)
         self.events: list[dict] = []
         self.ends = ends
         self.step_s = step_s
+        self.speed = float(speed)
         self.by_line = {}
         for end in ends:
             self.by_line.setdefault(end.line, []).append(end)
@@ -197,9 +258,28 @@ class ControllerAgent(RoundAgent):
         parent, child, _ = end.price.evaluate(end.flow_mw, end.states)
         if end.states:
             h, rate = self.step_s, end.price.rate
-            end.z_up = max(end.z_up + h * float(rate[0]), 0.0)
-            end.z_down = max(end.z_down + h * float(rate[1]), 0.0)
+            up, down = self._hastened(end, float(rate[0]), float(rate[1]))
+            end.z_up = max(end.z_up + h * up, 0.0)
+            end.z_down = max(end.z_down + h * down, 0.0)
         return (parent, child) if end.orientation > 0 else (child, parent)
+
+    def _hastened(self, end: LineEnd, up: float, down: float) -> tuple[float, float]:
+        """The rates (EUR/MW per s) of the line's up and down prices, the rising one (the
+        overflowing direction's) times the still line's factor but no faster than ``speed``
+        unless alone (:class:`StillLine`); a hastening that just ended takes back its last
+        gain first."""
+        still = end.still
+        if self.speed == 0.0:
+            return up, down
+        if still.judge(end.flow_mw, end.flow_round, float(end.price.params.limit[0])):
+            end.z_up = max(end.z_up - still.gained[0], 0.0)
+            end.z_down = max(end.z_down - still.gained[1], 0.0)
+        rates = [up, down]
+        for side, rate in enumerate(rates):
+            if rate > 0.0 and still.boost > 1.0:
+                rates[side] = rate * max(1.0, min(still.boost, self.speed / rate))
+        still.gained = (self.step_s * (rates[0] - up), self.step_s * (rates[1] - down))
+        return rates[0], rates[1]
 
     def residual_mw(self) -> float:
         """Largest distance from complementary slackness over this controller's lines at their

@@ -302,8 +302,9 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
         gen.relay = relay
         gen.slow_relays = slow
         gen.stale_rounds = stale_rounds
+    speed = still_line_speed(problem, settings) if local_step else 0.0
     controllers, line_ends = _controllers(problem, settings, fp, step_s, network,
-                                          *line_constants(problem, settings, fp, minute))
+                                          *line_constants(problem, settings, fp, minute), speed)
     for controller in controllers.values():  # the generators report a silence first
         controller.stale_rounds = 2 * stale_rounds
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
@@ -417,12 +418,23 @@ def line_constants(
     return controller_constants(problem, settings.exact.price_law, fp.C, fp.price_rate, minute)
 
 
-def _controllers(problem, settings: RunSettings, fp, step_s: float, network, weight, rate):
+def still_line_speed(problem: DispatchProblem, settings: RunSettings) -> float:
+    """The least speed the controllers hasten a still line's overflowing price to, EUR/MW per
+    s (:mod:`popdispatch.agents.controller`): exact mode's ``pinned_speed`` times the
+    marginal-cost spread ``S``, as the engine's pinned lines; 0 in a mode without prices."""
+    if not get_mode(settings.mode).bounded:
+        return 0.0
+    return float(settings.exact.pinned_speed * scales(problem)[0])
+
+
+def _controllers(problem, settings: RunSettings, fp, step_s: float, network, weight, rate,
+                 speed: float = 0.0):  # fmt: skip
     """``({id: controller}, line_ends)`` from the problem's controller table; each line priced
     by the mode's own payoff map (:class:`~popdispatch.agents.controller.LinePrice`) with the
     problem's limit of the line, its proportional weight ``weight[k]`` and price rate
     ``rate[k]`` (:func:`line_constants`: the scaled law and a mesh's lever scale are the plain
-    law with per-line constants)."""
+    law with per-line constants); ``speed``: the least speed of a still line's price, EUR/MW
+    per s (:func:`still_line_speed`)."""
     table = NodeControllers.from_problem(problem).table
     position = {line: k for k, line in enumerate(problem.lines)}
     payoff = PAYOFFS[get_mode(settings.mode).code]
@@ -446,7 +458,8 @@ def _controllers(problem, settings: RunSettings, fp, step_s: float, network, wei
             partner = next(a for a in line_ends[end.line] if a != aid)
             end.partner = partner
             end.other_receivers = next(e.receivers for e in ends[partner] if e.line == end.line)
-    controllers = {aid: ControllerAgent(own, step_s, network) for aid, own in ends.items()}
+    controllers = {aid: ControllerAgent(own, step_s, network, speed=speed)
+                   for aid, own in ends.items()}  # fmt: skip
     return controllers, [tuple(e) for e in line_ends]
 
 

@@ -56,7 +56,8 @@ class AgentSettings:
         by the room it has left now over every offer that arrived (late or repeated ones).
     local_step : curvature-scaled field (exact mode): every generator scales the steps of its
         pairs by its own factor ``1 / (1 + h lam)`` and the round step is bounded by the line
-        prices and the economic dispatch's rate only (docs/agents.md, "The local step");
+        prices and the economic dispatch's rate only (docs/agents.md, "The local step"), and
+        the node controllers hasten a still line's price (:mod:`popdispatch.agents.controller`);
         False: plain Euler rounds of the default step, the engine's Euler steps.
     """
 
