@@ -123,9 +123,10 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
     rest proves at least half the bound of the one before (the engine runs on while the
     bound falls by 1 %, :func:`popdispatch.online.run_snapshot`; the agents' rounds cost
     messages, so they ask more of each window; a system's ``rest_progress``, when it has one,
-    replaces :data:`REST_PROGRESS`): the rest window can stop a run whose last watts still
-    move. A run the certificate proves within the accuracy every ``window``
-    rounds stops there, at rest or not (:func:`proved`)."""
+    replaces :data:`REST_PROGRESS`), or as long as the bound, falling at its rate since the
+    rest before, would reach the accuracy within the horizon (:class:`Falling`): the rest
+    window can stop a run whose last watts still move. A run the certificate proves within
+    the accuracy every ``window`` rounds stops there, at rest or not (:func:`proved`)."""
     from mango import AgentAddress, create_world, graph_topology, per_node
 
     world = create_world(communication_sim=system.network, record_messages=False)
@@ -143,7 +144,7 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
     window = opts.window
     last_event = max((_last_round(e) for e in system.network.faults.events), default=-1)
     check_after = last_event + window  # no rest declared before the last fault
-    last_bound = np.inf
+    last_bound, last_rest = np.inf, 0
     async with world:
         rnd, quiet = 0, False
         while True:
@@ -158,8 +159,10 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
                 if rest_round is not None and system.prove is not None and rnd < opts.max_rounds:
                     bound = system.prove(system)
                     progress = getattr(system, "rest_progress", REST_PROGRESS)
-                    if bound > system.accuracy_mw and bound < progress * last_bound:
-                        rest_round, last_bound, check_after = None, bound, rnd + window
+                    falling = Falling(bound, last_bound, rnd - last_rest)
+                    if falling.goes_on(system.accuracy_mw, opts.max_rounds - rnd, progress):
+                        rest_round, check_after = None, rnd + window
+                        last_bound, last_rest = bound, rnd
                 elif proved(system, rnd, window,
                             rnd > check_after and unrest is None and opts.tol_kw > 0.0):
                     rest_round = len(system.history) - 1
@@ -186,8 +189,37 @@ async def simulate(system: WorldSystem, opts: WorldOptions, on_round=None) -> Wo
 
 
 #: The factor each further rest's proved bound must fall below, times the one before, for a
-#: run at rest above the accuracy to go on (:func:`simulate`).
+#: run at rest above the accuracy to go on (:func:`simulate`) whatever its horizon.
 REST_PROGRESS = 0.5
+
+
+@dataclass(frozen=True)
+class Falling:
+    """The distance bounds (MW) proved at two rests of a run, ``rounds`` apart: ``bound`` now,
+    ``before`` at the rest before (``inf`` at the first)."""
+
+    bound: float
+    before: float
+    rounds: int
+
+    def rounds_to(self, accuracy_mw: float) -> float:
+        """Rounds until the bound is within ``accuracy_mw`` if it keeps falling by the same
+        factor every ``rounds`` (0 within it already; ``inf`` if it did not fall)."""
+        if self.bound <= accuracy_mw:
+            return 0.0
+        if not self.bound < self.before:
+            return np.inf
+        ratio = self.bound / self.before
+        return self.rounds * np.log(accuracy_mw / self.bound) / np.log(ratio)
+
+    def goes_on(self, accuracy_mw: float, remaining: int, progress: float) -> bool:
+        """Whether a run at rest above ``accuracy_mw`` goes on: its bound fell below
+        ``progress`` times the one before, or at its rate it would reach the accuracy within
+        the ``remaining`` rounds of its horizon (a slow tail the rest window caught still
+        creeping, not a stall)."""
+        if self.bound <= accuracy_mw:
+            return False
+        return self.bound < progress * self.before or self.rounds_to(accuracy_mw) <= remaining
 
 
 def proved(system: WorldSystem, rnd: int, window: int, due: bool) -> bool:
