@@ -336,7 +336,9 @@ def agents_text(s: dict) -> str:
     by = (f"{s['dynamics']} dynamics, {s['mode']} mode, by {s['agents']} agents "
           f"({s['graph']} graph)" if population else f"{s['algorithm']} by {s['agents']} agents")
     step = (f" of {s['step_s']:.4g} s ({s['step_source']} step"
-            + ("; each generator damps its own by its curvature" if s["local_step"] else "")
+            + ("; each generator damps its own by its curvature, and a line's controller "
+               "hastens its price while its flow stands still over its limit"
+               if s["local_step"] else "")
             + ")") if population else ""  # fmt: skip
     lines = [
         f"minute {s['minute']}, demand {s['demand_kw']:.3f} kW: {by}",
