@@ -279,12 +279,20 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
 
 @nb.njit(cache=True, inline="always")
 def error_norm(x_high, x_low, z_high, z_low, rtol, atol, price_atol):
-    """Largest scaled difference of the Heun and Euler results (accept the step if <= 1)."""
+    """Largest scaled difference of the Heun and Euler results (accept the step if <= 1);
+    infinite where either result is not finite (a step too long for a stiff field can
+    overflow: rejected and shortened, never taken)."""
     err = 0.0
     for i in range(x_high.shape[0]):
-        err = max(err, abs(x_high[i] - x_low[i]) / (atol + rtol * abs(x_high[i])))
+        scaled = abs(x_high[i] - x_low[i]) / (atol + rtol * abs(x_high[i]))
+        if scaled != scaled:  # NaN: a result not finite (inf / inf, inf - inf, or NaN)
+            return np.inf
+        err = max(err, scaled)
     for k in range(z_high.shape[0]):
-        err = max(err, abs(z_high[k] - z_low[k]) / (price_atol + rtol * abs(z_high[k])))
+        scaled = abs(z_high[k] - z_low[k]) / (price_atol + rtol * abs(z_high[k]))
+        if scaled != scaled:
+            return np.inf
+        err = max(err, scaled)
     return err
 
 
