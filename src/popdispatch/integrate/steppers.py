@@ -278,22 +278,25 @@ def euler_steps(steps, evaluate_first, h, x, z, term, params, minute, p, f, w, v
 
 
 @nb.njit(cache=True, inline="always")
-def error_norm(x_high, x_low, z_high, z_low, rtol, atol, price_atol):
-    """Largest scaled difference of the Heun and Euler results (accept the step if <= 1);
-    infinite where either result is not finite (a step too long for a stiff field can
-    overflow: rejected and shortened, never taken)."""
+def largest_scaled_difference(high, low, atol, rtol):
+    """``max |high - low| / (atol + rtol |high|)`` over the entries; infinite where either
+    value is not finite (the quotient is then NaN: inf / inf, inf - inf, or NaN itself)."""
     err = 0.0
-    for i in range(x_high.shape[0]):
-        scaled = abs(x_high[i] - x_low[i]) / (atol + rtol * abs(x_high[i]))
-        if scaled != scaled:  # NaN: a result not finite (inf / inf, inf - inf, or NaN)
-            return np.inf
-        err = max(err, scaled)
-    for k in range(z_high.shape[0]):
-        scaled = abs(z_high[k] - z_low[k]) / (price_atol + rtol * abs(z_high[k]))
+    for i in range(high.shape[0]):
+        scaled = abs(high[i] - low[i]) / (atol + rtol * abs(high[i]))
         if scaled != scaled:
             return np.inf
         err = max(err, scaled)
     return err
+
+
+@nb.njit(cache=True, inline="always")
+def error_norm(x_high, x_low, z_high, z_low, rtol, atol, price_atol):
+    """Largest scaled difference of the Heun and Euler results (accept the step if <= 1);
+    infinite where either result is not finite (a step too long for a stiff field can
+    overflow: rejected and shortened, never taken)."""
+    return max(largest_scaled_difference(x_high, x_low, atol, rtol),
+               largest_scaled_difference(z_high, z_low, price_atol, rtol))  # fmt: skip
 
 
 def advance_euler(method, x, z, term, params, minute, ws, stepper, h_try):
