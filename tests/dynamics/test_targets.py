@@ -98,6 +98,16 @@ def test_a_better_strategy_at_zero_share_escapes_extinction_unless_imitated(fiel
     assert abs(rate.sum()) < 1e-15
 
 
+def _drawn_problem(seed: int, n_gens: int):
+    """The property test's feeder and load of one draw."""
+    rng = np.random.default_rng(seed)
+    feeder = random_feeder(rng, 20, n_gens)
+    capacity = feeder.generators.pmax_kw.sum()
+    load = pd.Series(rng.uniform(0.1, 1.0, len(feeder.loads)), index=feeder.loads.index)
+    load *= rng.uniform(0.2, 0.9) * capacity / load.sum()
+    return build_problem(reduce_feeder(feeder), single_minute_profiles(1, load, "random"))
+
+
 @settings(max_examples=30, deadline=None)
 @given(
     seed=st.integers(0, 2**31),
@@ -115,12 +125,7 @@ def test_bnn_and_logit_conserve_mass_and_keep_the_simplex_and_the_box(seed, n_ge
     iteration's set points sum to the demand and stay non-negative (paper mode), inside the
     generator limits (exact mode)."""
     mode, dynamics = case
-    rng = np.random.default_rng(seed)
-    feeder = random_feeder(rng, 20, n_gens)
-    capacity = feeder.generators.pmax_kw.sum()
-    load = pd.Series(rng.uniform(0.1, 1.0, len(feeder.loads)), index=feeder.loads.index)
-    load *= rng.uniform(0.2, 0.9) * capacity / load.sum()
-    problem = build_problem(reduce_feeder(feeder), single_minute_profiles(1, load, "random"))
+    problem = _drawn_problem(seed, n_gens)
     method = "euler" if mode == "paper" else "heun"
     substeps = 20 if dt < 1 else 1
     loose = Integrator(method=method, dt=dt, substeps=substeps, rtol=1e6, atol=1e6,
@@ -128,7 +133,7 @@ def test_bnn_and_logit_conserve_mass_and_keep_the_simplex_and_the_box(seed, n_ge
     eta = 10.0**log_eta if dynamics == "logit" else None
     run = run_snapshot(problem, 1, RunSettings(dynamics=dynamics, mode=mode, eta=eta,
                                                x0="capacity", integrator=loose))  # fmt: skip
-    demand_kw = load.sum()
+    demand_kw = problem.demand[0] * 1000
     np.testing.assert_allclose(run.trajectory_kw.sum(axis=1), demand_kw, rtol=1e-10)
     assert np.isfinite(run.trajectory_kw).all()
     assert (run.trajectory_kw >= -1e-12 * demand_kw).all()
@@ -136,6 +141,24 @@ def test_bnn_and_logit_conserve_mass_and_keep_the_simplex_and_the_box(seed, n_ge
         pmin, pmax = problem.pmin * 1000, problem.pmax * 1000
         assert (run.trajectory_kw >= pmin - 1e-9 * demand_kw).all()
         assert (run.trajectory_kw <= pmax + 1e-9 * demand_kw).all()
+
+
+def test_a_state_that_overflows_is_stalled_with_the_reason():
+    """Exact-mode logit (eta 5e-3 EUR/MWh) by fixed Euler steps of 0.01 s: the prices ring up
+    to overflow (the Heun steps of the property test above are rejected instead). The run and
+    the day say so, never a dispatch: stalled, the bound infinite, the reason the steps."""
+    problem = _drawn_problem(38616, 4)
+    euler = Integrator(method="euler", dt=0.01, substeps=1, max_iterations=30)
+    settings = RunSettings(dynamics="logit", mode="exact", eta=10.0**-2.28125, x0="capacity",
+                           integrator=euler)  # fmt: skip
+    run = run_snapshot(problem, 1, settings)
+    assert not np.isfinite(run.setpoints_kw).all()
+    assert run.status == "stalled" and run.converged_at is None
+    assert run.distance_bound_kw == np.inf
+    assert "overflowed" in run.stall_reason and "euler steps of 0.01 s" in run.stall_reason
+    day = run_day(problem, settings)
+    assert day.status == "stalled" and not day.converged.any()
+    assert "overflowed" in day.stall_reasons[1]
 
 
 @pytest.fixture(scope="module")

@@ -112,9 +112,9 @@ SWITCH_CAPS = 64
 #: an iteration, in units of the iteration's ``dt``. Holding the step does not always stop the
 #: collapse: a state sliding along a switch can still be driven to steps of 5e-15 s by the
 #: error control's rejections (measured: MATPOWER's case300 on a ring, two million steps an
-#: iteration). A step at the floor is taken whatever its error estimate: what the run reports
-#: rests on the end state's certificate, not on the steps' error. Iterations with fewer
-#: switches have no floor.
+#: iteration). A step at the floor is taken whatever its error estimate, if its result is finite
+#: (else the iteration ends where it is): what the run reports rests on the end state's
+#: certificate, not on the steps' error. Iterations with fewer switches have no floor.
 STEP_FLOOR = 1e-6
 
 
@@ -458,11 +458,14 @@ def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
         err = error_norm(x2, x1, z2, z1, rtol, atol, price_atol)
         rate = stiffness(h, x, z, mass1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,
                          price_atol)  # fmt: skip
-        if err <= 1.0 or h <= floor:  # a step at the floor is taken (STEP_FLOOR)
+        if err <= 1.0 or (h <= floor and err < np.inf):  # a finite step at the floor is taken
             copy_into(x2, x)
             copy_into(z2, z)
             remaining -= h
             fresh = False
+        elif h <= floor:  # not finite even at the floor: the iteration ends where it is
+            counters.rejected[0] += 1
+            remaining = 0.0
         else:
             counters.rejected[0] += 1
         h_try, switches = next_step(h, err, rate, switches, dt)

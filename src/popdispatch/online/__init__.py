@@ -231,7 +231,37 @@ def verdicts(
     certificate proves the accuracy (and the run was not infeasible); a minute at rest that
     is not certified gets the reason (a failing KKT condition, else the bound). Dynamics whose
     rest points are not the game's equilibria (logit) are never certified; their minutes at
-    rest are stalled with the bound. Paper mode: certified means at rest."""
+    rest are stalled with the bound. Paper mode: certified means at rest. A minute whose end
+    state is not finite (a step too long for the field overflowed it) is never certified and
+    is stalled with that reason, in every mode."""
+    overflowed = ~(np.isfinite(p_mw).all(axis=1) & np.isfinite(z).all(axis=1))
+    verdict = _verdicts(engine, minutes, p_mw, z, rested, infeasible)
+    for r in np.flatnonzero(overflowed & ~infeasible):
+        verdict.certified[r] = False
+        verdict.reasons[r] = _overflow_reason(engine)
+    return verdict
+
+
+def _overflow_reason(engine: Engine) -> str:
+    """Why a minute whose end state is not finite has no dispatch: its steps."""
+    stepping = engine.settings.stepping
+    step = stepping.dt / stepping.substeps if stepping.method == "euler" else stepping.dt
+    return (
+        f"the state overflowed (set points or prices not finite): {stepping.method} steps of "
+        f"{step:.3g} s are too long for this field; shorten them (the Integrator's dt, "
+        f"substeps)" + ("" if stepping.method == "heun" else " or use method='heun'")
+    )
+
+
+def _verdicts(
+    engine: Engine,
+    minutes: np.ndarray,
+    p_mw: np.ndarray,
+    z: np.ndarray,
+    rested: np.ndarray,
+    infeasible: np.ndarray,
+) -> Verdict:
+    """:func:`verdicts` of finite end states."""
     certificates = engine.certificates(minutes, p_mw, z)
     if certificates is None:
         return Verdict(rested & ~infeasible, [None] * len(minutes), None, None)
