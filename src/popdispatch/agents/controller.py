@@ -30,6 +30,19 @@ minute: later still spells are the price loop ringing around its target, which t
 damps and a hastened step would feed. At a rest point the line is not overflowing, so the
 hastening changes no rest point.
 
+A line whose flow has settled inside both limits (moved by at most :data:`NET_SETTLED` of its
+slack since the measurement before) with both prices positive nets them (:meth:`LineEnd.net`):
+both lowered by the same amount, as far as each direction's multiplier ``max(0, z + C
+excess)`` allows, so the broadcast at the measured flow is unchanged. On the line's Lagrangian
+term ``z_up (f - U) + z_down (-f - U)`` the net ``z_up - z_down`` prices the flow and the sum
+costs ``U`` each: among prices with the same net the smallest sum is the better dual point,
+and a rest point never has both (the flow cannot be at ``+U`` and ``-U``), so netting changes
+no rest point. Left alone, the two prices decay together at ``alpha (U -+ f)`` while the net
+holds the flow inside, slow on a small limit. Only once settled: while the flow sweeps
+across the band, the two prices move the net at ``2 alpha f``, faster than one price alone
+(``alpha (f - U)``), and that corrects an overshoot. With the local step only, as the
+hastening.
+
 A controller that stops (crash): every round each end sends its partner at the other end of
 the line a :class:`~popdispatch.agents.messages.Heartbeat`. An end whose partner has been
 silent for more than ``stale_rounds`` rounds takes the line over: it also sends the other
@@ -63,6 +76,10 @@ STILL_GRACE = 6
 #: The factor on a still line's overflowing price rate grows by this much a round (2 overshot
 #: more, and without the once-a-minute rule kept a case12da fleet oscillating).
 STUCK_GROWTH = 1.5
+#: A flow inside both limits that moved by at most this fraction of its slack since the
+#: measurement before has settled, and its line's two prices are netted (0.3 netted later on
+#: random fleets, with more rounds).
+NET_SETTLED = 0.1
 
 
 @dataclass
@@ -168,6 +185,29 @@ class LineEnd:
     took_over: bool = False
     weights: dict[str, float] | None = None
     still: StillLine = field(default_factory=StillLine)
+    moved_mw: float = float("inf")
+
+    def measure(self, flow_mw: float, flow_round: int) -> None:
+        """Keep a measurement newer than the latest (and how far it moved the flow, MW)."""
+        if flow_round > self.flow_round:
+            if self.flow_mw is not None:
+                self.moved_mw = abs(flow_mw - self.flow_mw)
+            self.flow_mw, self.flow_round = flow_mw, flow_round
+
+    def net(self) -> None:
+        """Net the two prices of a line whose flow has settled inside both limits (module
+        docstring): both lowered by ``min(mu_up, mu_down)`` (EUR/MW), the multipliers
+        ``max(0, z + C excess)`` at the measured flow, which keeps their difference, the
+        broadcast."""
+        limit, C = float(self.price.params.limit[0]), float(self.price.params.C)
+        slack = limit - abs(self.flow_mw)
+        if not (slack > 0.0 and self.moved_mw <= NET_SETTLED * slack):
+            return
+        mu_up = max(0.0, self.z_up + C * (self.flow_mw - limit))
+        mu_down = max(0.0, self.z_down + C * (-self.flow_mw - limit))
+        common = min(mu_up, mu_down)
+        self.z_up -= common
+        self.z_down -= common
 
     @property
     def states(self) -> tuple[float, ...]:
@@ -179,20 +219,21 @@ class LineEnd:
 class ControllerAgent(RoundAgent):
     """The node controller of one key node (see the module docstring). ``step_s``: the
     round's Euler step ``h``, s; ``speed``: the least speed a still line's overflowing price
-    is hastened to, EUR/MW per s (0: never)."""
+    is hastened to, EUR/MW per s (0: never); ``net``: net a settled line's two prices."""
 
     ROUND = Phase
 
     PHASES = (Phase.SIGNAL,)
 
     def __init__(self, ends: list[LineEnd], step_s: float, network=None,
-                 stale_rounds: int = 10, speed: float = 0.0):  # fmt: skip
+                 stale_rounds: int = 10, speed: float = 0.0, net: bool = False):  # fmt: skip
         super().__init__(network)
         self.stale_rounds = int(stale_rounds)
         self.events: list[dict] = []
         self.ends = ends
         self.step_s = step_s
         self.speed = float(speed)
+        self.net = bool(net)
         self.by_line = {}
         for end in ends:
             self.by_line.setdefault(end.line, []).append(end)
@@ -200,8 +241,7 @@ class ControllerAgent(RoundAgent):
     def receive(self, content, sender) -> None:
         if isinstance(content, Measurement):
             for end in self.by_line.get(content.line, ()):
-                if content.round > end.flow_round:
-                    end.flow_mw, end.flow_round = content.flow_mw, content.round
+                end.measure(content.flow_mw, content.round)
         elif isinstance(content, Heartbeat):
             for end in self.by_line.get(content.line, ()):
                 end.partner_round = max(end.partner_round, content.round)
@@ -254,13 +294,16 @@ class ControllerAgent(RoundAgent):
 
     def _price(self, end: LineEnd) -> tuple[float, float]:
         """``(this side's value, the other side's)`` at the latest measurement (EUR/MW), then
-        one Euler step of the line's prices, ``z <- max(z + h z_rate, 0)`` (exact mode)."""
+        one Euler step of the line's prices, ``z <- max(z + h z_rate, 0)`` (exact mode), and
+        their netting if the controller nets."""
         parent, child, _ = end.price.evaluate(end.flow_mw, end.states)
         if end.states:
             h, rate = self.step_s, end.price.rate
             up, down = self._hastened(end, float(rate[0]), float(rate[1]))
             end.z_up = max(end.z_up + h * up, 0.0)
             end.z_down = max(end.z_down + h * down, 0.0)
+            if self.net:
+                end.net()
         return (parent, child) if end.orientation > 0 else (child, parent)
 
     def _hastened(self, end: LineEnd, up: float, down: float) -> tuple[float, float]:

@@ -265,7 +265,9 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
                  stale_rounds: int = 10, local_step: bool = False) -> AgentSystem:  # fmt: skip
     """The agents of one minute (not yet registered anywhere); ``timeout``: rounds an offer
     stays open; ``lag``: rounds from a commit to the inverters' change; ``local_step``: each
-    generator scales its pairs' steps by its own factor (GeneratorRule.step_factor)."""
+    generator scales its pairs' steps by its own factor (GeneratorRule.step_factor), and the
+    controllers hasten a still line's price and net a settled line's two prices
+    (:mod:`popdispatch.agents.controller`)."""
     if not problem.online[minute - 1].all():
         off = ", ".join(problem.generators[~problem.online[minute - 1]])
         raise OptionError(f"the agents run with every generator online (offline: {off})")
@@ -304,7 +306,8 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
         gen.stale_rounds = stale_rounds
     speed = still_line_speed(problem, settings) if local_step else 0.0
     controllers, line_ends = _controllers(problem, settings, fp, step_s, network,
-                                          *line_constants(problem, settings, fp, minute), speed)
+                                          *line_constants(problem, settings, fp, minute), speed,
+                                          bool(local_step))  # fmt: skip
     for controller in controllers.values():  # the generators report a silence first
         controller.stale_rounds = 2 * stale_rounds
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
@@ -428,13 +431,13 @@ def still_line_speed(problem: DispatchProblem, settings: RunSettings) -> float:
 
 
 def _controllers(problem, settings: RunSettings, fp, step_s: float, network, weight, rate,
-                 speed: float = 0.0):  # fmt: skip
+                 speed: float = 0.0, net: bool = False):  # fmt: skip
     """``({id: controller}, line_ends)`` from the problem's controller table; each line priced
     by the mode's own payoff map (:class:`~popdispatch.agents.controller.LinePrice`) with the
     problem's limit of the line, its proportional weight ``weight[k]`` and price rate
     ``rate[k]`` (:func:`line_constants`: the scaled law and a mesh's lever scale are the plain
     law with per-line constants); ``speed``: the least speed of a still line's price, EUR/MW
-    per s (:func:`still_line_speed`)."""
+    per s (:func:`still_line_speed`); ``net``: the controllers net a settled line's prices."""
     table = NodeControllers.from_problem(problem).table
     position = {line: k for k, line in enumerate(problem.lines)}
     payoff = PAYOFFS[get_mode(settings.mode).code]
@@ -458,7 +461,7 @@ def _controllers(problem, settings: RunSettings, fp, step_s: float, network, wei
             partner = next(a for a in line_ends[end.line] if a != aid)
             end.partner = partner
             end.other_receivers = next(e.receivers for e in ends[partner] if e.line == end.line)
-    controllers = {aid: ControllerAgent(own, step_s, network, speed=speed)
+    controllers = {aid: ControllerAgent(own, step_s, network, speed=speed, net=net)
                    for aid, own in ends.items()}  # fmt: skip
     return controllers, [tuple(e) for e in line_ends]
 

@@ -337,7 +337,8 @@ def agents_text(s: dict) -> str:
           f"({s['graph']} graph)" if population else f"{s['algorithm']} by {s['agents']} agents")
     step = (f" of {s['step_s']:.4g} s ({s['step_source']} step"
             + ("; each generator damps its own by its curvature, and a line's controller "
-               "hastens its price while its flow stands still over its limit"
+               "hastens its price while its flow stands still over its limit and nets its two "
+               "prices once its flow settles inside"
                if s["local_step"] else "")
             + ")") if population else ""  # fmt: skip
     lines = [
