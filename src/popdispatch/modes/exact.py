@@ -207,12 +207,18 @@ def dual_residual(excess, price):
 
 
 @nb.njit(cache=True, inline="always")
+def multiplier(z, excess, C):
+    """The augmented-Lagrangian multiplier of one line direction, ``mu = max(0, z + C *
+    excess)``, EUR/MW (``z``: its integral part, EUR/MW; ``excess``: flow beyond the limit,
+    MW; ``C``: EUR/MW per MW)."""
+    return max(0.0, z + C * excess)
+
+
+@nb.njit(cache=True, inline="always")
 def line_price(z_up, z_down, excess_up, excess_down, C):
     """The net price of one limited line, EUR/MW: ``nu = mu_up - mu_down`` with the
-    augmented-Lagrangian multipliers ``mu = max(0, z + C * excess)`` of its two directions
-    (``z``: the integral parts, EUR/MW; ``excess``: flow beyond the limit, MW; ``C``: EUR/MW
-    per MW)."""
-    return max(0.0, z_up + C * excess_up) - max(0.0, z_down + C * excess_down)
+    :func:`multiplier` of its two directions."""
+    return multiplier(z_up, excess_up, C) - multiplier(z_down, excess_down, C)
 
 
 @nb.njit(cache=True, inline="always")

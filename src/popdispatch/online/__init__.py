@@ -234,37 +234,11 @@ def verdicts(
     rest are stalled with the bound. Paper mode: certified means at rest. A minute whose end
     state is not finite (a step too long for the field overflowed it) is never certified and
     is stalled with that reason, in every mode."""
-    overflowed = ~(np.isfinite(p_mw).all(axis=1) & np.isfinite(z).all(axis=1))
-    verdict = _verdicts(engine, minutes, p_mw, z, rested, infeasible)
-    for r in np.flatnonzero(overflowed & ~infeasible):
-        verdict.certified[r] = False
-        verdict.reasons[r] = _overflow_reason(engine)
-    return verdict
-
-
-def _overflow_reason(engine: Engine) -> str:
-    """Why a minute whose end state is not finite has no dispatch: its steps."""
-    stepping = engine.settings.stepping
-    step = stepping.dt / stepping.substeps if stepping.method == "euler" else stepping.dt
-    return (
-        f"the state overflowed (set points or prices not finite): {stepping.method} steps of "
-        f"{step:.3g} s are too long for this field; shorten them (the Integrator's dt, "
-        f"substeps)" + ("" if stepping.method == "heun" else " or use method='heun'")
-    )
-
-
-def _verdicts(
-    engine: Engine,
-    minutes: np.ndarray,
-    p_mw: np.ndarray,
-    z: np.ndarray,
-    rested: np.ndarray,
-    infeasible: np.ndarray,
-) -> Verdict:
-    """:func:`verdicts` of finite end states."""
+    overflowed = ~(np.isfinite(p_mw).all(axis=1) & np.isfinite(z).all(axis=1)) & ~infeasible
     certificates = engine.certificates(minutes, p_mw, z)
     if certificates is None:
-        return Verdict(rested & ~infeasible, [None] * len(minutes), None, None)
+        verdict = Verdict(rested & ~infeasible, [None] * len(minutes), None, None)
+        return _overflowed(verdict, engine, overflowed)
     bound = np.array([c.distance_mw for c in certificates]) * KW_PER_MW
     demand = engine.problem.demand[np.asarray(minutes) - 1]
     accuracy = np.atleast_1d(engine.settings.accuracy_mw(demand)) * KW_PER_MW
@@ -292,7 +266,23 @@ def _verdicts(
                 f"the distance to the DC-OPF is bounded only by {bound[r]:.3g} kW, above the "
                 f"accuracy {accuracy[r]:.3g} kW" + (f" ({why})" if why else "")
             )
-    return Verdict(certified, reasons, bound, accuracy)
+    return _overflowed(Verdict(certified, reasons, bound, accuracy), engine, overflowed)
+
+
+def _overflowed(verdict: Verdict, engine: Engine, overflowed: np.ndarray) -> Verdict:
+    """``verdict`` with the minutes ``overflowed`` (end state not finite) not certified and
+    their reason the steps'."""
+    stepping = engine.settings.stepping
+    step = stepping.dt / stepping.substeps if stepping.method == "euler" else stepping.dt
+    reason = (
+        f"the state overflowed (set points or prices not finite): {stepping.method} steps of "
+        f"{step:.3g} s are too long for this field; shorten them (the Integrator's dt, "
+        f"substeps)" + ("" if stepping.method == "heun" else " or use method='heun'")
+    )
+    for r in np.flatnonzero(overflowed):
+        verdict.certified[r] = False
+        verdict.reasons[r] = reason
+    return verdict
 
 
 def _prices(

@@ -222,16 +222,21 @@ class RunSettings:
         eta = math.nan if self.eta is None else self.eta * scale
         return field_tag(field, eta=eta, gain=gain)
 
-    def revision_rates(self, problem: DispatchProblem) -> np.ndarray:
+    def revision_rates(self, problem: DispatchProblem, free_cap: float | None = None) -> np.ndarray:
         """The per-generator revision rates of the field in force (dimensionless; empty for a
-        field that takes none): ``(S / P) / (2 c_i)`` capped (dynamics/newton.py). The rates
-        of fixed explicit steps: the engine's Euler steps and the agents' rounds."""
+        field that takes none): ``(S / P) / (2 c_i)`` capped at ``rate_cap``
+        (dynamics/newton.py); with ``free_cap``, a quadratic generator whose output moves no
+        priced row (:func:`priced_generators`) capped at ``free_cap`` instead. Without: the
+        rates of fixed explicit steps, the engine's Euler steps and the agents' plain rounds."""
         if self.field != Field.CAPACITY_NEWTON:
             return np.zeros(0)
         from popdispatch.dynamics.newton import revision_rates
         from popdispatch.modes.exact import scales
 
-        return revision_rates(problem.c, *scales(problem), self.exact.rate_cap)
+        if free_cap is None:
+            return revision_rates(problem.c, *scales(problem), self.exact.rate_cap)
+        return revision_rates(problem.c, *scales(problem), self.exact.rate_cap,
+                              priced_generators(problem), free_cap)  # fmt: skip
 
     def engine_revision_rates(self, problem: DispatchProblem) -> np.ndarray:
         """The revision rates the engine integrates with: with adaptive Heun steps capped at
@@ -243,14 +248,7 @@ class RunSettings:
         not by fixed ones. On a communication graph as on the complete graph: capped at
         ``rate_cap``, two flat neighbours on a path meet at a few % per iteration
         (docs/exact-mode.md, "Random fleets")."""
-        capped = self.revision_rates(problem)
-        if not (self.adaptive and len(capped)):
-            return capped
-        from popdispatch.dynamics.newton import revision_rates
-        from popdispatch.modes.exact import scales
-
-        return revision_rates(problem.c, *scales(problem), self.exact.rate_cap,
-                              priced_generators(problem), self.exact.free_rate_cap)  # fmt: skip
+        return self.revision_rates(problem, self.exact.free_rate_cap if self.adaptive else None)
 
     @property
     def trading_graph(self) -> str | nx.Graph:
