@@ -92,20 +92,25 @@ FORMULATIONS = ("factors", "angles")
 @dataclass(frozen=True)
 class AngleRows:
     """A meshed network's DC-OPF rows in bus angles (:func:`angle_rows`), on the variables
-    ``[p (kW, generators), theta (mrad, buses but the slack)]`` (milliradians scale the rows
-    well: a p.u. susceptance times ``S``, the base MVA, in kW per mrad). ``theta`` are the angles
-    of the generators' injections balanced by the demand spread over the buses in the shares
-    ``w`` (the network's own ``pd + gs``): close to the true angles, so no large flows cancel
-    (angles of the generators withdrawn at the slack would carry the whole demand's flow).
+    ``[p (kW, generators), theta (mrad, groups of buses but the slack's)]`` (milliradians scale
+    the rows well: a p.u. susceptance times ``S``, the base MVA, in kW per mrad). A group is
+    the buses zero-reactance lines join (:mod:`popdispatch.feeder.fusion`; one bus each
+    without such lines), at one angle. ``theta`` are the angles of the generators' injections
+    balanced by the demand spread over the buses in the shares ``w`` (the network's own ``pd +
+    gs``): close to the true angles, so no large flows cancel (angles of the generators
+    withdrawn at the slack would carry the whole demand's flow).
 
-    ``bus_rows``: ``S B_r theta - C_g p = -w_r P_d`` (kW) per bus but the slack; ``line_rows``:
-    ``S Bf_L theta``, with ``flow = load_flow + S Bf_L theta + P_d line_share`` (kW) on the
-    limited lines ``L`` that can reach their limits, as ``sum p = P_d`` makes ``-D p = S Bf_L
-    theta + P_d PTDF_L w``. ``bus_share``: ``w_r``; ``line_share``: ``PTDF_L w`` (MW per MW of
-    demand); ``kept``: the positions of ``L`` among the problem's limited lines, those whose
-    flow can reach the limit at some minute (``max |load_flow| + sum_i |D_ki| max(|Pmin_i|,
-    |Pmax_i|) >= U``: a line rated far above any flow it can carry, as a case's 99,999 MVA, is
-    a row that never binds and only spoils the scaling)."""
+    ``bus_rows``: ``S B_r theta - C_g p = -w_r P_d`` (kW) per group but the slack's;
+    ``line_rows``: ``S Bf_L theta``, with ``flow = load_flow + S Bf_L theta + P_d line_share``
+    (kW) on the limited lines ``L`` that can reach their limits, as ``sum p = P_d`` makes ``-D
+    p = S Bf_L theta + P_d PTDF_L w``; a zero-reactance line's flow is no function of the
+    angles (Kirchhoff's current law in its group gives it), so its row is ``-D_k p`` (its
+    factors) and its ``line_share`` 0: ``flow = load_flow - D_k p``. ``bus_share``: ``w_r``;
+    ``line_share``: ``PTDF_L w`` (MW per MW of demand); ``kept``: the positions of ``L`` among
+    the problem's limited lines, those whose flow can reach the limit at some minute (``max
+    |load_flow| + sum_i |D_ki| max(|Pmin_i|, |Pmax_i|) >= U``: a line rated far above any flow
+    it can carry, as a case's 99,999 MVA, is a row that never binds and only spoils the
+    scaling)."""
 
     bus_rows: sparse.csr_matrix
     line_rows: sparse.csr_matrix
@@ -119,33 +124,56 @@ def angle_rows(problem: DispatchProblem) -> AngleRows:
     :class:`~popdispatch.feeder.dcnet.DcNetwork` whose fleet is the problem's)."""
     net = problem.feeder
     model = net.model
-    n = problem.n_generators
-    if len(net.generators) != n:
+    if len(net.generators) != problem.n_generators:
         raise ValueError("the problem's fleet is not its network's")
-    keep = model.keep
-    incidence = sparse.diags(1.0 / model.branch_b) @ model.Bf
-    Bbus = model.base_mva * sparse.csr_matrix(incidence.T @ model.Bf)[keep][:, keep]
-    position = np.full(len(net.buses), -1)
-    position[keep] = np.arange(len(keep))
-    at = position[net.buses.index.get_indexer(net.generators.bus)]
-    injected = np.flatnonzero(at >= 0)  # a generator at the slack injects into no bus row
-    Cg = sparse.csr_matrix((np.ones(len(injected)), (at[injected], injected)),
-                           shape=(len(keep), n))  # fmt: skip
-    largest = np.maximum(np.abs(problem.pmin), np.abs(problem.pmax))  # MW
-    loads = np.abs(problem.line_load_flow).max(axis=0, initial=0.0)
-    reach = loads + np.abs(problem.factor) @ largest
-    kept = np.flatnonzero(reach >= problem.limit * (1.0 - 1e-9))
+    kept = _reachable(problem)
     lines_kept = problem.lines[kept]
     load = (net.buses.pd_mw + net.buses.gs_mw).to_numpy(float)
     share = load / load.sum() if load.sum() > 0 else np.full(len(load), 1.0 / len(load))
     flows = model.flows_mw(np.c_[share, np.zeros(len(share))], lines_kept)
     line_share = flows[:, 0] - flows[:, 1]  # without the phase shifters' own flows
-    lines = model.base_mva * sparse.csr_matrix(model.Bf)[lines_kept][:, keep]
-    return AngleRows(
-        sparse.hstack([-Cg, Bbus]).tocsr(),
-        sparse.hstack([sparse.csr_matrix((len(kept), n)), lines]).tocsr(),
-        share[keep], line_share, kept,
-    )  # fmt: skip
+    ideal = np.isin(lines_kept, model.zero.lines if model.zero is not None else [])
+    line_share = np.where(ideal, 0.0, line_share)
+    return AngleRows(_bus_rows(problem), _line_rows(problem, kept, ideal),
+                     model.group_sums(share)[model.keep], line_share, kept)  # fmt: skip
+
+
+def _reachable(problem: DispatchProblem) -> np.ndarray:
+    """The positions of the problem's limited lines whose flow can reach the limit at some
+    minute (:class:`AngleRows` ``kept``)."""
+    largest = np.maximum(np.abs(problem.pmin), np.abs(problem.pmax))  # MW
+    loads = np.abs(problem.line_load_flow).max(axis=0, initial=0.0)
+    reach = loads + np.abs(problem.factor) @ largest
+    return np.flatnonzero(reach >= problem.limit * (1.0 - 1e-9))
+
+
+def _bus_rows(problem: DispatchProblem) -> sparse.csr_matrix:
+    """``[-C_g, S B_r]``: per group of buses but the slack's, its generators (kW) and its row
+    of the groups' ``B`` (kW per mrad)."""
+    net = problem.feeder
+    model = net.model
+    keep = model.keep
+    Bbus = model.base_mva * sparse.csr_matrix(model.Bbus)[keep][:, keep]
+    position = np.full(model.Bbus.shape[0], -1)
+    position[keep] = np.arange(len(keep))
+    at = position[model.group[net.buses.index.get_indexer(net.generators.bus)]]
+    injected = np.flatnonzero(at >= 0)  # a generator in the slack's group is in no bus row
+    Cg = sparse.csr_matrix((np.ones(len(injected)), (at[injected], injected)),
+                           shape=(len(keep), problem.n_generators))  # fmt: skip
+    return sparse.hstack([-Cg, Bbus]).tocsr()
+
+
+def _line_rows(problem: DispatchProblem, kept: np.ndarray, ideal: np.ndarray) -> sparse.csr_matrix:
+    """``[0, S Bf_L]`` on the limited lines ``kept`` (positions among the problem's), ``[-D_k,
+    0]`` on those of them that are zero-reactance lines (``ideal``)."""
+    model = problem.feeder.model
+    n = problem.n_generators
+    lines = model.base_mva * sparse.csr_matrix(model.Bf)[problem.lines[kept]][:, model.keep]
+    rows = np.flatnonzero(ideal)
+    factors = -problem.factor[kept[rows]]
+    r, c = np.nonzero(factors)
+    p_rows = sparse.csr_matrix((factors[r, c], (rows[r], c)), shape=(len(kept), n))
+    return sparse.hstack([p_rows, lines]).tocsr()
 
 
 class OpfSolver:

@@ -13,6 +13,7 @@ import pandas as pd
 
 from popdispatch.errors import FeederError, MeshedError, OptionError
 from popdispatch.feeder.dcnet import DcNetwork
+from popdispatch.feeder.fusion import ideal_note
 from popdispatch.feeder.model import Feeder
 
 
@@ -147,8 +148,10 @@ def load_network(source: FeederSource) -> tuple[Feeder | DcNetwork, str]:
         net = _read_mesh(source, exc)
     if source.fleet is None:
         check_fleet_ranges(net.generators)
+    ideal = ideal_note(net.buses.index, net.lines)
     return net, (f"note: {net.name} is meshed: it runs on MATPOWER's DC model, each generator "
-                 "weighing the line prices by its distribution factors (docs/meshed.md)")
+                 "weighing the line prices by its distribution factors"
+                 + (f"; {ideal}" if ideal else "") + " (docs/meshed.md)")
 
 
 def _read_mesh(source: FeederSource, exc: FeederError) -> DcNetwork:

@@ -11,6 +11,10 @@ path; this module is the meshed one. Its tables are plain, in MATPOWER's own uni
 - bus balance: ``S B theta = P_inj - P_shift`` with ``B = C^T diag(b) C`` (``C`` the
   branch-bus incidence) and ``P_shift = -S C^T (b phi)``; a bus's shunt conductance ``G_s``
   (MW at 1 p.u.) is a load, as MATPOWER's DC model has it;
+- a zero-reactance branch (``b_k`` infinite) is an ideal connection: the buses such branches
+  join share one angle, ``B`` is over these groups, and the flows on the zero-reactance
+  branches follow from Kirchhoff's current law inside each group
+  (:mod:`popdispatch.feeder.fusion`);
 - the slack bus's angle is 0 and it balances the rest: with a sparse LU (SuperLU,
   :func:`scipy.sparse.linalg.splu`) of the reduced ``B`` the flow of any injection is two
   sparse solves away, and the power transfer distribution factors (PTDF) are formed only for
@@ -32,6 +36,7 @@ from scipy import sparse
 
 from popdispatch.constants import KW_PER_MW
 from popdispatch.errors import FeederError
+from popdispatch.feeder.fusion import ZeroFlows, bus_groups, check_zero_reactance, zero_reactance
 from popdispatch.feeder.model import bus_id, bus_labels, tighter_limits
 
 BUS_COLUMNS = ["pd_mw", "gs_mw"]
@@ -141,7 +146,8 @@ class DcNetwork:
 
 def validate_network(net: DcNetwork) -> None:
     """One-line :class:`FeederError` on a table that the DC model cannot take: unknown buses,
-    zero reactance, a network in several parts."""
+    zero-reactance branches that close a loop among themselves or shift the phase
+    (:func:`~popdispatch.feeder.fusion.check_zero_reactance`), a network in several parts."""
     for table, columns in (("buses", BUS_COLUMNS), ("lines", LINE_COLUMNS)):
         missing = [c for c in columns if c not in getattr(net, table).columns]
         if missing:
@@ -157,14 +163,11 @@ def validate_network(net: DcNetwork) -> None:
                               "is not a bus of the network")  # fmt: skip
     if net.slack_bus not in index:
         raise FeederError(f"network {net.name!r}: slack bus {net.slack_bus} is not a bus")
-    zero = net.lines.x_pu.to_numpy(float) == 0
-    if zero.any():
-        raise FeederError(f"network {net.name!r}: line {net.lines.index[zero.argmax()]!r} has "
-                          "zero reactance (the DC model needs x != 0)")  # fmt: skip
     from scipy.sparse.csgraph import connected_components
 
     n = len(index)
     a, b = index.get_indexer(net.lines.from_bus), index.get_indexer(net.lines.to_bus)
+    check_zero_reactance(net.name, net.lines, (a, b), n)
     graph = sparse.csr_array((np.ones(len(a)), (a, b)), shape=(n, n))
     _, part = connected_components(graph, directed=False)
     apart = part != part[index.get_loc(net.slack_bus)]
@@ -177,65 +180,137 @@ def validate_network(net: DcNetwork) -> None:
 
 @dataclass(frozen=True)
 class DcModel:
-    """MATPOWER's ``makeBdc`` of a :class:`DcNetwork` and a sparse LU of its reduced ``B``.
+    """MATPOWER's ``makeBdc`` of a :class:`DcNetwork` with its zero-reactance branches as ideal
+    connections (:mod:`popdispatch.feeder.fusion`), and a sparse LU of its reduced ``B``.
 
-    ``branch_b``: per line, ``b_k = 1 / (x_k tau_k)`` (p.u.); ``Bf``: (lines x buses) sparse,
-    ``b_k`` at the from bus and ``-b_k`` at the to bus; ``p_shift``: per line, the flow of its
-    phase shift alone, ``-S b_k phi_k`` (MW); ``bus_shift``: per bus, ``C^T p_shift`` (MW);
-    ``keep``: the buses other than the slack (positions); ``lu``: SuperLU of ``B`` on them.
+    The buses that zero-reactance branches join form a *group* with one angle; without such
+    branches every bus is its own group and this is ``makeBdc`` as it stands.
+
+    ``branch_b``: per line, ``b_k = 1 / (x_k tau_k)`` (p.u.; 0 on a zero-reactance line);
+    ``incidence``: (lines x buses) sparse, +1 at the from bus and -1 at the to bus; ``group``:
+    per bus, its group; ``members``: (groups x buses) sparse, 1 where the bus is in the group;
+    ``Bf``: (lines x groups) sparse, ``b_k`` at the from bus's group and
+    ``-b_k`` at the to bus's (a row of 0 for a line inside one group); ``Bbus``: (groups x
+    groups) ``B`` of the groups (p.u.); ``p_shift``: per line, the flow of its phase shift alone,
+    ``-S b_k phi_k`` (MW); ``bus_shift``: per bus, ``C^T p_shift`` (MW); ``slack``: the slack
+    bus's position; ``keep``: the groups other than the slack's; ``lu``: SuperLU of ``Bbus`` on
+    them; ``zero``: Kirchhoff's law for the zero-reactance lines (None without any).
     """
 
     base_mva: float
     branch_b: np.ndarray
+    incidence: sparse.csr_array
+    group: np.ndarray
+    members: sparse.csr_array
     Bf: sparse.csr_array
+    Bbus: sparse.csc_array
     p_shift: np.ndarray
     bus_shift: np.ndarray
+    slack: int
     keep: np.ndarray
     lu: object
+    zero: ZeroFlows | None
 
     @classmethod
     def of(cls, net: DcNetwork) -> DcModel:
+        """The model of ``net`` (:func:`validate_network` has accepted it)."""
         from scipy.sparse.linalg import splu
 
         index = net.buses.index
-        n, m = len(index), len(net.lines)
+        n = len(index)
         f, t = index.get_indexer(net.lines.from_bus), index.get_indexer(net.lines.to_bus)
+        zero = zero_reactance(net.lines)
         tap = net.lines.tap.to_numpy(float)
         tap = np.where(tap == 0, 1.0, tap)
-        b = 1.0 / (net.lines.x_pu.to_numpy(float) * tap)
-        rows = np.r_[np.arange(m), np.arange(m)]
-        incidence = sparse.csr_array((np.r_[np.ones(m), -np.ones(m)], (rows, np.r_[f, t])),
-                                     shape=(m, n))  # fmt: skip
-        Bf = sparse.csr_array(sparse.diags(b) @ incidence)
-        Bbus = (incidence.T @ Bf).tocsc()
+        x = np.where(zero, 1.0, net.lines.x_pu.to_numpy(float))
+        b = np.where(zero, 0.0, 1.0 / (x * tap))
+        incidence = _incidence(f, t, n)
+        group = bus_groups(n, f, t, zero)
+        n_groups = int(group.max()) + 1
+        members = sparse.csr_array((np.ones(n), (group, np.arange(n))), shape=(n_groups, n))
+        grouped = _incidence(group[f], group[t], n_groups)
+        Bf = sparse.csr_array(sparse.diags(b) @ grouped)
+        Bbus = (grouped.T @ Bf).tocsc()
         p_shift = -net.base_mva * b * np.deg2rad(net.lines.shift_deg.to_numpy(float))
-        keep = np.flatnonzero(np.arange(n) != index.get_loc(net.slack_bus))
+        slack = index.get_loc(net.slack_bus)
+        keep = np.flatnonzero(np.arange(Bbus.shape[0]) != group[slack])
         lu = splu(sparse.csc_matrix(Bbus[keep][:, keep]))
-        return cls(float(net.base_mva), b, Bf, p_shift, incidence.T @ p_shift, keep, lu)
+        kcl = ZeroFlows.of(incidence, zero) if zero.any() else None
+        return cls(float(net.base_mva), b, incidence, group, members, Bf, Bbus, p_shift,
+                   incidence.T @ p_shift, slack, keep, lu, kcl)  # fmt: skip
 
-    def angles(self, injection_mw: np.ndarray) -> np.ndarray:
-        """Bus angles (rad, buses x columns) for injections ``injection_mw`` (MW, buses x
-        columns; the slack's own entry is replaced by the balance)."""
-        injection = np.atleast_2d(np.asarray(injection_mw, float).T).T
+    def group_sums(self, per_bus: np.ndarray) -> np.ndarray:
+        """Per group, the sum of ``per_bus`` (buses x columns) over its buses."""
+        if self.zero is None:  # every bus its own group
+            return per_bus
+        return self.members @ per_bus
+
+    def group_angles(
+        self, injection_mw: np.ndarray, shifted: bool = True, base: float | None = None
+    ) -> np.ndarray:
+        """Group angles (rad, groups x columns; the slack's group 0) for bus injections
+        ``injection_mw`` (MW, buses x columns; the slack's group balances the rest):
+        ``S B_r theta = P_r - P_shift,r`` on the groups. ``shifted``: with the phase shifters'
+        flows (without: the angles of the injections alone, linear in them); ``base``: ``S``
+        (default ``base_mva``; 1 for angles per p.u. of injection)."""
+        injection = self.group_sums(injection_mw)
+        if shifted:
+            injection = injection - self.group_sums(self.bus_shift)[:, None]
         theta = np.zeros(injection.shape)
-        rhs = (injection[self.keep] - self.bus_shift[self.keep, None]) / self.base_mva
+        rhs = injection[self.keep] / (self.base_mva if base is None else base)
         theta[self.keep] = self.lu.solve(np.ascontiguousarray(rhs))
         return theta
 
+    def angles(self, injection_mw: np.ndarray) -> np.ndarray:
+        """Bus angles (rad, buses x columns) for injections ``injection_mw`` (MW, buses x
+        columns; the slack's own entry is replaced by the balance): each bus its group's."""
+        injection = np.atleast_2d(np.asarray(injection_mw, float).T).T
+        return self.group_angles(injection)[self.group]
+
     def flows_mw(self, injection_mw: np.ndarray, lines: np.ndarray) -> np.ndarray:
         """Flows (MW, from bus to to bus) on ``lines`` (positions) for the bus injections
-        ``injection_mw`` (MW, buses x columns), the slack balancing: (lines x columns)."""
-        theta = self.angles(injection_mw)
-        return self.base_mva * (self.Bf[lines] @ theta) + self.p_shift[lines, None]
+        ``injection_mw`` (MW, buses x columns), the slack balancing: (lines x columns). A
+        zero-reactance line's flow is Kirchhoff's current law's in its group."""
+        injection = np.atleast_2d(np.asarray(injection_mw, float).T).T
+        return self._flows(injection, np.asarray(lines, np.int64), shifted=True)
 
     def ptdf(self, lines: np.ndarray, buses: np.ndarray) -> np.ndarray:
         """PTDF (MW per MW) of ``lines`` for injections at ``buses`` (positions) withdrawn at
         the slack: ``(lines, buses)``, by one sparse solve per distinct bus (the slack's
-        column is 0); the full matrix is never formed."""
+        column is 0; a zero-reactance line's factors from Kirchhoff's current law in its
+        group); the full matrix is never formed."""
         unique, back = np.unique(np.asarray(buses, np.int64), return_inverse=True)
-        n = self.Bf.shape[1]
-        rhs = np.zeros((n, len(unique)))
+        rhs = np.zeros((self.incidence.shape[1], len(unique)))
         rhs[unique, np.arange(len(unique))] = 1.0
-        theta = np.zeros((n, len(unique)))
-        theta[self.keep] = self.lu.solve(np.ascontiguousarray(rhs[self.keep]))
-        return np.asarray(self.Bf[lines] @ theta)[:, back]
+        return self._flows(rhs, np.asarray(lines, np.int64), shifted=False, base=1.0)[:, back]
+
+    def _flows(
+        self, injection: np.ndarray, lines: np.ndarray, shifted: bool, base: float | None = None
+    ) -> np.ndarray:
+        """:meth:`flows_mw` (``shifted``: with the phase shifters' own flows; ``base``: ``S``,
+        as in :meth:`group_angles`)."""
+        base = self.base_mva if base is None else base
+        theta = self.group_angles(injection, shifted, base)
+        out = base * (self.Bf[lines] @ theta)
+        if shifted:
+            out += self.p_shift[lines, None]
+        if self.zero is None:
+            return out
+        at = np.flatnonzero(np.isin(lines, self.zero.lines))
+        if len(at):
+            touch = base * (self.Bf[self.zero.touch] @ theta)
+            if shifted:
+                touch += self.p_shift[self.zero.touch, None]
+            balanced = injection.copy()
+            balanced[self.slack] -= balanced.sum(axis=0)  # the slack's entry: the balance
+            ideal = self.zero.flows(balanced, touch)
+            out[at] = ideal[np.searchsorted(self.zero.lines, lines[at])]
+        return out
+
+
+def _incidence(f: np.ndarray, t: np.ndarray, n: int) -> sparse.csr_array:
+    """The (branches x ``n``) incidence of branches from ``f`` to ``t`` (positions): +1 at
+    the from end, -1 at the to end (0 where the two are one)."""
+    m = len(f)
+    rows = np.r_[np.arange(m), np.arange(m)]
+    return sparse.csr_array((np.r_[np.ones(m), -np.ones(m)], (rows, np.r_[f, t])), shape=(m, n))

@@ -14,6 +14,7 @@ import numpy as np
 
 from popdispatch.constants import KW_PER_MW
 from popdispatch.feeder.dcnet import DcNetwork
+from popdispatch.feeder.fusion import ideal_connections
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.radial import balance_lines
 from popdispatch.feeder.reduction import ReducedFeeder
@@ -170,16 +171,21 @@ def feeder_text(summary: dict) -> str:
 def network_summary(net: DcNetwork, ratings: bool = True) -> dict:
     """The ``popdispatch feeder`` JSON object of a meshed network (MATPOWER's DC model,
     :class:`~popdispatch.feeder.dcnet.DcNetwork`): counts, the slack bus, loads (kW), shunts,
-    lines (per-unit reactance, tap, shift, limit in kW) and generators."""
+    lines (per-unit reactance, tap, shift, limit in kW), the zero-reactance lines joined as
+    ideal connections (how many, the buses they join, the groups those form) and generators."""
     loads, lines, gens = net.loads, net.lines, net.generators
     limit = lines.limit_kw.to_numpy(float)
     label = dict(zip(net.buses.index, net.bus_labels(net.buses.index), strict=True))
+    zero, joined, groups = ideal_connections(net.buses.index, lines)
     return {
         "case": net.name,
         "meshed": True,
         "buses": len(net.buses),
         "original_lines": len(lines),
         "loops": len(lines) - len(net.buses) + 1,
+        "zero_reactance_lines": zero,
+        "fused_buses": joined,
+        "fused_groups": groups,
         "slack_bus": label[net.slack_bus],
         "base_mva": net.base_mva,
         "loads": len(loads),
@@ -217,6 +223,7 @@ def network_text(summary: dict) -> str:
         "1 p.u.",
         f"line ratings: {s['ratings']}; {s['rated_lines']} of {s['original_lines']} lines "
         "limited",
+        *_ideal_text(s),
         _generators_text(s),
     ]
     loads = [f"{'load':<24}{'bus':>16}{'kW':>12}"]
@@ -230,6 +237,15 @@ def network_text(summary: dict) -> str:
         for r in s["line_table"]
     ]
     return "\n".join(head + ["", "loads:"] + loads + ["", "lines:"] + lines)
+
+
+def _ideal_text(s: dict) -> list[str]:
+    """The line on a meshed network's zero-reactance lines (none without any)."""
+    if not s["zero_reactance_lines"]:
+        return []
+    return [f"ideal connections: {s['zero_reactance_lines']} zero-reactance line(s) join "
+            f"{s['fused_buses']} buses into {s['fused_groups']} group(s), each at one angle; "
+            "their flows from Kirchhoff's current law"]  # fmt: skip
 
 
 def _generators_text(s: dict) -> str:
