@@ -191,3 +191,16 @@ def agents_on_a_matpower_fleet(
     by_name = {g["name"]: g["setpoint_kw"] for g in out["generators"]}
     setpoints = np.array([by_name[str(g)] for g in problem.generators])
     return out, solve_opf(problem, 1), setpoints
+
+
+#: MATPOWER's case17me with a drawn fleet and line 16-17 limited to 714.7 kW: g2 (c 5.97
+#: EUR/MW^2h, below no limited line) must fall from 3.4 MW to 0 while g0's steep curve makes the
+#: spread 6,500 EUR/MWh: capped at 10 its rate is a quarter of its Newton rate (39), and it
+#: drained for 230 rounds.
+FLEET17 = """bus,name,b_eur_per_mwh,c_eur_per_mw2h,pmin_kw,pmax_kw
+1,src,46.4460708,0.0725472603,0,27760
+9,g0,52.4199563,912.062767,0,3545.23221
+17,g1,10.0815642,0,0,2548.4435
+4,g2,52.3506173,5.97050161,0,3422.45481
+2,g3,47.4251573,336.389421,0,3423.94862
+"""

@@ -19,7 +19,7 @@ from popdispatch.agents.population import FREE_RATE_CAP, build_agents  # noqa: E
 from popdispatch.modes.exact import NEWTON_RATE_CAP  # noqa: E402
 from popdispatch.online import RunSettings  # noqa: E402
 
-from helpers import agents_on_a_matpower_fleet, random_fleet_problem  # noqa: E402
+from helpers import FLEET17, agents_on_a_matpower_fleet, random_fleet_problem  # noqa: E402
 
 
 def _by_hand(problem, free: bool) -> np.ndarray:
@@ -50,19 +50,6 @@ def test_each_generator_revises_at_its_rate(seed, graph, local, free):
     found = np.array([g.rule.rate for g in system.generators])
     np.testing.assert_allclose(found, _by_hand(problem, free), rtol=1e-12)
     assert (found > NEWTON_RATE_CAP).any() == free  # the draws have such generators
-
-
-#: MATPOWER's case17me with a drawn fleet and line 16-17 limited to 714.7 kW: g2 (c 5.97
-#: EUR/MW^2h, below no limited line) must fall from 3.4 MW to 0 while g0's steep curve makes the
-#: spread 6,500 EUR/MWh: capped at 10 its rate is a quarter of its Newton rate (39), and it
-#: drained for 230 rounds.
-FLEET17 = """bus,name,b_eur_per_mwh,c_eur_per_mw2h,pmin_kw,pmax_kw
-1,src,46.4460708,0.0725472603,0,27760
-9,g0,52.4199563,912.062767,0,3545.23221
-17,g1,10.0815642,0,0,2548.4435
-4,g2,52.3506173,5.97050161,0,3422.45481
-2,g3,47.4251573,336.389421,0,3423.94862
-"""
 
 
 def test_an_unpriced_dg_draining_a_small_part_of_the_spread_in_under_200_rounds(tmp_path):

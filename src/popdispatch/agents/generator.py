@@ -73,6 +73,11 @@ from popdispatch.game.parameters import share_bounds
 #: (:meth:`GeneratorAgent._set`): the rounding of a few accepted amounts added in MW (1 ulp
 #: measured); a generator approaching ``Pmax`` smoothly is 1e-9 MW or more away from it.
 LIMIT_ULPS = 16
+#: On the complete graph a limited line above a generator counts in its own step factor for
+#: this many rounds after its price was last non-zero (:meth:`GeneratorAgent._price_slope`):
+#: 2 let a case17me fleet oscillate across the line's band, 20 slowed the ELV congestion
+#: minute (21 -> 41 rounds).
+PRICED_MEMORY = 5
 
 
 def relays(w: float, mass: float, room: float) -> bool:
@@ -133,9 +138,11 @@ class GeneratorRule:
 
     The local step (``local_step``, curvature-scaled field only; docs/agents.md, "The local
     step"): ``lines_above`` are the limited lines between the generator and the source (those
-    whose price falls as its output rises), ``price_slope`` the fall of a priced line's half
-    price per MW (``C / 2``, EUR/MW per MW) and ``fan`` the most receivers the own sender
-    weight sums over (1 on the complete graph, the own degree plus one on a sparse graph)."""
+    whose price falls as its output rises), ``price_slopes`` the fall of each one's half price
+    per MW, in the same order (``C_k / 2``, EUR/MW per MW, ``C_k`` the line's proportional
+    weight: the game's ``C`` under the plain law on a radial feeder) and ``fan`` the most
+    receivers the own sender weight sums over (1 on the complete graph, the own degree plus
+    one on a sparse graph)."""
 
     b: float
     c: float
@@ -150,7 +157,7 @@ class GeneratorRule:
     step_s: float
     rate: float = 0.0
     lines_above: tuple[int, ...] = ()
-    price_slope: float = 0.0
+    price_slopes: tuple[float, ...] = ()
     fan: int = 1
     local_step: bool = False
 
@@ -160,17 +167,18 @@ class GeneratorRule:
         normalised by the rates of a neighbourhood (dynamics/newton.py)."""
         return self.field == Field.CAPACITY_NEWTON
 
-    def step_factor(self, priced_above: int) -> float:
+    def step_factor(self, price_slope: float) -> float:
         """The own step factor ``theta = 1 / (1 + h lam)`` (dimensionless, in (0, 1]): ``lam``
         (1/s) is the fastest rate at which this generator's own fitness gap closes,
-        ``gain D fan r (2 c + price_slope m)`` with ``m = priced_above`` the priced lines
-        above it (each moves its half price by ``-C / 2`` per MW it adds). An Euler step of
-        ``theta h`` on the own mode ``y' = -lam y`` multiplies ``y`` by ``1 / (1 + h lam)``,
-        backward Euler's factor: never past the own marginal-cost equality, whatever ``h``.
-        1 without the local step or outside the curvature-scaled field."""
+        ``gain D fan r (2 c + price_slope)`` with ``price_slope`` the sum of ``C_k / 2`` over
+        the priced lines above it (EUR/MW per MW: each moves its half price by ``-C_k / 2``
+        per MW it adds). An Euler step of ``theta h`` on the own mode ``y' = -lam y``
+        multiplies ``y`` by ``1 / (1 + h lam)``, backward Euler's factor: never past the own
+        marginal-cost equality, whatever ``h``. 1 without the local step or outside the
+        curvature-scaled field."""
         if not (self.local_step and self.scaled):
             return 1.0
-        slope = 2.0 * self.c + self.price_slope * priced_above  # EUR/MW per MW
+        slope = 2.0 * self.c + price_slope  # EUR/MW per MW
         lam = self.gain * self.demand_mw * self.fan * self.rate * slope
         return 1.0 / (1.0 + self.step_s * lam)
 
@@ -210,6 +218,7 @@ class GeneratorAgent(RoundAgent):
         self.neighbours = list(neighbours)
         self.quiet = False  # no new offers (drain)
         self.signals: dict[str, tuple[int, float]] = {}
+        self.priced_lines: dict[int, int] = {}  # line above -> last round it priced this one
         self.statuses: dict[str, Status] = {}
         self.standings: dict[str, Standing] = {}  # sparse graph, curvature-scaled field
         self.own: Own | None = None
@@ -577,7 +586,7 @@ class GeneratorAgent(RoundAgent):
         w, v, room, mass = self._weights()
         if self.normalises_itself:
             w, v = self._own_weights(w, v, room, mass)
-        theta = r.step_factor(self._priced_above())
+        theta = r.step_factor(self._price_slope(rnd))
         self.own = Own(float(f[0]), w, v, room, mass, theta)
         self.status_round = rnd
         self.heard = {}
@@ -587,11 +596,21 @@ class GeneratorAgent(RoundAgent):
         for aid in self.neighbours:
             self.send(status, aid)
 
-    def _priced_above(self) -> int:
-        """The limited lines above this generator whose latest price is not zero (their
-        proportional part moves with this generator's output)."""
-        return sum(1 for k in self.rule.lines_above
-                   if self.signals.get(str(k), (0, 0.0))[1] != 0.0)  # fmt: skip
+    def _price_slope(self, rnd: int) -> float:
+        """The fall of the half prices above this generator per MW it adds (EUR/MW per MW):
+        ``C_k / 2`` summed over the limited lines above it whose price is not zero now (their
+        proportional part moves with this generator's output), or, on the complete graph, was
+        not zero within the last :data:`PRICED_MEMORY` rounds: there the round step can take
+        a generator across a line's band in one round (docs/agents.md, "The round step"),
+        and a price that vanishes just inside the limit would free the generator's step
+        exactly when the next step prices it again (a two-round oscillation)."""
+        r = self.rule
+        now = {k for k in r.lines_above if self.signals.get(str(k), (0, 0.0))[1] != 0.0}
+        if not self.relay:
+            self.priced_lines.update({k: rnd for k in now})
+            now = {k for k, last in self.priced_lines.items() if rnd - last <= PRICED_MEMORY}
+        return sum(slope for k, slope in zip(r.lines_above, r.price_slopes, strict=True)
+                   if k in now)  # fmt: skip
 
     def _normalised_weights(self, w: np.ndarray, v: np.ndarray, room: np.ndarray,
                             mass: np.ndarray) -> None:  # fmt: skip

@@ -66,6 +66,11 @@ OPTIONS = frozenset(AgentSettings.__dataclass_fields__)
 #: neighbourhood and free flat neighbours left runs unconverged (docs/agents.md, "The local
 #: step").
 FREE_RATE_CAP = 30.0
+#: With the local step on the complete graph a line price moves by at most this part of its
+#: proportional weight per round, ``h alpha / C`` (:func:`price_rates`): the price loop's own
+#: bound on the round step, ``h = C / (2 alpha)``, with the round step itself set by the
+#: coupling between generators (:func:`local_stiffness_rate`).
+PRICE_STEP = 0.5
 
 
 def default_step(problem: DispatchProblem, settings: RunSettings, minute: int,
@@ -87,16 +92,38 @@ def local_stiffness_rate(problem: DispatchProblem, settings: RunSettings, minute
     """The rate (1/s) that bounds the round step when every generator takes its own step
     factor (:meth:`~popdispatch.agents.generator.GeneratorRule.step_factor`), which keeps
     each generator's own mode, its curvature and the proportional part of the prices above
-    it, stable at any step: the larger of the line prices' rate ``2 STABLE_STEP alpha / C``
-    (:func:`~popdispatch.online.stiffness.price_loop_rate`) and the rate at which every
-    interior marginal cost relaxes, ``gain D S / P`` (the coupling between generators, which
-    no own factor bounds): a round step of 1.5 of that relaxation time at most."""
+    it, stable at any step: the rate at which every interior marginal cost relaxes, ``gain D
+    S / P`` (the coupling between generators, which no own factor bounds), a round step of
+    1.5 of that relaxation time at most. Where the prices do not integrate at their own step
+    (:func:`own_price_step`) also the line prices' rate ``2 STABLE_STEP alpha / C``
+    (:func:`~popdispatch.online.stiffness.price_loop_rate`)."""
     fp = settings.game_constants(problem)
     demand = float(problem.demand[minute - 1])
     spread, reference = scales(problem)
     field = float(fp.gain) * demand * spread / reference
+    if own_price_step(problem, settings):
+        return field
     return max(field, price_loop_rate(problem, settings, minute))
 
+
+def own_price_step(problem: DispatchProblem, settings: RunSettings) -> bool:
+    """Whether the line prices integrate at their own step (:func:`price_rates`) and the
+    round step is the generators' coupling bound: with the local step on the complete graph,
+    where no generator lies below two limited lines. Nested prices add up in the generators
+    below them, and the price loops with them: the synthetic 1k feeder (up to 23 limited lines
+    above a generator) oscillates at the larger step (docs/agents.md, "The local step")."""
+    if not _complete(generator_graph(problem, settings)):
+        return False
+    return all(len(lines_above(problem, i)) <= 1 for i in range(problem.n_generators))
+
+
+def price_rates(weight: np.ndarray, rate: np.ndarray, step_s: float) -> np.ndarray:
+    """The line prices' rates (EUR/MW per MW per s) under a round step ``step_s`` (s) that
+    the price loop does not bound: ``alpha_k`` at most ``C_k / (2 h)``, so that a round moves
+    a price by at most half its proportional part, ``h alpha / C <= 1/2``, the step the
+    price loop's bound gives (docs/agents.md, "The round step"). The price of a rest point
+    does not depend on its rate."""
+    return np.minimum(rate, PRICE_STEP * weight / step_s)
 
 
 @dataclass
@@ -292,6 +319,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     # unpriced quadratic generators freed with the local step on the complete graph only
     rates = settings.revision_rates(problem, FREE_RATE_CAP if local_step and not sparse else None)
     fp = game_constants(problem, settings)
+    weight, price_rate = line_constants(problem, settings, fp, minute)  # C_k, alpha_k
     demand = float(problem.demand[minute - 1])
     network = LossyNetwork(faults, TICKS_PER_ROUND)
     inverters = Inverters(initial_setpoints(problem, settings, minute))
@@ -299,12 +327,14 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     generators = []
     for i, name in enumerate(names):
         neighbours = [n for n in names if graph.has_edge(name, n)]
+        above = lines_above(problem, i)
         rule = GeneratorRule(
             float(problem.b[i]), float(problem.c[i]), float(problem.pmin[i]),
             float(problem.pmax[i]), float(fp.B), float(fp.m),
             float(fp.gain) if mode.bounded else 1.0, not mode.bounded, int(field_code),
             demand, step_s, float(rates[i]) if len(rates) else 0.0,
-            lines_above(problem, i), 0.5 * float(fp.C), len(neighbours) + 1 if sparse else 1,
+            above, price_slopes(above, weight if not sparse else np.full(len(weight), fp.C)),
+            len(neighbours) + 1 if sparse else 1,
             bool(local_step) and mode.bounded,
         )  # fmt: skip
         generators.append(
@@ -319,9 +349,10 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
         gen.slow_relays = slow
         gen.stale_rounds = stale_rounds
     speed = still_line_speed(problem, settings) if local_step else 0.0
-    controllers, line_ends = _controllers(problem, settings, fp, step_s, network,
-                                          *line_constants(problem, settings, fp, minute), speed,
-                                          bool(local_step))  # fmt: skip
+    if local_step and mode.bounded and own_price_step(problem, settings):
+        price_rate = price_rates(weight, price_rate, step_s)
+    controllers, line_ends = _controllers(problem, settings, fp, step_s, network, weight,
+                                          price_rate, speed, bool(local_step))  # fmt: skip
     for controller in controllers.values():  # the generators report a silence first
         controller.stale_rounds = 2 * stale_rounds
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
@@ -332,6 +363,16 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     cap = mode.price_cap(problem) if mode.bounded else np.inf
     return AgentSystem(plant, controllers, generators, inverters, network, graph, demand,
                        source, price_cap=cap, line_names=_line_names(problem))  # fmt: skip
+
+
+def price_slopes(above: tuple[int, ...], weight: np.ndarray) -> tuple[float, ...]:
+    """The fall of each half price above a generator per MW it adds, ``C_k / 2`` (EUR/MW per
+    MW) of the lines ``above`` (``weight``: each limited line's ``C_k``), for its own step
+    factor. On a sparse graph the agents pass the game's ``C`` on every line: there the price
+    loop bounds the round step, and the lines' own weights (the scaled law's ``C sqrt(s_k)``)
+    only make the factors smaller; on the complete graph the round step needs them
+    (docs/agents.md, "The local step")."""
+    return tuple(0.5 * float(weight[k]) for k in above)
 
 
 def lines_above(problem: DispatchProblem, generator: int) -> tuple[int, ...]:
