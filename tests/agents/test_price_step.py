@@ -106,10 +106,12 @@ def test_a_drawn_fleet_reaches_the_dc_opf_in_100_rounds(tmp_path):
     assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]
 
 
-@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("seed", range(8))
 def test_each_generator_counts_its_lines_at_their_own_weight(seed):
-    """Under the scaled law ``C_k`` differs from line to line: each generator's slopes are
-    half the weights of the lines above it, as their controllers hold them."""
+    """Under the scaled law ``C_k`` differs from line to line: under the prices' own step each
+    generator's slopes are half the weights of the lines above it, as their controllers hold
+    them, and it keeps counting a line for 5 rounds after its price; otherwise half the
+    game's ``C`` and only while priced."""
     problem = random_fleet_problem(seed, 5, 2)
     system = build_agents(problem, 1, SCALED, 1e-3, Faults(), local_step=True)
     weight = {e.line: float(e.price.params.C) for c in system.controllers.values()
@@ -118,7 +120,17 @@ def test_each_generator_counts_its_lines_at_their_own_weight(seed):
     assert any(w > game_C * (1 + 1e-9) for w in weight.values())  # sqrt(s_k) > 1 somewhere
     for generator in system.generators:
         rule = generator.rule
-        assert rule.price_slopes == tuple(0.5 * weight[k] for k in rule.lines_above)
+        if nested(problem):
+            assert rule.price_slopes == tuple(0.5 * game_C for _ in rule.lines_above)
+            assert rule.priced_memory == 0
+        else:
+            assert rule.price_slopes == tuple(0.5 * weight[k] for k in rule.lines_above)
+            assert rule.priced_memory == 5
+    ring_C = float(RING.game_constants(problem).C)
+    for generator in build_agents(problem, 1, RING, 1e-3, Faults(), local_step=True).generators:
+        rule = generator.rule
+        assert rule.price_slopes == tuple(0.5 * ring_C for _ in rule.lines_above)
+        assert rule.priced_memory == 0
 
 
 def test_a_drawn_fleet_under_the_scaled_law_reaches_the_dc_opf(tmp_path):

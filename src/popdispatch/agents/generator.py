@@ -73,11 +73,6 @@ from popdispatch.game.parameters import share_bounds
 #: (:meth:`GeneratorAgent._set`): the rounding of a few accepted amounts added in MW (1 ulp
 #: measured); a generator approaching ``Pmax`` smoothly is 1e-9 MW or more away from it.
 LIMIT_ULPS = 16
-#: On the complete graph a limited line above a generator counts in its own step factor for
-#: this many rounds after its price was last non-zero (:meth:`GeneratorAgent._price_slope`):
-#: 2 let a case17me fleet oscillate across the line's band, 20 slowed the ELV congestion
-#: minute (21 -> 41 rounds).
-PRICED_MEMORY = 5
 
 
 def relays(w: float, mass: float, room: float) -> bool:
@@ -142,7 +137,8 @@ class GeneratorRule:
     per MW, in the same order (``C_k / 2``, EUR/MW per MW, ``C_k`` the line's proportional
     weight: the game's ``C`` under the plain law on a radial feeder) and ``fan`` the most
     receivers the own sender weight sums over (1 on the complete graph, the own degree plus
-    one on a sparse graph)."""
+    one on a sparse graph); ``priced_memory``: rounds a line above keeps counting in the own
+    factor after its price was last non-zero (0: only while it is)."""
 
     b: float
     c: float
@@ -160,6 +156,7 @@ class GeneratorRule:
     price_slopes: tuple[float, ...] = ()
     fan: int = 1
     local_step: bool = False
+    priced_memory: int = 0
 
     @property
     def scaled(self) -> bool:
@@ -597,20 +594,19 @@ class GeneratorAgent(RoundAgent):
             self.send(status, aid)
 
     def _price_slope(self, rnd: int) -> float:
-        """The fall of the half prices above this generator per MW it adds (EUR/MW per MW):
-        ``C_k / 2`` summed over the limited lines above it whose price is not zero now (their
-        proportional part moves with this generator's output), or, on the complete graph, was
-        not zero within the last :data:`PRICED_MEMORY` rounds: there the round step can take
-        a generator across a line's band in one round (docs/agents.md, "The round step"),
-        and a price that vanishes just inside the limit would free the generator's step
-        exactly when the next step prices it again (a two-round oscillation)."""
+        """The fall of the prices above this generator per MW it adds (EUR/MW per MW): its
+        rule's slope of each limited line above it whose price is not zero (its proportional
+        part moves with this generator's output), now or within the rule's
+        ``priced_memory`` rounds: where the round step can take a generator across a line's
+        band in one round (docs/agents.md, "The local step"), a price that vanishes just inside
+        the limit would free the generator's step exactly when the next step prices it again
+        (a two-round oscillation)."""
         r = self.rule
-        now = {k for k in r.lines_above if self.signals.get(str(k), (0, 0.0))[1] != 0.0}
-        if not self.relay:
-            self.priced_lines.update({k: rnd for k in now})
-            now = {k for k, last in self.priced_lines.items() if rnd - last <= PRICED_MEMORY}
+        now = [k for k in r.lines_above if self.signals.get(str(k), (0, 0.0))[1] != 0.0]
+        self.priced_lines.update({k: rnd for k in now})
+        recent = {k for k, last in self.priced_lines.items() if rnd - last <= r.priced_memory}
         return sum(slope for k, slope in zip(r.lines_above, r.price_slopes, strict=True)
-                   if k in now)  # fmt: skip
+                   if k in recent)  # fmt: skip
 
     def _normalised_weights(self, w: np.ndarray, v: np.ndarray, room: np.ndarray,
                             mass: np.ndarray) -> None:  # fmt: skip

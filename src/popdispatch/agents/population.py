@@ -71,6 +71,14 @@ FREE_RATE_CAP = 30.0
 #: bound on the round step, ``h = C / (2 alpha)``, with the round step itself set by the
 #: coupling between generators (:func:`local_stiffness_rate`).
 PRICE_STEP = 0.5
+#: Under the prices' own step a limited line above a generator counts in its own step factor
+#: for this many rounds after its price was last non-zero
+#: (:meth:`~popdispatch.agents.generator.GeneratorAgent._price_slope`): 2 let a case17me
+#: fleet oscillate across the line's band, 20 took more rounds on the ELV congestion minute.
+PRICED_MEMORY = 5
+#: Under the prices' own step each line above a generator counts at this part of its
+#: proportional weight ``C_k`` in the generator's own step factor (:func:`price_slopes`).
+OWN_STEP_SLOPE = 0.5
 
 
 def default_step(problem: DispatchProblem, settings: RunSettings, minute: int,
@@ -320,6 +328,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     rates = settings.revision_rates(problem, FREE_RATE_CAP if local_step and not sparse else None)
     fp = game_constants(problem, settings)
     weight, price_rate = line_constants(problem, settings, fp, minute)  # C_k, alpha_k
+    own_step = bool(local_step) and mode.bounded and own_price_step(problem, settings)
     demand = float(problem.demand[minute - 1])
     network = LossyNetwork(faults, TICKS_PER_ROUND)
     inverters = Inverters(initial_setpoints(problem, settings, minute))
@@ -333,9 +342,9 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
             float(problem.pmax[i]), float(fp.B), float(fp.m),
             float(fp.gain) if mode.bounded else 1.0, not mode.bounded, int(field_code),
             demand, step_s, float(rates[i]) if len(rates) else 0.0,
-            above, price_slopes(above, weight if not sparse else np.full(len(weight), fp.C)),
+            above, price_slopes(above, weight, fp.C, own_step),
             len(neighbours) + 1 if sparse else 1,
-            bool(local_step) and mode.bounded,
+            bool(local_step) and mode.bounded, PRICED_MEMORY if own_step else 0,
         )  # fmt: skip
         generators.append(
             GeneratorAgent(
@@ -349,7 +358,7 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
         gen.slow_relays = slow
         gen.stale_rounds = stale_rounds
     speed = still_line_speed(problem, settings) if local_step else 0.0
-    if local_step and mode.bounded and own_price_step(problem, settings):
+    if own_step:
         price_rate = price_rates(weight, price_rate, step_s)
     controllers, line_ends = _controllers(problem, settings, fp, step_s, network, weight,
                                           price_rate, speed, bool(local_step))  # fmt: skip
@@ -365,14 +374,18 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
                        source, price_cap=cap, line_names=_line_names(problem))  # fmt: skip
 
 
-def price_slopes(above: tuple[int, ...], weight: np.ndarray) -> tuple[float, ...]:
-    """The fall of each half price above a generator per MW it adds, ``C_k / 2`` (EUR/MW per
-    MW) of the lines ``above`` (``weight``: each limited line's ``C_k``), for its own step
-    factor. On a sparse graph the agents pass the game's ``C`` on every line: there the price
-    loop bounds the round step, and the lines' own weights (the scaled law's ``C sqrt(s_k)``)
-    only make the factors smaller; on the complete graph the round step needs them
-    (docs/agents.md, "The local step")."""
-    return tuple(0.5 * float(weight[k]) for k in above)
+def price_slopes(above: tuple[int, ...], weight: np.ndarray, C: float,
+                 own_step: bool) -> tuple[float, ...]:  # fmt: skip
+    """The fall of the prices above a generator per MW it adds, as its own step factor counts
+    them (EUR/MW per MW), for each line in ``above``: under the prices' own step
+    (``own_step``, :func:`own_price_step`) :data:`OWN_STEP_SLOPE` times the line's own weight
+    ``C_k`` (``weight``: each limited line's; the scaled law's ``C sqrt(s_k)``); otherwise half
+    the game's ``C`` on every line, the fall of the generator's own half of the net price
+    (there the price loop bounds the round step, and the lines' own weights only make the
+    factors smaller; docs/agents.md, "The local step")."""
+    if own_step:
+        return tuple(OWN_STEP_SLOPE * float(weight[k]) for k in above)
+    return tuple(0.5 * float(C) for _ in above)
 
 
 def lines_above(problem: DispatchProblem, generator: int) -> tuple[int, ...]:
