@@ -351,10 +351,9 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
                 rule, i, inverters, neighbours, timeout, lag, copies, engine_limiter, network
             )  # fmt: skip
         )
-    relay = not _complete(graph)
-    slow = slow_relay_ids(graph, names, rates) if relay else frozenset()
+    slow = slow_relay_ids(graph, names, rates) if sparse else frozenset()
     for gen in generators:
-        gen.relay = relay
+        gen.relay = sparse  # relay through blocked generators where the graph is not complete
         gen.slow_relays = slow
         gen.stale_rounds = stale_rounds
     speed = still_line_speed(problem, settings) if local_step else 0.0

@@ -291,16 +291,18 @@ class DcModel:
         as in :meth:`group_angles`)."""
         base = self.base_mva if base is None else base
         theta = self.group_angles(injection, shifted, base)
-        out = base * (self.Bf[lines] @ theta)
-        if shifted:
-            out += self.p_shift[lines, None]
+
+        def angle_flows(rows: np.ndarray) -> np.ndarray:
+            """The flows the angles give ``rows`` (lines), with their shifts if ``shifted``."""
+            flows = base * (self.Bf[rows] @ theta)
+            return flows + self.p_shift[rows, None] if shifted else flows
+
+        out = angle_flows(lines)
         if self.zero is None:
             return out
         at = np.flatnonzero(np.isin(lines, self.zero.lines))
         if len(at):
-            touch = base * (self.Bf[self.zero.touch] @ theta)
-            if shifted:
-                touch += self.p_shift[self.zero.touch, None]
+            touch = angle_flows(self.zero.touch)
             balanced = injection.copy()
             balanced[self.slack] -= balanced.sum(axis=0)  # the slack's entry: the balance
             ideal = self.zero.flows(balanced, touch)
