@@ -1,13 +1,16 @@
 """Zero-reactance branches of a meshed network: ideal connections in the DC model.
 
-The buses they join share one angle and their flows follow Kirchhoff's current law. Yardsticks
+The buses they join share one angle and their flows follow Kirchhoff's current law; a
+reactance below 1e-6 of the network's median nonzero ``|x|`` counts as zero. Yardsticks
 written here in plain numpy, nothing of popdispatch's model used: the same network with every
 zero reactance replaced by 1e-9 p.u., solved by a dense ``numpy.linalg.solve`` of the full
-``B`` (its flows, distribution factors and angles), and a DC-OPF of that network written with
-its dense factors and solved by Clarabel. On EPRI ckt24 as shipped (its busbars have ``X1 0``;
-skipped without the data) the ``feeder`` command describes the network and an exact-mode
-snapshot with a limit on a busbar lands on the DC-OPF and on the optimum worked out from the
-topology by hand.
+``B`` (its flows, distribution factors and angles); the exact limit ``x = 0``, the buses merged
+by hand and the ideal connections' flows by least squares on Kirchhoff's current law; and a
+DC-OPF written with the dense factors and solved by Clarabel. On EPRI ckt24 as shipped (its
+busbars have ``X1 0``, ``Line.Other_Feeders`` ``X1`` 1e-9 ohm; skipped without the data) the
+``feeder`` command describes the network, the base case meets Kirchhoff's current law at every
+bus, and an exact-mode snapshot with a limit on a busbar lands on the DC-OPF and on the optimum
+worked out from the topology by hand.
 """
 
 from __future__ import annotations
@@ -23,8 +26,10 @@ import pandas as pd
 import pytest
 from scipy import sparse
 
+from popdispatch.cases.sources import FeederSource, load_network
 from popdispatch.errors import FeederError
 from popdispatch.feeder.dcnet import DcNetwork
+from popdispatch.feeder.fusion import zero_reactance, zero_reactance_threshold
 from popdispatch.feeder.generators import make_fleet
 from popdispatch.game.mesh import build_mesh_problem
 from popdispatch.online import RunSettings, run_snapshot
@@ -169,6 +174,138 @@ def test_a_network_without_zero_reactance_is_unchanged():
     np.testing.assert_allclose(ours, dense_flows(net, injection)[0], rtol=1e-10, atol=1e-10)
 
 
+# -- near-zero reactance: below 1e-6 of the median nonzero |x| is zero --------------------------
+
+#: The zero-reactance lines of LINES.
+ZERO_LINES = ("a", "e", "g", "j")
+#: A reactance (p.u.) far below the threshold, 5e-12 of the lines' median: ckt24's
+#: Other_Feeders is 2.7e-11 of its network's.
+NEAR_X = 1e-12
+
+
+def with_x(x_by_name: dict[str, float], lines=LINES) -> list[tuple]:
+    """``lines`` with the reactances (p.u.) of the lines named in ``x_by_name`` replaced."""
+    return [(*row[:3], x_by_name.get(row[0], row[3]), *row[4:]) for row in lines]
+
+
+def threshold_by_hand(lines) -> float:
+    """1e-6 times the median nonzero |x| (p.u.) of ``lines``, written out here."""
+    x = np.abs([row[3] for row in lines])
+    return 1e-6 * float(np.median(x[x != 0]))
+
+
+def merged_flows(net: DcNetwork, injection: np.ndarray, ideal: tuple[str, ...]) -> np.ndarray:
+    """Flows (MW, every line) of ``injection`` (MW per bus, the slack's entry its balance) in
+    the exact limit of the lines ``ideal`` at ``x = 0``: their buses merged by hand into one
+    bus each set, a dense ``B`` of the merged buses from every other line (phase shifts
+    included), and the ideal lines' flows the least-squares solution of Kirchhoff's current law
+    at every bus (exact: the ideal lines form a forest, so the law fixes them)."""
+    index = net.buses.index
+    f, t = index.get_indexer(net.lines.from_bus), index.get_indexer(net.lines.to_bus)
+    n = len(index)
+    is_ideal = net.lines.index.isin(ideal)
+    label = np.arange(n)  # each bus labelled by the smallest bus of its merged set
+    for _ in range(n):
+        for k in np.flatnonzero(is_ideal):
+            low = min(label[f[k]], label[t[k]])
+            label[(label == label[f[k]]) | (label == label[t[k]])] = low
+    _, merged = np.unique(label, return_inverse=True)
+    m = merged.max() + 1
+    injection = injection.copy()
+    injection[0] = -injection[1:].sum()  # the slack (bus 1, position 0) balances
+    rest = np.flatnonzero(~is_ideal)
+    x = net.lines.x_pu.to_numpy(float)[rest]
+    tap = net.lines.tap.to_numpy(float)[rest]
+    b = 1.0 / (x * np.where(tap == 0, 1.0, tap))
+    C = np.zeros((len(rest), m))
+    np.add.at(C, (np.arange(len(rest)), merged[f[rest]]), 1.0)
+    np.add.at(C, (np.arange(len(rest)), merged[t[rest]]), -1.0)
+    shift_flows = -BASE_MVA * b * np.deg2rad(net.lines.shift_deg.to_numpy(float)[rest])
+    group_injection = np.bincount(merged, injection, minlength=m) - C.T @ shift_flows
+    B = C.T @ (b[:, None] * C)
+    keep = np.flatnonzero(np.arange(m) != merged[0])
+    theta = np.zeros(m)
+    theta[keep] = np.linalg.solve(B[np.ix_(keep, keep)], group_injection[keep] / BASE_MVA)
+    flows = np.zeros(len(net.lines))
+    flows[rest] = BASE_MVA * b * (C @ theta) + shift_flows
+    full = np.zeros((len(net.lines), n))
+    full[np.arange(len(f)), f], full[np.arange(len(t)), t] = 1.0, -1.0
+    others = full[rest].T @ flows[rest]
+    lines = np.flatnonzero(is_ideal)
+    flows[lines] = np.linalg.lstsq(full[lines].T, injection - others, rcond=None)[0]
+    return flows
+
+
+def test_near_zero_reactances_are_ideal_connections_equal_to_the_exact_limit():
+    """Every zero reactance of LINES at 1e-12 p.u.: the same groups, and flows and angles equal
+    to the limit x = 0 worked out by hand, to round-off."""
+    lines = with_x(dict.fromkeys(ZERO_LINES, NEAR_X))
+    assert threshold_by_hand(lines) > 1e4 * NEAR_X
+    near, exact = network(lines), network()
+    assert net_zero_names(near) == list(ZERO_LINES)
+    np.testing.assert_array_equal(near.model.group, exact.model.group)
+    injection = injections()
+    every = np.arange(len(LINES))
+    ours = near.model.flows_mw(injection, every)[:, 0]
+    theirs = merged_flows(near, injection, ZERO_LINES)
+    scale = np.abs(theirs).max()
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(ours, exact.model.flows_mw(injection, every)[:, 0], rtol=0,
+                               atol=1e-12 * scale)  # fmt: skip
+    np.testing.assert_array_equal(near.model.angles(injection), exact.model.angles(injection))
+    # Kirchhoff's current law at every bus, the slack's injection the balance
+    balanced = injection.copy()
+    balanced[0] = -injection[1:].sum()
+    np.testing.assert_allclose(near.model.incidence.T @ ours, balanced, rtol=0,
+                               atol=1e-12 * scale)  # fmt: skip
+
+
+def net_zero_names(net: DcNetwork) -> list[str]:
+    """The names of the lines the DC model of ``net`` takes as ideal connections."""
+    zero = net.model.zero
+    return [] if zero is None else net.lines.index[zero.lines].tolist()
+
+
+def test_a_reactance_just_above_the_threshold_is_a_branch_and_just_below_it_is_fused():
+    """Line ``a`` (1-6, parallel to ``p``) at 0.99 and 1.01 times the threshold: below it, an
+    ideal connection (the exact limit by hand); above it, a branch of ``B`` whose flows equal
+    the merged yardstick with ``a`` kept (well conditioned: 1e-6 of the median); the two differ
+    by the share ``x_a / (x_a + x_th)`` of a's flow that its reactance pushes onto ``p``, about
+    4e-6 (``x_th`` about 0.04 p.u.)."""
+    threshold = threshold_by_hand(with_x({"a": NEAR_X}))  # a, the least, leaves the median
+    assert threshold == pytest.approx(1.75e-7, rel=1e-12)  # 1e-6 x (0.15 + 0.2) / 2
+    below = network(with_x({"a": 0.99 * threshold}))
+    above = network(with_x({"a": 1.01 * threshold}))
+    assert net_zero_names(below) == list(ZERO_LINES)
+    assert net_zero_names(above) == ["e", "g", "j"]
+    group = pd.Series(above.model.group, index=above.buses.index)
+    assert group[1] != group[6] and group[3] == group[4] == group[5] and group[7] == group[8]
+    assert below.model.group[0] == below.model.group[5]  # buses 1 and 6 at one angle
+    injection = injections()
+    every = np.arange(len(LINES))
+    flows_below = below.model.flows_mw(injection, every)[:, 0]
+    flows_above = above.model.flows_mw(injection, every)[:, 0]
+    scale = np.abs(flows_below).max()
+    np.testing.assert_allclose(flows_below, merged_flows(below, injection, ZERO_LINES), rtol=0,
+                               atol=1e-12 * scale)  # fmt: skip
+    np.testing.assert_allclose(flows_above, merged_flows(above, injection, ("e", "g", "j")),
+                               rtol=0, atol=1e-9 * scale)  # fmt: skip
+    jump = np.abs(flows_above - flows_below).max()
+    a = above.lines.index.get_loc("a")
+    assert 1e-6 * abs(flows_below[a]) < jump < 1e-5 * abs(flows_below[a])
+
+
+def test_no_line_with_reactance_leaves_only_exact_zeros_zero():
+    """Where no line has reactance there is no typical one: only x = 0 is zero (a path of
+    ideal connections from the slack)."""
+    table = pd.DataFrame({"x_pu": [0.0, 0.0, -0.0]})
+    assert zero_reactance_threshold(table) == 0.0
+    assert zero_reactance(table).all()
+    table = pd.DataFrame({"x_pu": [0.0, 1e-300, -0.5, 0.5, 1.0]})  # |x|: the sign is no matter
+    assert zero_reactance_threshold(table) == pytest.approx(0.5e-6, rel=1e-12)
+    np.testing.assert_array_equal(zero_reactance(table), [True, True, False, False, False])
+
+
 # -- the DC-OPF ----------------------------------------------------------------------------
 
 
@@ -247,6 +384,37 @@ def test_a_zero_reactance_phase_shifter_is_refused_in_one_line():
     assert "line 'j' has zero reactance and a phase shift of 2 deg" in message
 
 
+def test_a_near_zero_line_closing_a_loop_of_ideal_connections_is_refused_in_one_line():
+    """``q`` (3-5, 1e-12 p.u.) with the exact zeros ``e`` and ``g``: a triangle of ideal
+    connections, refused as for x = 0; the message says what zero is."""
+    lines = LINES + [("q", 3, 5, NEAR_X, 0.0, 0.0)]
+    with pytest.raises(FeederError) as exc:
+        network(lines)
+    message = str(exc.value)
+    assert "\n" not in message
+    below = f"{threshold_by_hand(lines):.3g}"
+    assert below == "1.75e-07"
+    assert (f"line 'q' closes a loop of zero-reactance branches (reactance below {below} p.u.; "
+            "the DC model cannot split") in message  # fmt: skip
+    # at the threshold's other side q is a branch of B, in a group: it carries no flow
+    net = network(LINES + [("q", 3, 5, 1.01 * threshold_by_hand(lines), 0.0, 0.0)])
+    assert net_zero_names(net) == list(ZERO_LINES)
+    q = net.lines.index.get_loc("q")
+    assert net.model.flows_mw(injections(), np.array([q]))[0, 0] == 0.0
+
+
+def test_a_near_zero_phase_shifter_is_refused_in_one_line():
+    lines = [(*row[:3], NEAR_X, row[4], 2.0) if row[0] == "j" else row for row in LINES]
+    with pytest.raises(FeederError) as exc:
+        network(lines)
+    message = str(exc.value)
+    assert "\n" not in message
+    below = f"{threshold_by_hand(lines):.3g}"
+    assert below == "1.75e-07"
+    assert (f"line 'j' has zero reactance (1e-12 p.u., below {below} p.u.) and a phase shift of "
+            "2 deg") in message  # fmt: skip
+
+
 def test_what_is_wrong_otherwise_is_still_refused():
     net = network()
     with pytest.raises(FeederError, match="several parts"):
@@ -282,12 +450,36 @@ def test_the_commands_say_how_many_lines_they_join(tmp_path):
     case = tmp_path / "zerox.m"
     case.write_text(matpower_text())
     described = popdispatch("feeder", "--net", str(case))
-    assert ("ideal connections: 4 zero-reactance line(s) join 7 buses into 3 group(s), each at "
-            "one angle") in described.stdout  # fmt: skip
-    assert "4 zero-reactance line(s) joined as ideal connections" in described.stderr
+    assert ("ideal connections: 4 zero-reactance line(s) (reactance below 2e-07 p.u.) join 7 "
+            "buses into 3 group(s), each at one angle") in described.stdout  # fmt: skip
+    assert ("4 zero-reactance line(s) (reactance below 2e-07 p.u.) joined as ideal "
+            "connections") in described.stderr  # fmt: skip
     summary = json.loads(popdispatch("feeder", "--net", str(case), "--json", "-q").stdout)
     assert (summary["zero_reactance_lines"], summary["fused_buses"], summary["fused_groups"]) == (
         4, 7, 3)  # fmt: skip
+    limits = ["--limit", "7:8=20000", "--limit", "3:4=3000", "--limit", "6:7=5000"]
+    opf = json.loads(popdispatch("opf", "--net", str(case), "--minute", "1", *limits, "--json",
+                                 "-q").stdout)  # fmt: skip
+    theirs = dense_opf(network(limits=LIMITS))
+    ours = np.array([g["p_kw"] for g in opf["generators"]])
+    assert np.abs(ours - theirs).max() <= 1e-6 * opf["demand_kw"]
+
+
+def test_the_commands_count_near_zero_lines_and_say_the_threshold(tmp_path):
+    """The zero lines at 1e-12 p.u. in a MATPOWER case: the same four ideal connections, the
+    threshold 1e-6 x 0.12 p.u. (the median of the 15 nonzero reactances) in the text and the
+    JSON, the DC-OPF the exact limit's."""
+    lines = with_x(dict.fromkeys(ZERO_LINES, NEAR_X))
+    case = tmp_path / "nearx.m"
+    case.write_text(matpower_text(lines))
+    described = popdispatch("feeder", "--net", str(case))
+    assert ("ideal connections: 4 zero-reactance line(s) (reactance below 1.2e-07 p.u.) join 7 "
+            "buses into 3 group(s)") in described.stdout  # fmt: skip
+    summary = json.loads(popdispatch("feeder", "--net", str(case), "--json", "-q").stdout)
+    assert (summary["zero_reactance_lines"], summary["fused_buses"], summary["fused_groups"]) == (
+        4, 7, 3)  # fmt: skip
+    assert summary["zero_reactance_threshold_pu"] == pytest.approx(threshold_by_hand(lines),
+                                                                   rel=1e-12)  # fmt: skip
     limits = ["--limit", "7:8=20000", "--limit", "3:4=3000", "--limit", "6:7=5000"]
     opf = json.loads(popdispatch("opf", "--net", str(case), "--minute", "1", *limits, "--json",
                                  "-q").stdout)  # fmt: skip
@@ -316,9 +508,32 @@ def ckt24_summary() -> dict:
 @needs_ckt24
 def test_ckt24_as_shipped_is_described_with_its_busbars_joined():
     done = popdispatch("feeder", "--net", str(CKT24))
-    assert "ideal connections: 64 zero-reactance line(s) join 76 buses into 12 group(s)" in (
-        done.stdout)  # fmt: skip
-    assert "64 zero-reactance line(s) joined as ideal connections" in done.stderr
+    below = "(reactance below 3.08e-08 p.u.)"  # 1e-6 of the median, 0.0308 p.u. on 1 MVA
+    assert (f"ideal connections: 65 zero-reactance line(s) {below} join 77 buses into 12 "
+            "group(s)") in done.stdout  # fmt: skip
+    assert f"65 zero-reactance line(s) {below} joined as ideal connections" in done.stderr
+
+
+@needs_ckt24
+def test_ckt24_base_case_meets_kirchhoffs_current_law_at_every_bus():
+    """``Line.Other_Feeders`` (``X1`` 1e-9 ohm: 8.4e-13 p.u., 2.7e-11 of the median) is an ideal
+    connection, so ``B`` holds only real branches and the base case (the loads withdrawn, the
+    slack balancing) meets Kirchhoff's current law at every bus to round-off: within 1e-9 of the
+    demand (51 mW; the branch left in ``B`` misses it by 12 W at bus ``feeders``, 13 W in the
+    slack's balance). The balance is summed here from the line table, not the model's
+    incidence."""
+    net, _ = load_network(FeederSource(net=CKT24))
+    index = net.buses.index
+    injection = -(net.buses.pd_mw + net.buses.gs_mw).to_numpy(float)  # MW
+    slack = index.get_loc(net.slack_bus)
+    injection[slack] -= injection.sum()  # the slack's balance
+    flows = net.model.flows_mw(injection, np.arange(len(net.lines)))[:, 0]
+    f, t = index.get_indexer(net.lines.from_bus), index.get_indexer(net.lines.to_bus)
+    out = np.bincount(f, flows, len(index)) - np.bincount(t, flows, len(index))
+    residual = np.abs(out - injection)
+    worst = net.bus_labels([index[residual.argmax()]])[0]
+    assert residual.max() <= 1e-9 * net.demand_mw, (worst, residual.max())
+    assert "other_feeders" in net_zero_names(net)
 
 
 @needs_ckt24
@@ -328,7 +543,7 @@ def test_ckt24_exact_mode_with_a_busbar_limited_lands_on_the_dc_opf(tmp_path, ck
     demand, G2 and G3 at their maximum (cheaper than the source) and the source the rest."""
     nx = pytest.importorskip("networkx")
     s = ckt24_summary
-    assert s["zero_reactance_lines"] == 64
+    assert s["zero_reactance_lines"] == 65
     graph = nx.MultiGraph([(r["from_bus"], r["to_bus"]) for r in s["line_table"]])
     graph.remove_edge(*BUSBAR)
     beyond = nx.node_connected_component(graph, BUSBAR[1])

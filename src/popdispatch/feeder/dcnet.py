@@ -11,10 +11,11 @@ path; this module is the meshed one. Its tables are plain, in MATPOWER's own uni
 - bus balance: ``S B theta = P_inj - P_shift`` with ``B = C^T diag(b) C`` (``C`` the
   branch-bus incidence) and ``P_shift = -S C^T (b phi)``; a bus's shunt conductance ``G_s``
   (MW at 1 p.u.) is a load, as MATPOWER's DC model has it;
-- a zero-reactance branch (``b_k`` infinite) is an ideal connection: the buses such branches
-  join share one angle, ``B`` is over these groups, and the flows on the zero-reactance
-  branches follow from Kirchhoff's current law inside each group
-  (:mod:`popdispatch.feeder.fusion`);
+- a zero-reactance branch (``b_k`` infinite; ``|x_k|`` below 1e-6 of the network's median
+  nonzero ``|x|`` counts as zero, :func:`~popdispatch.feeder.fusion.zero_reactance`) is an
+  ideal connection: the buses such branches join share one angle, ``B`` is over these
+  groups, and the flows on the zero-reactance branches follow from Kirchhoff's current law
+  inside each group (:mod:`popdispatch.feeder.fusion`);
 - the slack bus's angle is 0 and it balances the rest: with a sparse LU (SuperLU,
   :func:`scipy.sparse.linalg.splu`) of the reduced ``B`` the flow of any injection is two
   sparse solves away, and the power transfer distribution factors (PTDF) are formed only for
@@ -186,7 +187,8 @@ class DcModel:
     The buses that zero-reactance branches join form a *group* with one angle; without such
     branches every bus is its own group and this is ``makeBdc`` as it stands.
 
-    ``branch_b``: per line, ``b_k = 1 / (x_k tau_k)`` (p.u.; 0 on a zero-reactance line);
+    ``branch_b``: per line, ``b_k = 1 / (x_k tau_k)`` (p.u.; 0 on a zero-reactance line,
+    :func:`~popdispatch.feeder.fusion.zero_reactance`);
     ``incidence``: (lines x buses) sparse, +1 at the from bus and -1 at the to bus; ``group``:
     per bus, its group; ``members``: (groups x buses) sparse, 1 where the bus is in the group;
     ``Bf``: (lines x groups) sparse, ``b_k`` at the from bus's group and

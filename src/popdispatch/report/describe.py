@@ -14,7 +14,11 @@ import numpy as np
 
 from popdispatch.constants import KW_PER_MW
 from popdispatch.feeder.dcnet import DcNetwork
-from popdispatch.feeder.fusion import ideal_connections
+from popdispatch.feeder.fusion import (
+    ideal_connections,
+    threshold_phrase,
+    zero_reactance_threshold,
+)
 from popdispatch.feeder.model import Feeder
 from popdispatch.feeder.radial import balance_lines
 from popdispatch.feeder.reduction import ReducedFeeder
@@ -172,7 +176,9 @@ def network_summary(net: DcNetwork, ratings: bool = True) -> dict:
     """The ``popdispatch feeder`` JSON object of a meshed network (MATPOWER's DC model,
     :class:`~popdispatch.feeder.dcnet.DcNetwork`): counts, the slack bus, loads (kW), shunts,
     lines (per-unit reactance, tap, shift, limit in kW), the zero-reactance lines joined as
-    ideal connections (how many, the buses they join, the groups those form) and generators."""
+    ideal connections (how many, the buses they join, the groups those form, and the reactance
+    in p.u. below which a line is one: :func:`~popdispatch.feeder.fusion.zero_reactance`) and
+    generators."""
     loads, lines, gens = net.loads, net.lines, net.generators
     limit = lines.limit_kw.to_numpy(float)
     label = dict(zip(net.buses.index, net.bus_labels(net.buses.index), strict=True))
@@ -186,6 +192,7 @@ def network_summary(net: DcNetwork, ratings: bool = True) -> dict:
         "zero_reactance_lines": zero,
         "fused_buses": joined,
         "fused_groups": groups,
+        "zero_reactance_threshold_pu": zero_reactance_threshold(lines),
         "slack_bus": label[net.slack_bus],
         "base_mva": net.base_mva,
         "loads": len(loads),
@@ -243,7 +250,8 @@ def _ideal_text(s: dict) -> list[str]:
     """The line on a meshed network's zero-reactance lines (none without any)."""
     if not s["zero_reactance_lines"]:
         return []
-    return [f"ideal connections: {s['zero_reactance_lines']} zero-reactance line(s) join "
+    below = threshold_phrase(s["zero_reactance_threshold_pu"])
+    return [f"ideal connections: {s['zero_reactance_lines']} zero-reactance line(s){below} join "
             f"{s['fused_buses']} buses into {s['fused_groups']} group(s), each at one angle; "
             "their flows from Kirchhoff's current law"]  # fmt: skip
 
