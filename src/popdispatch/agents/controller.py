@@ -43,6 +43,14 @@ across the band, the two prices move the net at ``2 alpha f``, faster than one p
 (``alpha (f - U)``), and that corrects an overshoot. With the local step only, as the
 hastening.
 
+Under the prices' own step (:func:`popdispatch.agents.population.own_price_step`) the
+controllers tell the generators, with each signal, the lines whose two multipliers were both
+positive at the measurement it comes from (``Signals.both``,
+:meth:`ControllerAgent._both_directions`): the net price then moves by ``2 C`` per MW of flow
+instead of ``C``, and
+the generators below the line count it twice in their own step factors
+(:meth:`popdispatch.agents.generator.GeneratorAgent._price_slope`).
+
 A controller that stops (crash): every round each end sends its partner at the other end of
 the line a :class:`~popdispatch.agents.messages.Heartbeat`. An end whose partner has been
 silent for more than ``stale_rounds`` rounds takes the line over: it also sends the other
@@ -218,14 +226,17 @@ class LineEnd:
 class ControllerAgent(RoundAgent):
     """The node controller of one key node (see the module docstring). ``step_s``: the
     round's Euler step ``h``, s; ``speed``: the least speed a still line's overflowing price
-    is hastened to, EUR/MW per s (0: never); ``net``: net a settled line's two prices."""
+    is hastened to, EUR/MW per s (0: never); ``net``: net a settled line's two prices;
+    ``tell_both``: tell the generators which lines have both directions priced (the prices'
+    own step, :func:`popdispatch.agents.population.own_price_step`)."""
 
     ROUND = Phase
 
     PHASES = (Phase.SIGNAL,)
 
     def __init__(self, ends: list[LineEnd], step_s: float, network=None,
-                 stale_rounds: int = 10, speed: float = 0.0, net: bool = False):  # fmt: skip
+                 stale_rounds: int = 10, speed: float = 0.0, net: bool = False,
+                 tell_both: bool = False):  # fmt: skip
         super().__init__(network)
         self.stale_rounds = int(stale_rounds)
         self.events: list[dict] = []
@@ -233,6 +244,7 @@ class ControllerAgent(RoundAgent):
         self.step_s = step_s
         self.speed = float(speed)
         self.net = bool(net)
+        self.tell_both = bool(tell_both)
         self.by_line = {}
         for end in ends:
             self.by_line.setdefault(end.line, []).append(end)
@@ -249,12 +261,15 @@ class ControllerAgent(RoundAgent):
         if phase != Phase.SIGNAL:
             return
         values: dict[str, dict[str, float]] = {}
+        doubled: set[str] = set()  # lines whose two directions both price the flow
         for end in self.ends:
             if end.partner is not None:
                 self.send(Heartbeat(rnd, end.line), end.partner)
                 self._watch(end, rnd)
             if end.flow_mw is None:
                 continue  # nothing measured yet: nothing to say
+            if self._both_directions(end):
+                doubled.add(str(end.line))
             own, other = self._price(end)
             if end.weights is not None:
                 self._weighted(end, own, other, values)
@@ -265,7 +280,19 @@ class ControllerAgent(RoundAgent):
                 for aid in end.other_receivers:
                     values.setdefault(aid, {})[str(end.line)] = other
         for aid, by_line in values.items():
-            self.send(Signals(rnd, by_line), aid)
+            self.send(Signals(rnd, by_line, tuple(sorted(doubled & by_line.keys()))), aid)
+
+    def _both_directions(self, end: LineEnd) -> bool:
+        """Whether ``end``'s line has both directions' multipliers ``max(0, z + C excess)``
+        positive at its latest measurement, before this round's step (told only when the
+        controller tells it, ``tell_both``): the net price ``mu_up - mu_down`` then moves by
+        ``2 C`` per MW of flow, each side's half price by ``C``, twice what one direction
+        moves it by."""
+        if not self.tell_both or not end.states:
+            return False
+        limit, C = float(end.price.params.limit[0]), float(end.price.params.C)
+        return (multiplier(end.z_up, end.flow_mw - limit, C) > 0.0
+                and multiplier(end.z_down, -end.flow_mw - limit, C) > 0.0)
 
     @staticmethod
     def _weighted(end: LineEnd, own: float, other: float, values: dict) -> None:

@@ -215,6 +215,7 @@ class GeneratorAgent(RoundAgent):
         self.neighbours = list(neighbours)
         self.quiet = False  # no new offers (drain)
         self.signals: dict[str, tuple[int, float]] = {}
+        self.both_lines: dict[str, bool] = {}  # line: both its directions price the flow
         self.priced_lines: dict[int, int] = {}  # line above -> last round it priced this one
         self.statuses: dict[str, Status] = {}
         self.standings: dict[str, Standing] = {}  # sparse graph, curvature-scaled field
@@ -294,6 +295,7 @@ class GeneratorAgent(RoundAgent):
             for line, value in content.values.items():
                 if content.round >= self.signals.get(line, (-1, 0.0))[0]:
                     self.signals[line] = (content.round, value)
+                    self.both_lines[line] = line in content.both
         elif isinstance(content, Standing):
             old = self.standings.get(sender)
             if old is None or content.round >= old.round:
@@ -600,12 +602,14 @@ class GeneratorAgent(RoundAgent):
         ``priced_memory`` rounds: where the round step can take a generator across a line's
         band in one round (docs/agents.md, "The local step"), a price that vanishes just inside
         the limit would free the generator's step exactly when the next step prices it again
-        (a two-round oscillation)."""
+        (a two-round oscillation). A line whose controllers last said both its directions
+        price the flow counts twice: its half price then moves by the whole ``C_k`` per MW."""
         r = self.rule
         now = [k for k in r.lines_above if self.signals.get(str(k), (0, 0.0))[1] != 0.0]
         self.priced_lines.update({k: rnd for k in now})
         recent = {k for k, last in self.priced_lines.items() if rnd - last <= r.priced_memory}
-        return sum(slope for k, slope in zip(r.lines_above, r.price_slopes, strict=True)
+        return sum(slope * (2.0 if self.both_lines.get(str(k)) else 1.0)
+                   for k, slope in zip(r.lines_above, r.price_slopes, strict=True)
                    if k in recent)  # fmt: skip
 
     def _normalised_weights(self, w: np.ndarray, v: np.ndarray, room: np.ndarray,

@@ -28,10 +28,14 @@ class Measurement:
 @dataclass(frozen=True)
 class Signals:
     """Node controller -> generator: the controller's value for each of its lines whose side
-    the generator is on (``{line: EUR/MW}``; paper eq. 8 or the exact mode's half price)."""
+    the generator is on (``{line: EUR/MW}``; paper eq. 8 or the exact mode's half price);
+    ``both``: those of the lines whose two directions' multipliers were both positive at the
+    measurement the values come from (told under the prices' own step only), on which the
+    half price moves by the whole ``C`` per MW of flow instead of ``C / 2``."""
 
     round: int
     values: dict
+    both: tuple = ()  # lines as text, as in values
 
 
 @json_serializable

@@ -360,7 +360,8 @@ def build_agents(problem: DispatchProblem, minute: int, settings: RunSettings,
     if own_step:
         price_rate = price_rates(weight, price_rate, step_s)
     controllers, line_ends = _controllers(problem, settings, fp, step_s, network, weight,
-                                          price_rate, speed, bool(local_step))  # fmt: skip
+                                          price_rate, speed, bool(local_step),
+                                          own_step)  # fmt: skip
     for controller in controllers.values():  # the generators report a silence first
         controller.stale_rounds = 2 * stale_rounds
     plant = PlantAgent(problem, minute, inverters, line_ends, faults.noise_kw, faults.seed,
@@ -498,13 +499,14 @@ def still_line_speed(problem: DispatchProblem, settings: RunSettings) -> float:
 
 
 def _controllers(problem, settings: RunSettings, fp, step_s: float, network, weight, rate,
-                 speed: float = 0.0, net: bool = False):  # fmt: skip
+                 speed: float = 0.0, net: bool = False, tell_both: bool = False):  # fmt: skip
     """``({id: controller}, line_ends)`` from the problem's controller table; each line priced
     by the mode's own payoff map (:class:`~popdispatch.agents.controller.LinePrice`) with the
     problem's limit of the line, its proportional weight ``weight[k]`` and price rate
     ``rate[k]`` (:func:`line_constants`: the scaled law and a mesh's lever scale are the plain
     law with per-line constants); ``speed``: the least speed of a still line's price, EUR/MW
-    per s (:func:`still_line_speed`); ``net``: the controllers net a settled line's prices."""
+    per s (:func:`still_line_speed`); ``net``: the controllers net a settled line's prices;
+    ``tell_both``: they tell which lines have both directions priced."""
     table = NodeControllers.from_problem(problem).table
     position = {line: k for k, line in enumerate(problem.lines)}
     payoff = PAYOFFS[get_mode(settings.mode).code]
@@ -528,7 +530,8 @@ def _controllers(problem, settings: RunSettings, fp, step_s: float, network, wei
             partner = next(a for a in line_ends[end.line] if a != aid)
             end.partner = partner
             end.other_receivers = next(e.receivers for e in ends[partner] if e.line == end.line)
-    controllers = {aid: ControllerAgent(own, step_s, network, speed=speed, net=net)
+    controllers = {aid: ControllerAgent(own, step_s, network, speed=speed, net=net,
+                                        tell_both=tell_both)
                    for aid, own in ends.items()}  # fmt: skip
     return controllers, [tuple(e) for e in line_ends]
 
