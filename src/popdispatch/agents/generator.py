@@ -164,6 +164,13 @@ class GeneratorRule:
         normalised by the rates of a neighbourhood (dynamics/newton.py)."""
         return self.field == Field.CAPACITY_NEWTON
 
+    @property
+    def free(self) -> bool:
+        """Whether power this generator trades with another free one changes no fitness
+        (local step only): its cost is linear (``c = 0``: its fitness does not move with its
+        output) and no limited line lies above it (its output moves no price)."""
+        return self.local_step and self.c == 0.0 and not self.lines_above
+
     def step_factor(self, price_slope: float) -> float:
         """The own step factor ``theta = 1 / (1 + h lam)`` (dimensionless, in (0, 1]): ``lam``
         (1/s) is the fastest rate at which this generator's own fitness gap closes,
@@ -591,7 +598,7 @@ class GeneratorAgent(RoundAgent):
         self.heard = {}
         self.forwarded = set()
         status = Status(rnd, self.own.f, w, v, mass, room, self.index,
-                        theta if r.local_step else None)  # fmt: skip
+                        theta if r.local_step else None, r.free)  # fmt: skip
         for aid in self.neighbours:
             self.send(status, aid)
 
@@ -638,6 +645,7 @@ class GeneratorAgent(RoundAgent):
         if self.rule.local_step:  # each pair at the step of its stiffer end
             theta = self.own.theta
             w[1:] *= np.minimum(theta, [_theta(s) for s in known])
+            self._free_pairs(f, w, v0, mass0, known)
         inflow, outflow = np.zeros(n), np.zeros(n)
         graph_flows(f, w, v, *star(n), inflow, outflow)
         relay_in, relay_out = self._relay_flows()
@@ -672,6 +680,24 @@ class GeneratorAgent(RoundAgent):
                 if tag:
                     self.routes[txid] = hops_of[(aid, tag)]
                 self._send_tx(Offer(rnd, txid, amount * scale), aid, txid)
+
+    def _free_pairs(self, f: np.ndarray, w: np.ndarray, v0: float, mass0: float,
+                    known: list[Status]) -> None:  # fmt: skip
+        """Where this generator and better neighbours are all free (:attr:`GeneratorRule.free`),
+        scale their receiver weights in ``w`` (in place; position 0 is this generator) by one
+        factor, so that the flows to them alone would empty this generator's movable mass
+        ``mass0`` within the round: such a pair's gap is the difference of two constant
+        marginal costs, which no trade closes, and the plain step moved the power at a
+        constant crawl. The flux limiter then shares the mass among all the receivers, in
+        proportion to their flows, and each receiver's side caps it at its room; a gap of 0
+        (a tie) moves nothing."""
+        if not (self.rule.free and v0 > 0.0 and mass0 > 0.0):
+            return
+        free = np.array([False, *(s.free for s in known)]) & (f > f[0])
+        rate = float(np.sum(w[free] * (f[free] - f[0]))) * v0  # shares/s at factor 1
+        h = self.rule.step_s
+        if rate > 0.0 and h * rate < mass0:
+            w[free] *= mass0 / (h * rate)
 
     def _accept(self, rnd: int) -> None:
         """Accept the open offers that arrived, all in the same proportion, within the room

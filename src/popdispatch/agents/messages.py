@@ -74,6 +74,7 @@ class Status:
     room: float = 0.0
     index: int = -1  # the generator's position among the generators
     theta: float | None = None  # its own step factor (GeneratorRule.step_factor); None: 1
+    free: bool = False  # a linear cost and no limited line above (GeneratorRule.free)
 
 
 @json_serializable
