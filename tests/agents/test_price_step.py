@@ -110,7 +110,7 @@ def test_a_drawn_fleet_reaches_the_dc_opf_in_100_rounds(tmp_path):
 def test_each_generator_counts_its_lines_at_their_own_weight(seed):
     """Under the scaled law ``C_k`` differs from line to line: under the prices' own step each
     generator's slopes are half the weights of the lines above it, as their controllers hold
-    them, and it keeps counting a line for 5 rounds after its price; otherwise half the
+    them, and it keeps counting a line for 10 rounds after its price; otherwise half the
     game's ``C`` and only while priced."""
     problem = random_fleet_problem(seed, 5, 2)
     system = build_agents(problem, 1, SCALED, 1e-3, Faults(), local_step=True)
@@ -125,12 +125,28 @@ def test_each_generator_counts_its_lines_at_their_own_weight(seed):
             assert rule.priced_memory == 0
         else:
             assert rule.price_slopes == tuple(0.5 * weight[k] for k in rule.lines_above)
-            assert rule.priced_memory == 5
+            assert rule.priced_memory == 10
     ring_C = float(RING.game_constants(problem).C)
     for generator in build_agents(problem, 1, RING, 1e-3, Faults(), local_step=True).generators:
         rule = generator.rule
         assert rule.price_slopes == tuple(0.5 * ring_C for _ in rule.lines_above)
         assert rule.priced_memory == 0
+
+
+def test_a_nearly_linear_dg_below_a_line_is_not_freed_while_the_flow_is_inside():
+    """A random 4-DG fleet whose one DG below the limited line is nearly linear: with a
+    memory of 5 rounds it was freed while the flow crept toward the limit inside the band,
+    dropped its whole output in one round and cycled for 1500 rounds (41 rounds before the
+    prices took their own step)."""
+    from popdispatch.agents.system import AgentSettings, run_agents
+    from popdispatch.opf import solve_opf
+
+    problem = random_fleet_problem(1032, 4, 1, linear_share=0.6)
+    opf = solve_opf(problem, 1)
+    assert abs(opf.line_price[0]) > 0.5  # the line binds at the optimum (EUR/MWh)
+    run = run_agents(problem, 1, SMITH, Faults(), AgentSettings(max_rounds=600))
+    assert run.status == "converged" and run.rounds <= 100, (run.status, run.rounds)
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= run.accuracy_kw
 
 
 def test_a_drawn_fleet_under_the_scaled_law_reaches_the_dc_opf(tmp_path):

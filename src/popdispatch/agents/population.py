@@ -74,8 +74,10 @@ PRICE_STEP = 0.5
 #: Under the prices' own step a limited line above a generator counts in its own step factor
 #: for this many rounds after its price was last non-zero
 #: (:meth:`~popdispatch.agents.generator.GeneratorAgent._price_slope`): 2 let a case17me
-#: fleet oscillate across the line's band, 20 took more rounds on the ELV congestion minute.
-PRICED_MEMORY = 5
+#: fleet oscillate across the line's band, 5 a random fleet whose nearly linear DG crept
+#: toward the limit for longer than that and, freed, crossed it by half the limit; the whole
+#: run held a linear DG below a line that no longer bound at a crawl (docs/agents.md).
+PRICED_MEMORY = 10
 #: Under the prices' own step each line above a generator counts at this part of its
 #: proportional weight ``C_k`` in the generator's own step factor (:func:`price_slopes`).
 OWN_STEP_SLOPE = 0.5
