@@ -47,8 +47,7 @@ Under the prices' own step (:func:`popdispatch.agents.population.own_price_step`
 controllers tell the generators, with each signal, the lines whose two multipliers were both
 positive at the measurement it comes from (``Signals.both``,
 :meth:`ControllerAgent._both_directions`): the net price then moves by ``2 C`` per MW of flow
-instead of ``C``, and
-the generators below the line count it twice in their own step factors
+instead of ``C``, and the generators below the line count it twice in their own step factors
 (:meth:`popdispatch.agents.generator.GeneratorAgent._price_slope`).
 
 A controller that stops (crash): every round each end sends its partner at the other end of
