@@ -1,7 +1,11 @@
 """A node controller whose line's flow stands still over its limit hastens the overflowing
 price: after ``STILL_GRACE`` still measurements each further one multiplies that price's step
 by ``STUCK_GROWTH``, up to the least speed; the first measurement that finds the flow moving
-takes back the last round's gain and ends the hastening for the minute. Otherwise (a line
+takes back the last round's gain and ends the spell, and a later spell grows the factor at
+most to the ended one's final factor over ``STUCK_GROWTH ** SPELL_BACKOFF``; on a drawn
+fleet whose linear DG answered the first spell's overshoot by letting the flow back inside,
+the price then climbs the rest hastened again (91 rounds; 211 with one spell a minute).
+Otherwise (a line
 within its limit, a controller without a speed) the step is the plain Euler step of the dual
 ascent ``z += h alpha (flow - U)``, computed here by hand."""
 
@@ -15,6 +19,7 @@ pytest.importorskip(
 
 from popdispatch.agents.controller import (  # noqa: E402
     PAYOFFS,
+    SPELL_BACKOFF,
     STILL_GRACE,
     STUCK_GROWTH,
     ControllerAgent,
@@ -72,12 +77,36 @@ def test_a_still_overflow_grows_the_step_and_a_moving_flow_ends_it():
     expected = [1.0, *hastened(STILL_GRACE + grown)]
     assert found[: len(still)] == pytest.approx(expected, rel=1e-12)
     # the flow moved (by 1 % of the overflow): the last gain taken back, the plain step on
-    # the new overflow; then the plain step for the rest of the minute, still or not
+    # the new overflow; then, still again, the plain step through the grace and a factor
+    # that grows at most to the last spell's over STUCK_GROWTH ** SPELL_BACKOFF
     last_gain = expected[-1] - 1.0
     rest = found[len(still) :]
     assert rest[0] == pytest.approx(1.01 - last_gain, rel=1e-12)
     assert rest[1:3] == pytest.approx([1.01, 1.01], rel=1e-12)
-    assert rest[3:] == pytest.approx([1.0] * len(still), rel=1e-12)
+    ceiling = expected[-1] / STUCK_GROWTH**SPELL_BACKOFF
+    again = [min(STUCK_GROWTH ** max(0, r - STILL_GRACE), ceiling) for r in range(len(still))]
+    assert ceiling > 1.0 and max(again) == pytest.approx(ceiling, rel=1e-12)
+    assert rest[3:] == pytest.approx(again, rel=1e-12)
+
+
+def test_a_linear_dg_s_price_climbs_hastened_again_after_an_overshoot():
+    """A random 4-DG fleet whose linear DG below the limited line let the flow back inside
+    after the first spell's overshoot; the price had to climb the rest from 10.7 EUR/MWh."""
+    import numpy as np
+
+    from popdispatch.agents.network import Faults
+    from popdispatch.agents.system import AgentSettings, run_agents
+    from popdispatch.online import RunSettings
+    from popdispatch.opf import solve_opf
+
+    from helpers import random_fleet_problem
+
+    problem = random_fleet_problem(1034, 4, 2, linear_share=0.6)
+    opf = solve_opf(problem, 1)
+    assert np.abs(opf.line_price).max() > 10.0  # a limit binds at the optimum (EUR/MWh)
+    run = run_agents(problem, 1, RunSettings(mode="exact"), Faults(), AgentSettings(max_rounds=600))
+    assert run.status == "converged" and run.rounds <= 150, (run.status, run.rounds)
+    assert np.abs(run.setpoints_kw - opf.p_kw).max() <= run.accuracy_kw
 
 
 def test_a_missing_measurement_keeps_the_factor_and_the_speed_caps_the_step():

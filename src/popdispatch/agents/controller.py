@@ -24,11 +24,13 @@ lines") but from what the controller alone measures (:class:`StillLine`): once
 :data:`STILL_FLOW` of the overflow, each further one multiplies the factor on that price's
 rate by :data:`STUCK_GROWTH`, up to :data:`popdispatch.modes.exact.PINNED_BOOST` and to the
 least speed ``speed`` (EUR/MW per s, :class:`ControllerAgent`). The first measurement that
-finds the flow moving ends the hastening for the minute and takes back the last round's gain
-(the generators answered a price before it; the measurement comes a round late). Once a
-minute: later still spells are the price loop ringing around its target, which the plain law
-damps and a hastened step would feed. At a rest point the line is not overflowing, so the
-hastening changes no rest point.
+finds the flow moving ends the spell and takes back the last round's gain (the generators
+answered a price before it; the measurement comes a round late). A later still spell grows
+the factor at most to the last spell's final factor over ``STUCK_GROWTH ** SPELL_BACKOFF``:
+the price loop ringing around its target, which the plain law damps, is fed less each time,
+while a price that the overshoot's answer left far below its target (a linear DG below the
+line, whose answer is all or nothing) still climbs faster than the plain law. At a rest point
+the line is not overflowing, so the hastening changes no rest point.
 
 A line whose flow has settled inside both limits (moved by at most :data:`NET_SETTLED` of its
 slack since the measurement before) with both prices positive nets them (:meth:`LineEnd.net`):
@@ -81,8 +83,12 @@ STILL_FLOW = 1e-6
 #: overshot and rang for up to 50 rounds more).
 STILL_GRACE = 6
 #: The factor on a still line's overflowing price rate grows by this much a round (2 overshot
-#: more, and without the once-a-minute rule kept a case12da fleet oscillating).
+#: more, and without a limit on later spells kept a case12da fleet oscillating).
 STUCK_GROWTH = 1.5
+#: A still spell after one that ended grows its factor at most to that one's final factor over
+#: ``STUCK_GROWTH`` to this power: about the rounds by which the ended spell overshot (its
+#: answer comes a round late and the factor grew meanwhile).
+SPELL_BACKOFF = 3
 #: A flow inside both limits that moved by at most this fraction of its slack since the
 #: measurement before has settled, and its line's two prices are netted (0.3 netted later on
 #: random fleets, with more rounds).
@@ -93,15 +99,16 @@ NET_SETTLED = 0.1
 class StillLine:
     """One line end's hastening of a still line's price (module docstring). ``boost``: the
     factor on the overflowing price's rate; ``flow_mw``, ``round``: the measurement last
-    judged; ``still``: still measurements in a row; ``spent``: this minute's hastening has
-    ended; ``gained``: what the factor added to the (up, down) prices in the last step,
-    EUR/MW."""
+    judged; ``still``: still measurements in a row; ``ceiling``: the most the factor may grow
+    to in this spell (:data:`PINNED_BOOST` until a spell ends, then that spell's final factor
+    over ``STUCK_GROWTH ** SPELL_BACKOFF``; no hastening once it is 1); ``gained``: what the
+    factor added to the (up, down) prices in the last step, EUR/MW."""
 
     boost: float = 1.0
     flow_mw: float = 0.0
     round: int = -1
     still: int = 0
-    spent: bool = False
+    ceiling: float = PINNED_BOOST
     gained: tuple[float, float] = (0.0, 0.0)
 
     def judge(self, flow_mw: float, flow_round: int, limit_mw: float) -> bool:
@@ -115,9 +122,10 @@ class StillLine:
         self.flow_mw, self.round = flow_mw, flow_round
         self.still = self.still + 1 if still else 0
         ended = self.boost > 1.0 and not still
-        self.spent = self.spent or ended
-        hasten = self.still > STILL_GRACE and not self.spent
-        self.boost = min(self.boost * STUCK_GROWTH, PINNED_BOOST) if hasten else 1.0
+        if ended:
+            self.ceiling = max(1.0, self.boost / STUCK_GROWTH**SPELL_BACKOFF)
+        hasten = self.still > STILL_GRACE and self.ceiling > 1.0
+        self.boost = min(self.boost * STUCK_GROWTH, self.ceiling) if hasten else 1.0
         return ended
 
 
