@@ -214,14 +214,20 @@ class LineEnd:
         docstring): both lowered by ``min(mu_up, mu_down)`` (EUR/MW), the mode's multipliers
         (:func:`popdispatch.modes.exact.multiplier`) at the measured flow, which keeps their
         difference, the broadcast."""
-        limit, C = float(self.price.params.limit[0]), float(self.price.params.C)
-        slack = limit - abs(self.flow_mw)
+        slack = float(self.price.params.limit[0]) - abs(self.flow_mw)
         if not (slack > 0.0 and self.moved_mw <= NET_SETTLED * slack):
             return
-        common = min(multiplier(self.z_up, self.flow_mw - limit, C),
-                     multiplier(self.z_down, -self.flow_mw - limit, C))  # fmt: skip
+        common = min(self.multipliers())
         self.z_up -= common
         self.z_down -= common
+
+    def multipliers(self) -> tuple[float, float]:
+        """``(mu_up, mu_down)``, EUR/MW: the mode's multipliers ``max(0, z + C excess)``
+        (:func:`popdispatch.modes.exact.multiplier`) of the line's two directions at the
+        latest measurement and the present prices."""
+        limit, C = float(self.price.params.limit[0]), float(self.price.params.C)
+        return (multiplier(self.z_up, self.flow_mw - limit, C),
+                multiplier(self.z_down, -self.flow_mw - limit, C))  # fmt: skip
 
     @property
     def states(self) -> tuple[float, ...]:
@@ -295,11 +301,7 @@ class ControllerAgent(RoundAgent):
         controller tells it, ``tell_both``): the net price ``mu_up - mu_down`` then moves by
         ``2 C`` per MW of flow, each side's half price by ``C``, twice what one direction
         moves it by."""
-        if not self.tell_both or not end.states:
-            return False
-        limit, C = float(end.price.params.limit[0]), float(end.price.params.C)
-        return (multiplier(end.z_up, end.flow_mw - limit, C) > 0.0
-                and multiplier(end.z_down, -end.flow_mw - limit, C) > 0.0)
+        return self.tell_both and bool(end.states) and min(end.multipliers()) > 0.0
 
     @staticmethod
     def _weighted(end: LineEnd, own: float, other: float, values: dict) -> None:
