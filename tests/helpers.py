@@ -195,6 +195,14 @@ def agents_on_a_matpower_fleet(
     return out, solve_opf(problem, 1), setpoints
 
 
+def assert_converged_on_the_dc_opf(out: dict, opf, setpoints: np.ndarray, most: int) -> None:
+    """``popdispatch agents``' JSON ``out`` says ``converged`` within ``most`` rounds, and its
+    set points (kW, :func:`agents_on_a_matpower_fleet`) lie within its accuracy of the DC-OPF
+    ``opf``."""
+    assert out["status"] == "converged" and out["rounds"] <= most, (out["status"], out["rounds"])
+    assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]
+
+
 #: MATPOWER's case17me with a drawn fleet and line 16-17 limited to 714.7 kW: g2 (c 5.97
 #: EUR/MW^2h, below no limited line) must fall from 3.4 MW to 0 while g0's steep curve makes the
 #: spread 6,500 EUR/MWh: capped at 10 its rate is a quarter of its Newton rate (39), and it

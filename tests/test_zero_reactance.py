@@ -362,25 +362,29 @@ def test_the_dc_opf_with_limits_on_ideal_connections_equals_a_dense_one():
 # -- what the DC model cannot take ------------------------------------------------------------
 
 
+def refusal(lines) -> str:
+    """The message of the :class:`FeederError` that building the network of ``lines`` raises,
+    asserted to be one line."""
+    with pytest.raises(FeederError) as exc:
+        network(lines)
+    message = str(exc.value)
+    assert "\n" not in message
+    return message
+
+
 @pytest.mark.parametrize(
     "extra, named",
     [([("e2", 3, 4, 0.0, 0.0, 0.0)], "e2"),  # parallel to e
      ([("q", 3, 5, 0.0, 0.0, 0.0)], "q")],  # with e and g, a triangle
 )  # fmt: skip
 def test_a_loop_of_zero_reactance_lines_is_refused_in_one_line(extra, named):
-    with pytest.raises(FeederError) as exc:
-        network(LINES + extra)
-    message = str(exc.value)
-    assert "\n" not in message
+    message = refusal(LINES + extra)
     assert f"line {named!r} closes a loop of zero-reactance branches" in message
 
 
 def test_a_zero_reactance_phase_shifter_is_refused_in_one_line():
     lines = [(*row[:5], 2.0) if row[0] == "j" else row for row in LINES]
-    with pytest.raises(FeederError) as exc:
-        network(lines)
-    message = str(exc.value)
-    assert "\n" not in message
+    message = refusal(lines)
     assert "line 'j' has zero reactance and a phase shift of 2 deg" in message
 
 
@@ -388,10 +392,7 @@ def test_a_near_zero_line_closing_a_loop_of_ideal_connections_is_refused_in_one_
     """``q`` (3-5, 1e-12 p.u.) with the exact zeros ``e`` and ``g``: a triangle of ideal
     connections, refused as for x = 0; the message says what zero is."""
     lines = LINES + [("q", 3, 5, NEAR_X, 0.0, 0.0)]
-    with pytest.raises(FeederError) as exc:
-        network(lines)
-    message = str(exc.value)
-    assert "\n" not in message
+    message = refusal(lines)
     below = f"{threshold_by_hand(lines):.3g}"
     assert below == "1.75e-07"
     assert (f"line 'q' closes a loop of zero-reactance branches (reactance below {below} p.u.; "
@@ -405,10 +406,7 @@ def test_a_near_zero_line_closing_a_loop_of_ideal_connections_is_refused_in_one_
 
 def test_a_near_zero_phase_shifter_is_refused_in_one_line():
     lines = [(*row[:3], NEAR_X, row[4], 2.0) if row[0] == "j" else row for row in LINES]
-    with pytest.raises(FeederError) as exc:
-        network(lines)
-    message = str(exc.value)
-    assert "\n" not in message
+    message = refusal(lines)
     below = f"{threshold_by_hand(lines):.3g}"
     assert below == "1.75e-07"
     assert (f"line 'j' has zero reactance (1e-12 p.u., below {below} p.u.) and a phase shift of "

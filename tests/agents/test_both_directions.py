@@ -8,7 +8,6 @@ drawn case16am fleet, whose flow swung across the line's band while both prices 
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 pytest.importorskip(
@@ -28,7 +27,11 @@ from popdispatch.agents.schedule import Phase  # noqa: E402
 from popdispatch.modes import ModeCode  # noqa: E402
 from popdispatch.online import RunSettings  # noqa: E402
 
-from helpers import agents_on_a_matpower_fleet, random_fleet_problem  # noqa: E402
+from helpers import (  # noqa: E402
+    agents_on_a_matpower_fleet,
+    assert_converged_on_the_dc_opf,
+    random_fleet_problem,
+)
 
 LIMIT, C, ALPHA, H = 1.0, 2.0, 300.0, 1e-3  # MW, EUR/MW per MW, EUR/MW per MW per s, s
 
@@ -108,5 +111,4 @@ def test_a_drawn_fleet_whose_prices_both_climbed_reaches_the_dc_opf(tmp_path):
         tmp_path, "case16am", FLEET16, (7, 9, 104.7), "complete"
     )
     assert abs(opf.line_price[0]) > 1.0  # the line binds at the optimum (EUR/MWh)
-    assert out["status"] == "converged" and out["rounds"] <= 100, (out["status"], out["rounds"])
-    assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]
+    assert_converged_on_the_dc_opf(out, opf, setpoints, 100)

@@ -8,7 +8,6 @@ both stayed positive for 120 rounds, the agents now reach the DC-OPF (Clarabel) 
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 pytest.importorskip(
@@ -26,7 +25,7 @@ from popdispatch.agents.messages import Measurement  # noqa: E402
 from popdispatch.agents.schedule import Phase  # noqa: E402
 from popdispatch.modes import ModeCode  # noqa: E402
 
-from helpers import agents_on_a_matpower_fleet  # noqa: E402
+from helpers import agents_on_a_matpower_fleet, assert_converged_on_the_dc_opf  # noqa: E402
 
 LIMIT, C, ALPHA, H = 1.0, 2.0, 300.0, 1e-3  # MW, EUR/MW per MW, EUR/MW per MW per s, s
 
@@ -138,5 +137,4 @@ def test_a_small_limit_with_both_prices_positive_in_under_200_rounds(tmp_path, g
         tmp_path, "case33bw", FLEET33, (20, 21, 9.682), graph
     )
     assert abs(opf.line_price[0]) > 0.1  # the line binds at the optimum (EUR/MWh)
-    assert out["status"] == "converged" and out["rounds"] <= 200, (out["status"], out["rounds"])
-    assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]
+    assert_converged_on_the_dc_opf(out, opf, setpoints, 200)

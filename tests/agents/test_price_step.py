@@ -24,7 +24,12 @@ from popdispatch.agents.population import build_agents, default_step  # noqa: E4
 from popdispatch.modes.exact import ExactConstants  # noqa: E402
 from popdispatch.online import RunSettings  # noqa: E402
 
-from helpers import FLEET17, agents_on_a_matpower_fleet, random_fleet_problem  # noqa: E402
+from helpers import (  # noqa: E402
+    FLEET17,
+    agents_on_a_matpower_fleet,
+    assert_converged_on_the_dc_opf,
+    random_fleet_problem,
+)
 
 SMITH = RunSettings(mode="exact")
 SCALED = RunSettings(mode="exact", exact=ExactConstants(price_law="scaled"))
@@ -102,8 +107,7 @@ def test_a_drawn_fleet_reaches_the_dc_opf_in_100_rounds(tmp_path):
         tmp_path, "case17me", FLEET17, (16, 17, 714.7), "complete"
     )
     assert abs(opf.line_price[0]) > 1.0  # the line binds at the optimum (EUR/MWh)
-    assert out["status"] == "converged" and out["rounds"] <= 100, (out["status"], out["rounds"])
-    assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]
+    assert_converged_on_the_dc_opf(out, opf, setpoints, 100)
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -155,5 +159,4 @@ def test_a_drawn_fleet_under_the_scaled_law_reaches_the_dc_opf(tmp_path):
         tmp_path, "case94pi", FLEET94, (22, 87, 43.93), "complete", "--price-law", "scaled"
     )
     assert abs(opf.line_price[0]) > 1.0  # the line binds at the optimum (EUR/MWh)
-    assert out["status"] == "converged" and out["rounds"] <= 100, (out["status"], out["rounds"])
-    assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]
+    assert_converged_on_the_dc_opf(out, opf, setpoints, 100)

@@ -19,7 +19,12 @@ from popdispatch.agents.population import FREE_RATE_CAP, build_agents  # noqa: E
 from popdispatch.modes.exact import NEWTON_RATE_CAP  # noqa: E402
 from popdispatch.online import RunSettings  # noqa: E402
 
-from helpers import FLEET17, agents_on_a_matpower_fleet, random_fleet_problem  # noqa: E402
+from helpers import (  # noqa: E402
+    FLEET17,
+    agents_on_a_matpower_fleet,
+    assert_converged_on_the_dc_opf,
+    random_fleet_problem,
+)
 
 
 def _by_hand(problem, free: bool) -> np.ndarray:
@@ -59,5 +64,4 @@ def test_an_unpriced_dg_draining_a_small_part_of_the_spread_in_under_200_rounds(
         tmp_path, "case17me", FLEET17, (16, 17, 714.7), "complete"
     )
     assert abs(opf.line_price[0]) > 1.0  # the line binds at the optimum (EUR/MWh)
-    assert out["status"] == "converged" and out["rounds"] <= 200, (out["status"], out["rounds"])
-    assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]
+    assert_converged_on_the_dc_opf(out, opf, setpoints, 200)

@@ -23,7 +23,7 @@ from popdispatch.modes.exact import ExactConstants  # noqa: E402
 from popdispatch.online import Engine, RunSettings, initial_shares  # noqa: E402
 from popdispatch.scenarios import PEAK_MINUTE  # noqa: E402
 
-from helpers import agents_on_a_matpower_fleet  # noqa: E402
+from helpers import agents_on_a_matpower_fleet, assert_converged_on_the_dc_opf  # noqa: E402
 
 SCALED = ExactConstants(price_law="scaled")
 
@@ -69,6 +69,5 @@ def test_a_dg_pinned_below_a_limited_line_in_under_200_rounds(tmp_path, graph, l
         tmp_path, "case16am", FLEET16, (14, 15, 200.6), graph, "--price-law", law
     )
     assert opf.line_price.min() < -1e4  # the line's price travels far (EUR/MWh)
-    assert out["status"] == "converged" and out["rounds"] <= 200, (out["status"], out["rounds"])
-    assert np.abs(setpoints - opf.p_kw).max() <= out["accuracy_kw"]
+    assert_converged_on_the_dc_opf(out, opf, setpoints, 200)
 
