@@ -2,7 +2,9 @@
 
 Per minute the demand and the online set change, the state warm-starts
 (:mod:`popdispatch.warm_start`) and the dynamics run (:func:`popdispatch.integrate.integrate`)
-until the stopping rule says; one row per minute is written to :class:`DayOutputs`.
+until the stopping rule says; one row per minute is written to :class:`DayOutputs`. A minute
+whose prices ran past their cap (infeasible) is reported at its end state, and the next minute
+continues from the state it started from.
 """
 
 from __future__ import annotations
@@ -63,6 +65,8 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
     hi = np.empty(n)
     weight = np.empty(n)
     below = np.empty(params.line_up.shape[0])
+    x_start = np.empty(n)
+    z_start = np.empty(z.shape[0])
     old_demand = day.previous_demand
     pmin, pmax = params.pmin, params.pmax
     for row in range(day.demand.shape[0]):
@@ -74,6 +78,8 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
         tradable = minute_bounds(pmin, pmax, active, demand, params.generator_line,
                                  params.line_up, params.line_preorder, lo, hi, below)  # fmt: skip
         minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active, below, tradable)
+        x_start[:] = x
+        z_start[:] = z
         outcome = integrate(x, z, term, params, minute, ws, stepper, rule, h_try, out.history)
         h_try = outcome.h_try
         for i in range(n):
@@ -84,6 +90,11 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
         out.status[row] = outcome.status
         out.converged_at[row] = outcome.converged_at
         out.first_congestion[row] = outcome.first_congestion
+        if outcome.status == Status.INFEASIBLE:
+            # prices past their cap say nothing of the next minute's: it continues from the
+            # state this minute started from, not from the runaway
+            x[:] = x_start
+            z[:] = z_start
         old_demand = demand
     return h_try, old_demand
 

@@ -1,0 +1,68 @@
+"""A day with minutes whose DC-OPF is infeasible: those minutes' line prices run past their cap,
+and the minutes after them still land on their DC-OPF (Clarabel) as if the runaway had not
+happened."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from popdispatch.feeder.generators import make_fleet
+from popdispatch.feeder.model import Feeder
+from popdispatch.feeder.profiles import LoadProfiles
+from popdispatch.feeder.reduction import reduce_feeder
+from popdispatch.game.problem import build_problem
+from popdispatch.online import RunSettings, run_day
+from popdispatch.opf import solve_opf
+
+from helpers import official_folder
+
+
+def _two_bus_day(loads_kw: list[float]):
+    """Grid at bus 1 (b 50, c 0.1, 200 kW), an expensive DG at bus 2 (b 60, c 1, 20 kW) beside
+    the load, the line between limited to 10 kW: a load over 30 kW has no dispatch."""
+    buses = pd.DataFrame({"x": [0.0, 1.0], "y": [0.0, 0.0]},
+                         index=pd.Index([1, 2], name="bus"))  # fmt: skip
+    lines = pd.DataFrame({"from_bus": [1], "to_bus": [2], "length_km": 0.01, "r_ohm": 0.01,
+                          "x_ohm": 0.001, "limit_kw": 10.0},
+                         index=pd.Index(["L2"], name="line"))  # fmt: skip
+    loads = pd.DataFrame({"bus": [2]}, index=pd.Index(["LD2"], name="load"))
+    fleet = make_fleet([(1, 0.0, 50.0, 0.1, 0.0, 200.0), (2, 0.0, 60.0, 1.0, 0.0, 20.0)])
+    feeder = Feeder("two-bus", buses, lines, loads, 1, fleet)
+    table = pd.DataFrame({"LD2": loads_kw},
+                         index=pd.RangeIndex(1, len(loads_kw) + 1, name="minute"))  # fmt: skip
+    return build_problem(reduce_feeder(feeder), LoadProfiles(table, "test"), check=False)
+
+
+def _assert_feasible_minutes_on_the_dc_opf(problem, day) -> None:
+    """Every minute whose DC-OPF exists is converged (proved) and within its accuracy of it;
+    the engine's runaway minutes are exactly those without one."""
+    opf = [solve_opf(problem, int(m)) for m in day.minutes]
+    infeasible = np.array([o.status != "optimal" for o in opf])
+    assert infeasible.any()
+    np.testing.assert_array_equal(day.infeasible, infeasible)
+    for row in np.flatnonzero(~infeasible):
+        assert day.converged[row], f"minute {day.minutes[row]}"
+        error = np.abs(day.setpoints_kw[row] - opf[row].p_kw).max()
+        assert error <= day.accuracy_kw[row], f"minute {day.minutes[row]}: {error} kW"
+
+
+def test_the_minute_after_an_infeasible_one_lands_on_its_dc_opf() -> None:
+    problem = _two_bus_day([15.0, 40.0, 15.0, 18.0, 45.0, 45.0, 12.0])
+    day = run_day(problem, RunSettings(mode="exact"))
+    np.testing.assert_array_equal(day.infeasible, [False, True, False, False, True, True, False])
+    _assert_feasible_minutes_on_the_dc_opf(problem, day)
+
+
+@pytest.mark.slow
+def test_elv_runaway_minutes_are_the_infeasible_ones() -> None:
+    """The ELV day around its peak with the path 505-666 limited to 10 kW: minutes 564-568
+    have no DC-OPF; the six after them do."""
+    from popdispatch.readers import read_profiles
+    from popdispatch.scenarios import elv_problem
+
+    problem = elv_problem(read_profiles(official_folder()), limits=[(505, 666, 10.0)],
+                          check=False)  # fmt: skip
+    day = run_day(problem, RunSettings(mode="exact"), minutes=np.arange(560, 581))
+    _assert_feasible_minutes_on_the_dc_opf(problem, day)
