@@ -17,6 +17,7 @@ import numpy as np
 
 from popdispatch.game.parameters import MinuteInputs, minute_bounds
 from popdispatch.integrate import Status, integrate
+from popdispatch.integrate.steppers import copy_into
 from popdispatch.warm_start import warm_start
 
 
@@ -78,8 +79,8 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
         tradable = minute_bounds(pmin, pmax, active, demand, params.generator_line,
                                  params.line_up, params.line_preorder, lo, hi, below)  # fmt: skip
         minute = MinuteInputs(demand, day.load_flow[row], lo, hi, active, below, tradable)
-        x_start[:] = x
-        z_start[:] = z
+        copy_into(x, x_start)
+        copy_into(z, z_start)
         outcome = integrate(x, z, term, params, minute, ws, stepper, rule, h_try, out.history)
         h_try = outcome.h_try
         for i in range(n):
@@ -93,8 +94,8 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
         if outcome.status == Status.INFEASIBLE:
             # prices past their cap say nothing of the next minute's: it continues from the
             # state this minute started from, not from the runaway
-            x[:] = x_start
-            z[:] = z_start
+            copy_into(x_start, x)
+            copy_into(z_start, z)
         old_demand = demand
     return h_try, old_demand
 
