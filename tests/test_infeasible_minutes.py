@@ -66,3 +66,16 @@ def test_elv_runaway_minutes_are_the_infeasible_ones() -> None:
                           check=False)  # fmt: skip
     day = run_day(problem, RunSettings(mode="exact"), minutes=np.arange(560, 581))
     _assert_feasible_minutes_on_the_dc_opf(problem, day)
+
+
+def test_an_infeasible_snapshot_reports_the_prices_it_ended_with() -> None:
+    """The engine continues after an infeasible minute from where it started, but the minute
+    itself is reported at its end: set points and the prices that ran past their cap."""
+    from popdispatch.modes import get_mode
+    from popdispatch.online import run_snapshot
+
+    problem = _two_bus_day([15.0, 40.0])
+    run = run_snapshot(problem, 2, RunSettings(mode="exact"))
+    assert run.status == "infeasible"
+    assert np.abs(run.line_price_eur_per_mwh).max() > get_mode("exact").price_cap(problem)
+    np.testing.assert_allclose(run.trajectory_kw[-1], [20.0, 20.0])  # the DG at its Pmax

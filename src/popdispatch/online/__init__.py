@@ -121,10 +121,10 @@ def run_snapshot(
     flows = limited_flows_mw(problem, final, minute)
     rested = run.status == Status.CONVERGED
     infeasible = np.array([run.status == Status.INFEASIBLE])
-    verdict = verdicts(engine, np.array([minute]), final[None], engine.z[None],
+    verdict = verdicts(engine, np.array([minute]), final[None], run.z_end[None],
                         np.array([rested]), infeasible)  # fmt: skip
     certified, reason = bool(verdict.certified[0]), verdict.reasons[0]
-    line_price, voltage_price = _prices(engine, np.array([minute]), final[None], engine.z[None])
+    line_price, voltage_price = _prices(engine, np.array([minute]), final[None], run.z_end[None])
     return SnapshotResult(
         minute=minute,
         demand_kw=float(problem.demand[minute - 1] * KW_PER_MW),

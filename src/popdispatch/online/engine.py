@@ -25,7 +25,10 @@ from popdispatch.warm_start import WARM_STARTS, WarmStart
 class MinuteRun(NamedTuple):
     """One run of :meth:`Engine.run_minute`: set points per iteration (MW; no rows without
     ``record``), final shares, :class:`~popdispatch.integrate.Status`, iteration of
-    convergence and of the first congestion (-1 if none), iterations run."""
+    convergence and of the first congestion (-1 if none), iterations run, and the controller
+    states at the minute's end (EUR/MW). After an infeasible minute the shares and the
+    engine's states are those it started from (:mod:`popdispatch.online.day`); its end is the
+    trajectory's last row and ``z_end``."""
 
     trajectory: np.ndarray
     x: np.ndarray
@@ -33,6 +36,7 @@ class MinuteRun(NamedTuple):
     converged_at: int
     first_congestion: int
     iterations: int
+    z_end: np.ndarray
 
 
 class Engine:
@@ -160,7 +164,7 @@ class Engine:
         steps = int(out.iterations[0])
         trajectory = out.history[: steps + 1] if record else out.history
         return MinuteRun(trajectory, x, Status(int(out.status[0])), int(out.converged_at[0]),
-                         int(out.first_congestion[0]), steps)  # fmt: skip
+                         int(out.first_congestion[0]), steps, out.states[0].copy())  # fmt: skip
 
     def run_day_chunk(self, x: np.ndarray, minutes: np.ndarray, out: DayArrays) -> None:
         """Run consecutive ``minutes`` (1-based) from shares ``x`` (updated in place)."""
