@@ -1,5 +1,5 @@
-"""Shared test helpers: where the official data is, random radial feeders, the agents' CLI on a
-MATPOWER case with a drawn fleet."""
+"""Shared test helpers: where the official data is, small and random radial feeders, the agents'
+CLI on a MATPOWER case with a drawn fleet."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import pytest
 
 from popdispatch.feeder.generators import make_fleet
 from popdispatch.feeder.model import Feeder
-from popdispatch.feeder.profiles import single_minute_profiles
+from popdispatch.feeder.profiles import LoadProfiles, single_minute_profiles
 from popdispatch.feeder.reduction import reduce_feeder
 from popdispatch.game.problem import DispatchProblem, build_problem
 from popdispatch.scenarios import apply_path_limits
@@ -60,6 +60,34 @@ def official_folder() -> Path:
     if folder is None:
         pytest.skip(MISSING_OFFICIAL)
     return folder
+
+
+def radial_problem(edges: list[tuple[int, int]], fleet: list[tuple], loads_kw,
+                   limits_kw: dict[str, float]) -> DispatchProblem:  # fmt: skip
+    """A small radial feeder as a dispatch problem: lines ``edges`` (from bus, to bus; buses
+    1.. with the source at 1), line ``L<to bus>`` limited to ``limits_kw[name]`` kW (others
+    unlimited), ``fleet`` rows as :func:`make_fleet` takes them, and a load ``LD<bus>`` per
+    key of ``loads_kw``: kW by bus, a number (every minute the same) or a list (one per
+    minute). Built unchecked: minutes without a dispatch stay in."""
+    n_buses = 1 + len(edges)
+    buses = pd.DataFrame({"x": np.arange(n_buses, dtype=float), "y": 0.0},
+                         index=pd.Index(np.arange(1, n_buses + 1), name="bus"))  # fmt: skip
+    names = [f"L{to}" for _, to in edges]
+    lines = pd.DataFrame({"from_bus": [a for a, _ in edges], "to_bus": [b for _, b in edges],
+                          "length_km": 0.01, "r_ohm": 0.01, "x_ohm": 0.001,
+                          "limit_kw": [limits_kw.get(name, np.inf) for name in names]},
+                         index=pd.Index(names, name="line"))  # fmt: skip
+    load_names = [f"LD{bus}" for bus in loads_kw]
+    loads = pd.DataFrame({"bus": list(loads_kw)}, index=pd.Index(load_names, name="load"))
+    feeder = Feeder("small", buses, lines, loads, 1, make_fleet(fleet))
+    series = {name: np.atleast_1d(np.asarray(kw, dtype=float))
+              for name, kw in zip(load_names, loads_kw.values(), strict=True)}  # fmt: skip
+    minutes = max(len(kw) for kw in series.values())
+    table = pd.DataFrame({name: np.broadcast_to(kw, minutes) for name, kw in series.items()},
+                         index=pd.RangeIndex(1, minutes + 1, name="minute"))  # fmt: skip
+    profiles = (single_minute_profiles(1, table.iloc[0], "test") if minutes == 1
+                else LoadProfiles(table, "test"))  # fmt: skip
+    return build_problem(reduce_feeder(feeder), profiles, check=False)
 
 
 def random_feeder(rng: np.random.Generator, n_buses: int, n_gens: int) -> Feeder:

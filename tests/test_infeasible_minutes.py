@@ -5,34 +5,19 @@ happened."""
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 import pytest
 
-from popdispatch.feeder.generators import make_fleet
-from popdispatch.feeder.model import Feeder
-from popdispatch.feeder.profiles import LoadProfiles
-from popdispatch.feeder.reduction import reduce_feeder
-from popdispatch.game.problem import build_problem
 from popdispatch.online import RunSettings, run_day
 from popdispatch.opf import solve_opf
 
-from helpers import official_folder
+from helpers import official_folder, radial_problem
 
 
 def _two_bus_day(loads_kw: list[float]):
     """Grid at bus 1 (b 50, c 0.1, 200 kW), an expensive DG at bus 2 (b 60, c 1, 20 kW) beside
     the load, the line between limited to 10 kW: a load over 30 kW has no dispatch."""
-    buses = pd.DataFrame({"x": [0.0, 1.0], "y": [0.0, 0.0]},
-                         index=pd.Index([1, 2], name="bus"))  # fmt: skip
-    lines = pd.DataFrame({"from_bus": [1], "to_bus": [2], "length_km": 0.01, "r_ohm": 0.01,
-                          "x_ohm": 0.001, "limit_kw": 10.0},
-                         index=pd.Index(["L2"], name="line"))  # fmt: skip
-    loads = pd.DataFrame({"bus": [2]}, index=pd.Index(["LD2"], name="load"))
-    fleet = make_fleet([(1, 0.0, 50.0, 0.1, 0.0, 200.0), (2, 0.0, 60.0, 1.0, 0.0, 20.0)])
-    feeder = Feeder("two-bus", buses, lines, loads, 1, fleet)
-    table = pd.DataFrame({"LD2": loads_kw},
-                         index=pd.RangeIndex(1, len(loads_kw) + 1, name="minute"))  # fmt: skip
-    return build_problem(reduce_feeder(feeder), LoadProfiles(table, "test"), check=False)
+    fleet = [(1, 0.0, 50.0, 0.1, 0.0, 200.0), (2, 0.0, 60.0, 1.0, 0.0, 20.0)]
+    return radial_problem([(1, 2)], fleet, {2: loads_kw}, {"L2": 10.0})
 
 
 def _assert_feasible_minutes_on_the_dc_opf(problem, day) -> None:

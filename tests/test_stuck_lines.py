@@ -7,19 +7,13 @@ known limit) not where it is a few watts or less: 229 to 2255 iterations."""
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 import pytest
 
-from popdispatch.feeder.generators import make_fleet
-from popdispatch.feeder.model import Feeder
-from popdispatch.feeder.profiles import single_minute_profiles
-from popdispatch.feeder.reduction import reduce_feeder
-from popdispatch.game.problem import build_problem
 from popdispatch.modes.exact import ExactConstants
 from popdispatch.online import RunSettings, run_snapshot
 from popdispatch.opf import solve_opf
 
-from helpers import official_folder
+from helpers import official_folder, radial_problem
 
 LAWS = ("plain", "tree", "scaled")
 #: Iterations within which each case is proved.
@@ -31,18 +25,11 @@ STUCK = pytest.mark.xfail(
 )
 
 
-def _feeder_problem(fleet: list[tuple], load_kw: dict[str, float], limit_kw: float):
+def _feeder_problem(fleet: list[tuple], load_kw: dict[int, float], limit_kw: float):
     """Bus 1 with a branch to bus 3 and, through the limited line L2, to bus 2 and on to 4;
-    loads at buses 1 and 2; ``fleet`` rows as :func:`make_fleet` takes them."""
-    buses = pd.DataFrame({"x": [0.0, 1.0, 0.0, 2.0], "y": [0.0, 0.0, 1.0, 0.0]},
-                         index=pd.Index([1, 2, 3, 4], name="bus"))  # fmt: skip
-    lines = pd.DataFrame({"from_bus": [1, 1, 2], "to_bus": [2, 3, 4], "length_km": 0.01,
-                          "r_ohm": 0.01, "x_ohm": 0.001, "limit_kw": [limit_kw, np.inf, np.inf]},
-                         index=pd.Index(["L2", "L3", "L4"], name="line"))  # fmt: skip
-    loads = pd.DataFrame({"bus": [1, 2]}, index=pd.Index(["LD1", "LD2"], name="load"))
-    feeder = Feeder("stuck", buses, lines, loads, 1, make_fleet(fleet))
-    profiles = single_minute_profiles(1, pd.Series(load_kw), "test")
-    return build_problem(reduce_feeder(feeder), profiles)
+    loads at buses 1 and 2; ``fleet`` rows as
+    :func:`~popdispatch.feeder.generators.make_fleet` takes them."""
+    return radial_problem([(1, 2), (1, 3), (2, 4)], fleet, load_kw, {"L2": limit_kw})
 
 
 def _export_limited(distance_kw: float):
@@ -51,7 +38,7 @@ def _export_limited(distance_kw: float):
     optimum; the cheapest DG (bus 3, b 1, 10 kW) runs flat out."""
     fleet = [(1, 0.0, 5.0, 0.02, 0.0, 10.0), (3, 0.0, 1.0, 0.01, 0.0, 10.0),
              (2, 0.0, 3.0, 0.025, 0.0, 5.0), (4, 0.0, 2.0, 0.02, 0.0, 20.0)]  # fmt: skip
-    return _feeder_problem(fleet, {"LD1": 20.0 + distance_kw, "LD2": 7.03}, 10.0)
+    return _feeder_problem(fleet, {1: 20.0 + distance_kw, 2: 7.03}, 10.0)
 
 
 def _import_limited(distance_kw: float):
@@ -60,7 +47,7 @@ def _import_limited(distance_kw: float):
     covers the rest beyond the line, the grid (b 5) is off."""
     fleet = [(1, 0.0, 5.0, 0.02, 0.0, 30.0), (3, 0.0, 1.0, 0.01, 0.0, 10.0),
              (2, 0.0, 3.0, 0.025, 0.0, 5.0), (4, 0.0, 2.0, 0.02, 0.0, 10.0)]  # fmt: skip
-    return _feeder_problem(fleet, {"LD1": 7.0 - distance_kw, "LD2": 10.046}, 3.0)
+    return _feeder_problem(fleet, {1: 7.0 - distance_kw, 2: 10.046}, 3.0)
 
 
 def _assert_proved_on_the_dc_opf(problem, minute: int, law: str) -> None:
