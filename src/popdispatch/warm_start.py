@@ -30,6 +30,7 @@ import numpy as np
 from popdispatch.dynamics.capacity import project_to_box
 from popdispatch.game.parameters import share_bounds
 from popdispatch.integrate.steppers import copy_into
+from popdispatch.jit import ALLOCATING
 
 
 class WarmStart(IntEnum):
@@ -181,7 +182,7 @@ def continue_setpoints(x, old_demand, demand, pmin, pmax, active, weight, b=None
         x[i] = p[i] / demand
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, **ALLOCATING)
 def warm_start(policy, bounded, x, old_demand, demand, pmin, pmax, active, weight, b=None,
                c=None):  # fmt: skip
     """Shares to start a minute of ``demand`` (MW) from, in place: offline mass handed on

@@ -27,6 +27,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from popdispatch.jit import ALLOCATING
+
 
 class Graph(NamedTuple):
     """The communication graph as the compiled kernels take it: its symmetric adjacency in
@@ -118,7 +120,7 @@ def sort_by_fitness(f, order):
             return
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, **ALLOCATING)
 def merge_sort(f, order):
     """``order[:] = np.argsort(f, kind="mergesort")`` (the same permutation: a stable sort of
     ``0..n-1`` by ``f``), bottom-up. numba's ``argsort`` would add seconds to every first
@@ -390,10 +392,18 @@ def relay_flows(f, w, v, mass, room, slow, indptr, indices, label, inflow, outfl
     relay"). The terms are continuous in the fitness: where two receivers tie, a sender's
     relayed flow is shared between them, not switched from one to the other (a jump in the
     field that an error-controlled step resolves only with steps of the tolerance over the
-    jump). The member lists (n + edges entries) are allocated when a strategy is blocked.
+    jump). The member lists (n + edges entries) are allocated when a strategy is blocked
+    (:func:`grouped_flows`).
     """
-    if not relay_groups(w, mass, room, slow, indptr, indices, label):
-        return
+    if relay_groups(w, mass, room, slow, indptr, indices, label):
+        grouped_flows(f, w, v, room, indptr, indices, label, inflow, outflow)
+
+
+@nb.njit(cache=True, **ALLOCATING)
+def grouped_flows(f, w, v, room, indptr, indices, label, inflow, outflow):
+    """The relayed flows within each relay group of ``label`` (:func:`relay_flows`), added to
+    ``inflow``/``outflow``. It allocates the member lists (n + edges entries), so it is
+    compiled with reference counting (:mod:`popdispatch.jit`)."""
     n = f.shape[0]
     group = np.empty(n + indices.shape[0], dtype=np.int64)
     member = np.empty(n + indices.shape[0], dtype=np.int64)

@@ -20,10 +20,10 @@ limit stays large.)
   iteration, capped by a stiffness estimate (exact mode).
 
 Controller states ``z`` are integrated alongside and kept non-negative. Everything here is
-compiled and allocation-free. The records (:class:`Workspace`, :class:`Stage`, ...) are taken
-apart once per iteration and the per-substep kernels take their arrays: numba reference-counts
-every array of a record each time the record is handed to an inlined function, which slows
-the innermost loop noticeably when the records go down to it.
+compiled and allocation-free, and runs inside the day loop, which is compiled without
+reference counting (:mod:`popdispatch.jit`). The records (:class:`Workspace`, :class:`Stage`,
+...) are taken apart once per iteration and the per-substep kernels take their arrays: that
+is also what keeps the code short where a record would be handed down.
 
 Compilation: the game and field (:func:`evaluate_stage`) and the limiter's flows
 (:func:`limited_flows`) are compiled once each and called; inlined, numba typed and LLVM
@@ -48,6 +48,7 @@ from numba.extending import overload
 from popdispatch.dynamics.fields import law_flows
 from popdispatch.game.parameters import GameWork
 from popdispatch.integrate.term import Stage, evaluate
+from popdispatch.jit import BORROWING
 
 
 class Method(IntEnum):
@@ -195,7 +196,7 @@ def copy_into(source, target):
         target[i] = source[i]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, **BORROWING)
 def evaluate_stage(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term, params,
                    minute, work):  # fmt: skip
     """:func:`~popdispatch.integrate.term.evaluate` as one compiled function, called (not
@@ -204,7 +205,9 @@ def evaluate_stage(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order,
     Inlined, the game and field (every mode's payoff, every field's weights, both pairwise
     sums) were copied into each of four call sites, and LLVM optimised every copy again in
     each function that links them, the bulk of the first run's compilation. Called, they are
-    compiled once; the call costs a few reference counts per evaluation.
+    compiled once. Compiled without reference counting (:data:`~popdispatch.jit.BORROWING`):
+    the records it takes hold dozens of arrays, and counting each of them at every inlined
+    call cost more than the evaluation's arithmetic.
     """
     return evaluate(x, z, p, f, w, v, room, mass, inflow, outflow, z_rate, order, term, params,
                     minute, work)  # fmt: skip

@@ -18,6 +18,7 @@ import numpy as np
 from popdispatch.game.parameters import MinuteInputs, minute_bounds
 from popdispatch.integrate import Status, integrate
 from popdispatch.integrate.steppers import copy_into
+from popdispatch.jit import BORROWING
 from popdispatch.warm_start import warm_start
 
 
@@ -60,14 +61,23 @@ def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
 
     The engine's one compiled entry point (a single minute is a day of one row): each entry
     point links the game and field again and LLVM optimises all it links once more, so one
-    instead of two saves a full optimisation of the engine on the first run."""
+    instead of two saves a full optimisation of the engine on the first run. It allocates the
+    day's scratch and hands it to :func:`day_rows`, which borrows it (:mod:`popdispatch.jit`)."""
     n = x.shape[0]
-    lo = np.empty(n)
-    hi = np.empty(n)
-    weight = np.empty(n)
-    below = np.empty(params.line_up.shape[0])
-    x_start = np.empty(n)
-    z_start = np.empty(z.shape[0])
+    return day_rows(x, z, term, params, day, ws, stepper, rule, h_try, out, np.empty(n),
+                    np.empty(n), np.empty(n), np.empty(params.line_up.shape[0]), np.empty(n),
+                    np.empty(z.shape[0]))  # fmt: skip
+
+
+@nb.njit(cache=True, **BORROWING)
+def day_rows(x, z, term, params, day, ws, stepper, rule, h_try, out, lo, hi, weight, below,
+             x_start, z_start):  # fmt: skip
+    """The loop of :func:`integrate_day` over its rows, compiled without reference counting
+    (:data:`~popdispatch.jit.BORROWING`): it allocates nothing. Scratch (each overwritten per
+    minute): the minute's share bounds ``lo``, ``hi``, the warm start's ``weight`` (one per
+    generator), the generators that can trade ``below`` each limited line, and the state the
+    minute started from, ``x_start``, ``z_start``."""
+    n = x.shape[0]
     old_demand = day.previous_demand
     pmin, pmax = params.pmin, params.pmax
     for row in range(day.demand.shape[0]):
