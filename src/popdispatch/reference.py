@@ -33,6 +33,7 @@ from popdispatch.modes.exact import (
     PINNED_FADE,
     PINNED_MARGIN,
     PINNED_SETTLE,
+    STUCK_SETTLE,
 )
 
 
@@ -75,14 +76,15 @@ def voltage_rows(problem: DispatchProblem, p, minute: int) -> tuple[np.ndarray, 
 
 
 def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: FitnessParameters,
-         pinned_speed: float = 0.0):  # fmt: skip
+         pinned_speed: float = 0.0, stuck: bool = False):  # fmt: skip
     """``(fitness, z_rate, congestion, residual)`` of a mode at set points ``p`` (MW).
 
     Exact and voltage modes: every row ``r`` (a limited line's direction, a monitored bus's
     bound) has an excess ``e_r`` (MW or MW equivalents) and a price ``mu_r = max(0, z_r + C
     e_r)`` that integrates at ``price_rate e_r`` (a mesh line's ``C`` and ``price_rate`` times
     its lever scale, :func:`popdispatch.game.mesh.lever_scale`; a pinned line's, and a pinned
-    pair's gap, raised to ``pinned_speed``, EUR/MW per s, :func:`pinned_rates`); generator
+    pair's gap, raised to ``pinned_speed``, EUR/MW per s, and with ``stuck`` a stuck line's,
+    :func:`pinned_rates`); generator
     ``i``'s signal is ``-sum_r mu_r de_r/dp_i`` weighed as the paper splits a line's (half to
     each side, eq. 8's sides) and in full for a bus (the Lagrangian's gradient of the voltage
     rows)."""
@@ -103,10 +105,6 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
     if problem.meshed:
         scale[: 2 * lines] = np.tile(lever_scale(problem.factor), 2)
     z_rate = fp.price_rate * scale * excess
-    if pinned_speed > 0.0 and lines:
-        z_rate[: 2 * lines] = pinned_rates(problem, minute, p, z[: 2 * lines],
-                                           excess[: 2 * lines], z_rate[: 2 * lines],
-                                           fp.price_rate, pinned_speed)  # fmt: skip
     slack = np.where(z > 0.0, np.abs(excess), np.maximum(excess, 0.0))
     mu = np.maximum(0.0, z + fp.C * scale * excess)
     nu = mu[:lines] - mu[lines : 2 * lines]
@@ -119,7 +117,13 @@ def game(mode: ModeCode, p, z, problem: DispatchProblem, minute: int, fp: Fitnes
                                                 - mu[2 * lines + n_v :])])  # fmt: skip
     congestion = prices.max() if len(prices) else 0.0
     residual = slack.max() if len(slack) else 0.0
-    return fitness(problem, p, signal, fp, fp.gain, False), z_rate, congestion, residual
+    f = fitness(problem, p, signal, fp, fp.gain, False)
+    if pinned_speed > 0.0 and lines:
+        z_rate[: 2 * lines] = pinned_rates(problem, minute, p, z[: 2 * lines],
+                                           excess[: 2 * lines], z_rate[: 2 * lines],
+                                           fp.price_rate, pinned_speed,
+                                           f / fp.gain if stuck else None)  # fmt: skip
+    return f, z_rate, congestion, residual
 
 
 def rates_in_force(problem: DispatchProblem, minute: int, p, z, C: float, rate, idle_rate):
@@ -141,7 +145,7 @@ def rates_in_force(problem: DispatchProblem, minute: int, p, z, C: float, rate, 
 
 
 def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, price_rate,
-                 speed: float):  # fmt: skip
+                 speed: float, price_fitness=None):  # fmt: skip
     """The line prices' rates ``z_rate`` (both directions, EUR/MW per s, at prices ``z``) plus
     the gains of the pinned lines and pairs: a line with generators below it that can trade,
     none more than ``PINNED_FADE`` of its range inside its limits, gains on each price what
@@ -154,6 +158,12 @@ def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, pr
     price's lowers it), gain the same on half the gap of their rates ``price_rate * excess``,
     added to the upper price and taken from the lower while the price it lowers is positive,
     by at most that price over ``PINNED_SETTLE``; each gain by at most ``PINNED_BOOST`` times.
+    A *stuck* price (``price_fitness`` given: the fitness over the revision gain, EUR/MW) with
+    an excess or a price: none of the trades that would move its line's flow the way it asks
+    is open (the flow must fall where the up price's excess is positive: a generator below
+    that can rise fitter than one elsewhere that can fall), its gap being how much the worst
+    sender is fitter than the best receiver; it gains the same, by at most its gap over
+    ``STUCK_SETTLE``, where that is more than the pinned gain.
     ``price_rate``: one value, or one per price (the scaled law's ``alpha s_k``)."""
     inputs = MinuteInputs.of(problem, minute)
     low, high = inputs.lo * inputs.demand, inputs.hi * inputs.demand
@@ -181,7 +191,14 @@ def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, pr
     weight = np.maximum(0.0, 1.0 - problem.down @ np.where(near, distance, 0.0))
     pinned = (problem.down @ (tradable & deep) == 0) & (problem.down @ tradable > 0)
     own = np.broadcast_to(price_rate, excess.shape) * excess
-    z_rate = z_rate + np.tile(np.where(pinned, weight, 0.0), 2) * gain(own)
+    full = gain(own)
+    size = np.tile(np.where(pinned, weight, 0.0), 2) * np.abs(full)
+    if price_fitness is not None:
+        rises = tradable & ~(at_limit & ~nearer_low)
+        falls = tradable & ~(at_limit & nearer_low)
+        waits = stuck_gaps(problem.down != 0.0, price_fitness, rises, falls, excess, z)
+        size = np.maximum(size, np.minimum(np.abs(full), waits / STUCK_SETTLE))
+    z_rate = z_rate + np.sign(full) * size
     lower = np.flatnonzero(problem.line_up >= 0)
     upper = problem.line_up[lower]
     pair = (inside[lower] >= 1) & (inside[upper] == inside[lower])
@@ -196,6 +213,26 @@ def pinned_rates(problem: DispatchProblem, minute: int, p, z, excess, z_rate, pr
         np.add.at(z_rate, up_row, pair_gain)
         np.add.at(z_rate, low_row, -pair_gain)
     return z_rate
+
+
+def stuck_gaps(below, f, rises, falls, excess, z):
+    """Per price (up prices, then down): the gap (EUR/MW) of the trade its line's flow waits
+    for (:func:`pinned_rates`); 0 where such a trade is open, and where the price has neither
+    an excess nor a value. ``below``: lines x generators; ``f``: fitness over the gain."""
+
+    def extreme(mask, values, worst, pick):
+        return pick(np.where(mask, values[None, :], worst), axis=1, initial=worst)
+
+    rise_below = extreme(below & rises, f, -np.inf, np.max)
+    fall_below = extreme(below & falls, f, np.inf, np.min)
+    rise_out = extreme(~below & rises, f, -np.inf, np.max)
+    fall_out = extreme(~below & falls, f, np.inf, np.min)
+    lowering = np.maximum(0.0, fall_out - rise_below)
+    raising = np.maximum(0.0, fall_below - rise_out)
+    lines = below.shape[0]
+    up = np.arange(2 * lines) < lines
+    waits = np.where(up == (excess > 0.0), np.tile(lowering, 2), np.tile(raising, 2))
+    return np.where((excess > 0.0) | (z > 0.0), waits, 0.0)
 
 
 def weights(field, x, f, lo, hi, active, rate=None):
@@ -287,11 +324,12 @@ class ReferenceMinute:
             self.slow |= slow_members(self.idle_rate, self.graph)
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         self.pinned_speed = settings.engine_pinned_speed(problem)
+        self.stuck = settings.engine_hastens_stuck_lines(problem)
 
     def evaluate(self, x, z):
         f, z_rate, congestion, residual = game(
             self.mode.code, x * self.demand, z, self.problem, self.minute, self.fp,
-            self.pinned_speed,
+            self.pinned_speed, self.stuck,
         )
         law = self.law
         rate = self.rate

@@ -85,9 +85,9 @@ def test_a_pinned_pairs_scaled_rates_equal_the_numpy_statement():
     """Along a scaled-law run of the nested pair (tests/test_fleet_outliers.py: the one
     generator between two nested lines at its Pmin, 1680 iterations before its pair was
     hastened under this law): the compiled rates are the law's (:func:`dense_scaled`) plus
-    the pair's gain on half the gap of the lines' rates ``alpha s_k e_k`` and the pinned
-    lines' gains on their own (``popdispatch.reference.pinned_rates``); a gain is not zero on
-    some of the states."""
+    the pair's gain on half the gap of the lines' rates ``alpha s_k e_k`` and the pinned and
+    stuck lines' gains on their own (``popdispatch.reference.pinned_rates``); a gain is not
+    zero on some of the states."""
     from popdispatch.game.parameters import GameParameters, GameWork
     from popdispatch.modes.exact import pinned_scaled_payoff
     from popdispatch.online import Engine, RunSettings
@@ -104,7 +104,7 @@ def test_a_pinned_pairs_scaled_rates_equal_the_numpy_statement():
     run = engine.run_minute(initial_shares(problem, settings.x0, 1), 1, max_iterations=8)
     minute = MinuteInputs.of(problem, 1)
     fp = settings.game_constants(problem)
-    params = GameParameters.of(problem, fp, pinned_speed=speed)
+    params = GameParameters.of(problem, fp, pinned_speed=speed, stuck_lines=True)
     n = len(problem.limit)
     response = (minute.hi > minute.lo).astype(float)
     r_k = problem.down @ response
@@ -121,7 +121,7 @@ def test_a_pinned_pairs_scaled_rates_equal_the_numpy_statement():
         flow = problem.load_flow[0] - problem.down @ p
         excess = np.concatenate([flow - problem.limit, -flow - problem.limit])
         expected = pinned_rates(problem, 1, p, z, excess, plain_rate, fp.price_rate *
-                                np.tile(s, 2), speed)  # fmt: skip
+                                np.tile(s, 2), speed, expected_fitness / fp.gain)  # fmt: skip
         np.testing.assert_allclose(z_rate, expected, rtol=1e-9, atol=1e-9 * fp.price_rate)
         np.testing.assert_allclose(fitness, expected_fitness, rtol=1e-9, atol=1e-9 * fp.gain)
         gained += not np.allclose(expected, plain_rate, rtol=1e-12, atol=0.0)

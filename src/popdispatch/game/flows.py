@@ -105,3 +105,25 @@ def mesh_broadcast(to_parent_side, to_child_side, factor, signal):
         if step != 0.0:
             for i in range(signal.shape[0]):
                 signal[i] += factor[k, i] * step
+
+
+def generator_spans(
+    generator_line: np.ndarray, line_up: np.ndarray, line_preorder: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(order, span)``: the generators in an order where those below each limited line are
+    consecutive, ``order[span[k, 0]:span[k, 1]]`` for line ``k`` (generators below no limited
+    line first). The order sorts the generators by the pre-order position of the nearest
+    limited line above them: a line's subtree is a run of consecutive positions."""
+    n_lines = len(line_preorder)
+    position = np.empty(n_lines, dtype=np.int64)
+    position[line_preorder] = np.arange(n_lines)
+    size = np.ones(n_lines, dtype=np.int64)  # lines in each line's subtree, itself included
+    for k in line_preorder[::-1]:
+        if line_up[k] >= 0:
+            size[line_up[k]] += size[k]
+    key = np.where(generator_line >= 0, position[np.maximum(generator_line, 0)], -1)
+    order = np.argsort(key, kind="stable").astype(np.int64)
+    sorted_key = key[order]
+    span = np.stack([np.searchsorted(sorted_key, position, "left"),
+                     np.searchsorted(sorted_key, position + size, "left")], axis=1)  # fmt: skip
+    return order, np.ascontiguousarray(span, dtype=np.int64)

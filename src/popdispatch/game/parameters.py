@@ -13,12 +13,15 @@ import numba as nb
 import numpy as np
 
 from popdispatch.game.fitness import FitnessParameters
+from popdispatch.game.flows import generator_spans
 from popdispatch.game.mesh import lever_scale
 from popdispatch.game.problem import DispatchProblem
 
 NO_VOLTAGE_ROWS = np.zeros((0, 0))  # empty: nothing in it to change
 NO_FACTORS = np.zeros((0, 0))  # a radial feeder's: its kernels work on the tree
 NO_RATES = np.zeros(0)  # empty: the dynamics that take no per-generator revision rate
+NO_ORDER = np.zeros(0, dtype=np.int64)  # no spans of generators below limited lines
+NO_SPANS = np.zeros((0, 2), dtype=np.int64)
 
 
 class PriceLaw(IntEnum):
@@ -87,16 +90,24 @@ class GameParameters(NamedTuple):
     # per generator, the revision rate while every limited line above it is idle (modes/exact.py
     # rates_in_force), dimensionless; empty: the rates are revision_rate throughout
     idle_rate: np.ndarray = NO_RATES
+    # exact mode's stuck lines on a radial feeder (modes/exact.py stuck_gaps): the generators
+    # in an order where those below each limited line are a run (game/flows.py
+    # generator_spans), and each line's run, order[span[k, 0]:span[k, 1]]; empty: the stuck
+    # lines are not hastened
+    stuck_order: np.ndarray = NO_ORDER
+    stuck_span: np.ndarray = NO_SPANS
 
     @classmethod
     def of(
         cls, problem: DispatchProblem, fp: FitnessParameters, revision_rate: np.ndarray = NO_RATES,
-        pinned_speed: float = 0.0, idle_rate: np.ndarray = NO_RATES,
+        pinned_speed: float = 0.0, idle_rate: np.ndarray = NO_RATES, stuck_lines: bool = False,
     ) -> GameParameters:
         """The parameters of ``problem`` with the constants ``fp`` (EUR/MW), the dynamic's
         per-generator ``revision_rate`` (dimensionless; empty when it takes none), exact
-        mode's least speed of a pinned line's prices (EUR/MW per s; 0: none) and the revision
-        rates while the lines above are idle (dimensionless; empty: none)."""
+        mode's least speed of a pinned line's prices (EUR/MW per s; 0: none), the revision
+        rates while the lines above are idle (dimensionless; empty: none) and whether the
+        stuck lines' prices are hastened too (``stuck_lines``: the generators' spans below
+        the lines, :func:`~popdispatch.game.flows.generator_spans`)."""
         return cls(
             problem.b, problem.c, problem.pmin, problem.pmax, float(fp.B), float(fp.m),
             float(fp.C), float(fp.gain), float(fp.price_rate), problem.limit,
@@ -108,7 +119,17 @@ class GameParameters(NamedTuple):
             NO_RATES if problem.factor is None else lever_scale(problem.factor),
             float(pinned_speed),
             np.ascontiguousarray(idle_rate, dtype=float),
+            *(_stuck_spans(problem) if stuck_lines else (NO_ORDER, NO_SPANS)),
         )  # fmt: skip
+
+
+def _stuck_spans(problem: DispatchProblem) -> tuple[np.ndarray, np.ndarray]:
+    """The generators' order and each limited line's run in it
+    (:func:`~popdispatch.game.flows.generator_spans`) on a radial feeder with limited lines;
+    empty on a mesh or without limited lines."""
+    if problem.factor is not None or not len(problem.limit):
+        return NO_ORDER, NO_SPANS
+    return generator_spans(problem.generator_line, problem.line_up, problem.line_preorder)
 
 
 class MinuteInputs(NamedTuple):
@@ -209,6 +230,12 @@ class GameWork(NamedTuple):
     at_low: np.ndarray
     at_high: np.ndarray
     near: np.ndarray
+    # exact mode's stuck lines (modes/exact.py stuck_gaps), EUR/MW: per limited line, the best
+    # fitness below it that can rise, the worst that can fall, and the gaps its up and down
+    # prices wait for; per position r of the generators' order (and one past the last), the
+    # best that can rise and the worst that can fall before r, and the same from r on
+    line_ends: np.ndarray
+    order_ends: np.ndarray
 
     @classmethod
     def empty(cls, n_lines: int, n_rates: int = 0, *, n_generators: int) -> GameWork:
@@ -216,4 +243,6 @@ class GameWork(NamedTuple):
         states of the game's ``n_generators`` generators (every evaluation that counts them
         reads one per generator, unchecked)."""
         return cls(*(np.zeros(n_lines) for _ in range(4)), np.zeros(n_rates),
-                   np.zeros(n_generators), *(np.zeros(n_lines) for _ in range(3)))  # fmt: skip
+                   np.zeros(n_generators), *(np.zeros(n_lines) for _ in range(3)),
+                   np.zeros((n_lines, 4)),
+                   np.zeros((n_generators + 1 if n_lines else 0, 4)))  # fmt: skip

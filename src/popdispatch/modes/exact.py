@@ -59,6 +59,12 @@ PINNED_FADE = 1e-6
 #: A pinned pair's gain empties the price it lowers no faster than with this time constant
 #: (s): the gain fades with that price instead of stopping where it reaches zero.
 PINNED_SETTLE = 1e-3
+#: A stuck line's gain closes its gap no faster than with this time constant (s), one
+#: iteration of the default steps: a line none of whose trades can move its flow the way its
+#: excess asks, gaining on its price at most its gap over this time, reaches the price where
+#: a trade opens within about an iteration, and the gain fades with the gap (docs/exact-mode.md,
+#: "Stuck lines").
+STUCK_SETTLE = 1e-2
 #: A limited line is idle, and the generators below it revise at their idle rates
 #: (:func:`rates_in_force`), once its augmented term ``z + C e`` is below ``-C`` times this
 #: fraction of its limit in both directions: no price and this much slack.
@@ -464,9 +470,105 @@ def pair_gain(gap, sign, lows, highs, lowered, speed):
 
 
 @nb.njit(cache=True, inline="always")
-def hasten_pinned(p, z, params, minute, work, z_rate, scaled=False):
-    """The pinned lines' and pairs' prices hastened (docs/exact-mode.md, "Pinned lines"),
-    ``z_rate`` in place at prices ``z`` (EUR/MW) and the flows in ``work.flow``; the counts
+def trade_ends(p, f, low, high):
+    """``(as a receiver, as a sender)``: a generator's fitness ``f`` if it can rise (else
+    ``-inf``) and if it can fall (else ``+inf``), at ``p`` in ``[low, high]`` (MW); neither if
+    it cannot trade (``high <= low``)."""
+    if not high > low:
+        return -np.inf, np.inf
+    state = limit_state(p, low, high)
+    return (-np.inf if state == 1.0 else f), (np.inf if state == -1.0 else f)
+
+
+@nb.njit(cache=True, inline="always")
+def stuck_gaps(p, z, fitness, params, minute, work):
+    """Per limited line, how far (EUR/MW of price) its flow is from moving the way each of its
+    prices asks, into ``work.line_ends[k, 2]`` (the up price) and ``[k, 3]`` (the down price);
+    returns whether any price waits (a gap above 0).
+
+    The flow falls when a generator below the line that can rise is fitter than one elsewhere
+    that can fall (a trade of the field), so its gap to falling is ``max(0, min f_out,fall -
+    max f_below,rise) / gain``, and to rising the same the other way; 0 where such a trade is
+    open (:func:`stuck_gap` picks the one each price asks for). A line's price moves the
+    fitness of the generators below it against those elsewhere one for one, so the gap is what
+    its price must still move. One pass over the generators in the order
+    ``params.stuck_order`` (those below each line a run, ``params.stuck_span``) with prefix
+    and suffix extremes for the generators outside each run, and one up the tree of limited
+    lines: O(generators + lines)."""
+    order, span = params.stuck_order, params.stuck_span
+    ends, line_ends = work.order_ends, work.line_ends
+    n, n_lines = p.shape[0], params.limit.shape[0]
+    lo, hi, demand, line_up = minute.lo, minute.hi, minute.demand, params.line_up
+    for k in range(n_lines):
+        line_ends[k, 0], line_ends[k, 1] = -np.inf, np.inf
+    # ends[r, 0:2]: the best that can rise and the worst that can fall before position r;
+    # ends[r, 2:4]: first the generator at r's own, then (second loop) from r on
+    ends[0, 0], ends[0, 1] = -np.inf, np.inf
+    for r in range(n):
+        i = order[r]
+        rise, fall = trade_ends(p[i], fitness[i], lo[i] * demand, hi[i] * demand)
+        ends[r, 2], ends[r, 3] = rise, fall
+        ends[r + 1, 0], ends[r + 1, 1] = max(ends[r, 0], rise), min(ends[r, 1], fall)
+        k = params.generator_line[i]
+        if k >= 0:
+            line_ends[k, 0] = max(line_ends[k, 0], rise)
+            line_ends[k, 1] = min(line_ends[k, 1], fall)
+    ends[n, 2], ends[n, 3] = -np.inf, np.inf
+    for r in range(n - 1, -1, -1):
+        ends[r, 2], ends[r, 3] = max(ends[r, 2], ends[r + 1, 2]), min(ends[r, 3], ends[r + 1, 3])
+    for r in range(params.line_preorder.shape[0] - 1, -1, -1):  # children before parents
+        k = params.line_preorder[r]
+        up = line_up[k]
+        if up >= 0:
+            line_ends[up, 0] = max(line_ends[up, 0], line_ends[k, 0])
+            line_ends[up, 1] = min(line_ends[up, 1], line_ends[k, 1])
+    waiting = False
+    for k in range(n_lines):
+        start, stop = span[k, 0], span[k, 1]
+        rise_out = max(ends[start, 0], ends[stop, 2])
+        fall_out = min(ends[start, 1], ends[stop, 3])
+        lowering = max(0.0, fall_out - line_ends[k, 0]) / params.gain
+        raising = max(0.0, line_ends[k, 1] - rise_out) / params.gain
+        up = stuck_gap(lowering, raising, 1.0, work.flow[k] - params.limit[k], z[k])
+        down = stuck_gap(lowering, raising, -1.0, -work.flow[k] - params.limit[k],
+                         z[n_lines + k])  # fmt: skip
+        line_ends[k, 2], line_ends[k, 3] = up, down
+        waiting = waiting or up > 0.0 or down > 0.0
+    return waiting
+
+
+@nb.njit(cache=True, inline="always")
+def crawling(z, params, work, below, total, speed):
+    """Could a line's price be stuck (:func:`stuck_gaps`)? Only one that moves slower than
+    ``speed`` (EUR/MW per s), with an excess or a price: elsewhere the stuck gain is zero. A
+    test over the lines that spares most evaluations the pass over the generators."""
+    n_lines = params.limit.shape[0]
+    for k in range(n_lines):
+        rate = line_rate(params.price_rate, below[k], total)
+        for side, sign in ((0, 1.0), (n_lines, -1.0)):
+            excess = sign * work.flow[k] - params.limit[k]
+            own = abs(rate * excess)
+            if 0.0 < own < speed and (excess > 0.0 or z[side + k] > 0.0):
+                return True
+    return False
+
+
+@nb.njit(cache=True, inline="always")
+def stuck_gap(lowering, raising, sign, excess, price):
+    """The gap (EUR/MW) of the trade a line's price of direction ``sign`` (+1 up, -1 down)
+    waits for, of its line's ``lowering`` and ``raising`` gaps (:func:`stuck_gaps`): its flow
+    must fall where the up price's excess is positive (the down price's negative), else rise;
+    0 where that price cannot move (no excess and no price to give back)."""
+    if not (excess > 0.0 or price > 0.0):
+        return 0.0
+    return lowering if (sign > 0.0) == (excess > 0.0) else raising
+
+
+@nb.njit(cache=True, inline="always")
+def hasten_pinned(p, z, params, minute, work, z_rate, fitness, scaled=False):
+    """The pinned and stuck lines' and the pinned pairs' prices hastened (docs/exact-mode.md,
+    "Pinned lines", "Stuck lines"), ``z_rate`` in place at prices ``z`` (EUR/MW), the flows in
+    ``work.flow`` and the ``fitness`` the field reads (with the revision gain); the counts
     at the limits in ``work`` (:func:`count_at_limits`); ``params.pinned_speed`` the least
     speed (EUR/MW per s; 0: never), each gain at most :data:`PINNED_BOOST` times the rate it
     raises (:func:`hastened`).
@@ -478,6 +580,12 @@ def hasten_pinned(p, z, params, minute, work, z_rate, scaled=False):
       excesses are not hastened. It is weighed by :func:`pinned_weight`: 1 with every
       generator below at a limit, fading to 0 as one leaves it by :data:`PINNED_FADE` of its
       range, so the field stays continuous where a generator leaves its limit.
+    - A *stuck line* (where ``params.stuck_order`` is given: a field that trades in pairs):
+      its flow waits for a trade that the fitness order closes (:func:`stuck_gaps`), so its
+      price alone moves, at its rate times an overflow that can be a few watts. Each of its
+      prices that has an excess or a value gains the same as a pinned line's, but at most the
+      gap over :data:`STUCK_SETTLE`: the price reaches the trade within about that time, and
+      the gain fades with the gap. Where a line is pinned as well, the larger gain counts.
     - A *pinned pair*: a line with generators below it inside their limits and the nearest
       limited line above it, the generators between them able to trade, none inside, each
       at the limit the pair's gain pushes it into. The generators below the lower line answer
@@ -489,8 +597,9 @@ def hasten_pinned(p, z, params, minute, work, z_rate, scaled=False):
 
     ``scaled``: the scaled law, each line's rate ``alpha s_k`` (:func:`line_rate`).
 
-    Neither gain moves a rest point of the plain or scaled law: at one, a pinned line's excess
-    is zero, and of a pair's prices the one a nonzero gap lowers is zero (its line is below
+    No gain moves a rest point of the plain or scaled law: at one, a pinned or stuck line's
+    excess is zero where its price is positive (a price at zero is held there by the
+    projection), and of a pair's prices the one a nonzero gap lowers is zero (its line is below
     its limit); nor makes one: with both prices still ``alpha_up e_up + g = 0 = alpha_low
     e_low - g`` would need ``g = -gap``, against the gain's sign (docs/exact-mode.md, "Pinned
     pairs")."""
@@ -498,33 +607,39 @@ def hasten_pinned(p, z, params, minute, work, z_rate, scaled=False):
     n_lines = params.limit.shape[0]
     if speed == 0.0 or n_lines == 0:
         return
+    at_low, at_high, near, below = work.at_low, work.at_high, work.near, minute.below
+    path, line_ends = work.path, work.line_ends
     held_any, near_any = count_at_limits(p, params, minute, work)
-    if held_any + near_any == 0:
+    total = minute.tradable if scaled else 0.0
+    waiting = (params.stuck_order.shape[0] > 0 and crawling(z, params, work, below, total, speed)
+               and stuck_gaps(p, z, fitness, params, minute, work))  # fmt: skip
+    if held_any + near_any == 0 and not waiting:
         return
     if near_any > 0:
         fade_sums(p, params, minute, work)
-    at_low, at_high, near, below = work.at_low, work.at_high, work.near, minute.below
-    total = minute.tradable if scaled else 0.0
     for k in range(n_lines):
         up = params.line_up[k]
         held = at_low[k] + at_high[k]
         inside = below[k] - held
-        weight = pinned_weight(held, near[k], below[k], work.path[k])
+        weight = pinned_weight(held, near[k], below[k], path[k])
         pinned = weight > 0.0
         # a pair: a positive price to lower, generators below inside, none between inside,
         # some between at a limit
         pair = (up >= 0 and max(z[k], z[n_lines + k], z[up], z[n_lines + up]) > 0.0
                 and inside > 0.0 and at_low[up] + at_high[up] > held
                 and below[up] - at_low[up] - at_high[up] == inside)  # fmt: skip
-        if not (pinned or pair):
+        if not (pinned or pair or waiting):
             continue
         rate = line_rate(params.price_rate, below[k], total)
         rate_up = line_rate(params.price_rate, below[up], total) if pair else 0.0
         for side, sign in ((0, 1.0), (n_lines, -1.0)):  # the up and down prices
             excess = sign * work.flow[k] - params.limit[k]
-            if pinned:
+            waits = line_ends[k, 2 if sign > 0.0 else 3] if waiting else 0.0
+            if pinned or waits > 0.0:
                 own = rate * excess
-                z_rate[side + k] += weight * (hastened(own, speed) - own)
+                full = hastened(own, speed) - own
+                size = max(weight * abs(full), min(abs(full), waits / STUCK_SETTLE))
+                z_rate[side + k] += size if full > 0.0 else -size
             if not pair:
                 continue
             gap = 0.5 * (rate_up * (sign * work.flow[up] - params.limit[up]) - rate * excess)
@@ -702,7 +817,7 @@ def pinned_scaled_payoff(p, z, params, minute, work, fitness, z_rate):
     congestion, residual = scaled_line_signals(p, z, params, minute, work, fitness, z_rate)
     marginal_costs_into(p, params, fitness)
     rates_in_force(z, params, work)
-    hasten_pinned(p, z, params, minute, work, z_rate, True)
+    hasten_pinned(p, z, params, minute, work, z_rate, fitness, True)
     return congestion, residual
 
 
@@ -732,7 +847,7 @@ def pinned_payoff(p, z, params, minute, work, fitness, z_rate):
     congestion, residual = line_signals(p, z, params, minute, work, fitness, z_rate)
     marginal_costs_into(p, params, fitness)
     rates_in_force(z, params, work)
-    hasten_pinned(p, z, params, minute, work, z_rate)
+    hasten_pinned(p, z, params, minute, work, z_rate, fitness)
     return congestion, residual
 
 
@@ -743,7 +858,7 @@ def pinned_tree_payoff(p, z, params, minute, work, fitness, z_rate):
     congestion, residual = tree_line_signals(p, z, params, minute, work, fitness, z_rate)
     marginal_costs_into(p, params, fitness)
     rates_in_force(z, params, work)
-    hasten_pinned(p, z, params, minute, work, z_rate)
+    hasten_pinned(p, z, params, minute, work, z_rate, fitness)
     return congestion, residual
 
 

@@ -62,7 +62,8 @@ class Engine:
         self.term = Term.of(field, tag, complete, indptr, indices, rates, held, idle)
         self.constants = settings.game_constants(problem)  # EUR/MW
         self.price_scale = settings.price_scale(problem)
-        self.params = GameParameters.of(problem, self.constants, rates, pinned_speed, idle)
+        self.params = GameParameters.of(problem, self.constants, rates, pinned_speed, idle,
+                                        settings.engine_hastens_stuck_lines(problem))
         self.z = np.zeros(self.mode.controller_states(problem))
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         integrator = settings.stepping

@@ -305,6 +305,22 @@ class RunSettings:
 
         return float(self.exact.pinned_speed * scales(problem)[0])
 
+    def engine_hastens_stuck_lines(self, problem: DispatchProblem) -> bool:
+        """Does the engine also hasten the stuck lines' prices
+        (:func:`popdispatch.modes.exact.stuck_gaps`, docs/exact-mode.md "Stuck lines")? Where
+        it hastens the pinned lines, with a field that trades in pairs, from a generator to a
+        fitter one (Smith's comparison kernel): there no trade moves a line's flow while every
+        generator that could send is fitter than every one that could receive. The logit
+        moves shares toward every strategy by a smooth response, so its flows answer every
+        price."""
+        from popdispatch.dynamics import Kernel
+        from popdispatch.dynamics.fields import law_of
+
+        if self.engine_pinned_speed(problem) <= 0.0:
+            return False
+        tag = self.field_tag(problem)
+        return tag is not None and law_of(tag).kernel == Kernel.COMPARISON
+
     @property
     def hastens_pinned_lines(self) -> bool:
         """Does the engine hasten the pinned lines' prices (on a radial feeder with limited
