@@ -88,5 +88,5 @@ def test_the_engine_frees_every_array_it_allocates() -> None:
     assert len(rows) == 2
     for status, allocated, freed in rows:
         assert status == "converged"
-        assert int(allocated) > 0  # the day loop's scratch, at least
+        assert int(allocated) > 0  # the warm start projects the shares with scratch of its own
         assert int(allocated) == int(freed)

@@ -53,31 +53,41 @@ class DayOutputs(NamedTuple):
     history: np.ndarray
 
 
-@nb.njit(cache=True)
-def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out):
-    """The minutes of ``day`` (:class:`DayInputs`) in order from shares ``x`` and controller
-    states ``z`` (both updated in place), into ``out`` (:class:`DayOutputs`).
-    Returns ``(h_try, demand of the last minute)``.
+class DayScratch(NamedTuple):
+    """Scratch of the day loop, overwritten every minute: the minute's share bounds ``lo``,
+    ``hi`` and the warm start's ``weight`` (one per generator), the generators that can trade
+    ``below`` each limited line, and the state the minute started from, ``x_start`` (shares)
+    and ``z_start`` (controller states). Allocated by the caller: the loop borrows it."""
 
-    The engine's one compiled entry point (a single minute is a day of one row): each entry
-    point links the game and field again and LLVM optimises all it links once more, so one
-    instead of two saves a full optimisation of the engine on the first run. It allocates the
-    day's scratch and hands it to :func:`day_rows`, which borrows it (:mod:`popdispatch.jit`)."""
-    n = x.shape[0]
-    return day_rows(x, z, term, params, day, ws, stepper, rule, h_try, out, np.empty(n),
-                    np.empty(n), np.empty(n), np.empty(params.line_up.shape[0]), np.empty(n),
-                    np.empty(z.shape[0]))  # fmt: skip
+    lo: np.ndarray
+    hi: np.ndarray
+    weight: np.ndarray
+    below: np.ndarray
+    x_start: np.ndarray
+    z_start: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int, n_lines: int, n_states: int) -> DayScratch:
+        """Scratch for ``n`` generators, ``n_lines`` limited lines and ``n_states`` controller
+        states."""
+        return cls(np.empty(n), np.empty(n), np.empty(n), np.empty(n_lines), np.empty(n),
+                   np.empty(n_states))  # fmt: skip
 
 
 @nb.njit(cache=True, **BORROWING)
-def day_rows(x, z, term, params, day, ws, stepper, rule, h_try, out, lo, hi, weight, below,
-             x_start, z_start):  # fmt: skip
-    """The loop of :func:`integrate_day` over its rows, compiled without reference counting
-    (:data:`~popdispatch.jit.BORROWING`): it allocates nothing. Scratch (each overwritten per
-    minute): the minute's share bounds ``lo``, ``hi``, the warm start's ``weight`` (one per
-    generator), the generators that can trade ``below`` each limited line, and the state the
-    minute started from, ``x_start``, ``z_start``."""
+def integrate_day(x, z, term, params, day, ws, stepper, rule, h_try, out, scratch):
+    """The minutes of ``day`` (:class:`DayInputs`) in order from shares ``x`` and controller
+    states ``z`` (both updated in place), into ``out`` (:class:`DayOutputs`), with the
+    caller's ``scratch`` (:class:`DayScratch`). Returns ``(h_try, demand of the last minute)``.
+
+    The engine's one compiled entry point (a single minute is a day of one row): each entry
+    point links the game and field again and LLVM optimises all it links once more, so one
+    instead of two saves a full optimisation of the engine on the first run. Compiled without
+    reference counting (:data:`~popdispatch.jit.BORROWING`): it allocates nothing, its scratch
+    comes from the caller."""
     n = x.shape[0]
+    lo, hi, weight, below = scratch.lo, scratch.hi, scratch.weight, scratch.below
+    x_start, z_start = scratch.x_start, scratch.z_start
     old_demand = day.previous_demand
     pmin, pmax = params.pmin, params.pmax
     for row in range(day.demand.shape[0]):

@@ -16,7 +16,7 @@ from popdispatch.integrate import Status, Term, workspace
 from popdispatch.modes import get_mode, mode_tag
 from popdispatch.modes.exact import price_weights
 from popdispatch.online.certificate import Certificate, certify_minutes
-from popdispatch.online.day import DayArrays, DayInputs, integrate_day
+from popdispatch.online.day import DayArrays, DayInputs, DayScratch, integrate_day
 from popdispatch.online.kkt import KktTolerances, kkt_violations, line_prices, voltage_prices
 from popdispatch.online.settings import RunSettings
 from popdispatch.warm_start import WARM_STARTS, WarmStart
@@ -65,6 +65,8 @@ class Engine:
         self.params = GameParameters.of(problem, self.constants, rates, pinned_speed, idle,
                                         settings.engine_hastens_stuck_lines(problem))
         self.z = np.zeros(self.mode.controller_states(problem))
+        self.day_scratch = DayScratch.empty(problem.n_generators, len(problem.limit),
+                                            len(self.z))  # fmt: skip
         self.z_cap = self.mode.price_cap(problem) if self.mode.bounded else np.inf
         integrator = settings.stepping
         self.ws = workspace(
@@ -184,7 +186,7 @@ class Engine:
         )  # fmt: skip
         self.h_try, out.last_demand = integrate_day(
             x, self.z, self.term, self.params, day, self.ws, integrator.stepper(self.price_scale),
-            integrator.stop_rule(self.z_cap), self.h_try, out.outputs(),
+            integrator.stop_rule(self.z_cap), self.h_try, out.outputs(), self.day_scratch,
         )  # fmt: skip
 
 
